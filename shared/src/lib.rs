@@ -1,0 +1,20 @@
+//! What crosses a process boundary between the sim-server, the haptic daemon
+//! and the viewer: session naming and the clock every payload is stamped with.
+//!
+//! The payload types and the iceoryx2 services arrive with the protocol; this
+//! crate already fixes the two conventions they rely on.
+//!
+//! ```
+//! use shared::{monotonic_ns, SessionName};
+//! let session = SessionName::new("trainee-3").unwrap();
+//! assert_eq!(session.service("force"), "hapsim/trainee-3/force");
+//! let t0 = monotonic_ns();
+//! assert!(monotonic_ns() >= t0);
+//! ```
+#![warn(missing_docs)]
+
+mod clock;
+mod session;
+
+pub use clock::{NS_PER_S, monotonic_ns};
+pub use session::{SessionName, SessionNameError};

@@ -1,0 +1,228 @@
+//! Static equilibrium on the model's tensors: K u = f with some degrees of
+//! freedom imposed (fixed sets, prescribed displacements, per axis), solved by
+//! a sparse Cholesky factorization (faer) of the free block.
+
+use crate::ids::VertexId;
+use crate::math::{Real, Vec3};
+use crate::tensor_mass::ElasticModel;
+use faer::prelude::Solve;
+use faer::sparse::{SparseColMat, Triplet};
+use thiserror::Error;
+
+/// Imposed displacements per vertex and axis (`None` = free).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dirichlet {
+    dofs: Vec<[Option<Real>; 3]>,
+}
+
+impl Dirichlet {
+    /// Nothing imposed on `vertex_count` vertices.
+    pub fn new(vertex_count: usize) -> Self {
+        Self {
+            dofs: vec![[None; 3]; vertex_count],
+        }
+    }
+
+    /// Fixes `v` at rest on all axes.
+    pub fn fix(&mut self, v: VertexId) {
+        self.prescribe(v, Vec3::ZERO);
+    }
+
+    /// Imposes displacement `d_m` on `v`.
+    pub fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        self.dofs[v.idx()] = d_m.to_array().map(Some);
+    }
+
+    /// Imposes `value_m` on one axis (0 = x) of `v`.
+    pub fn prescribe_axis(&mut self, v: VertexId, axis: usize, value_m: Real) {
+        self.dofs[v.idx()][axis] = Some(value_m);
+    }
+
+    /// The imposed value of (v, axis), if any.
+    pub fn get(&self, v: VertexId, axis: usize) -> Option<Real> {
+        self.dofs[v.idx()][axis]
+    }
+
+    /// Number of imposed degrees of freedom.
+    pub fn count(&self) -> usize {
+        self.dofs.iter().flatten().filter(|d| d.is_some()).count()
+    }
+}
+
+/// The solution: displacements and forces per vertex.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StaticSolution {
+    /// Displacement (m).
+    pub displacement_m: Vec<Vec3>,
+    /// Per axis: at imposed degrees of freedom the force the support exerts
+    /// on the body (N), elsewhere the applied load.
+    pub force_n: Vec<Vec3>,
+}
+
+/// Why the static problem could not be solved.
+#[derive(Debug, Error, PartialEq)]
+pub enum StaticError {
+    /// Sizes do not match the model.
+    #[error("{what} has {got} entries, the model has {expected} vertices")]
+    Size {
+        /// Which input.
+        what: &'static str,
+        /// Given.
+        got: usize,
+        /// Expected.
+        expected: usize,
+    },
+    /// A load or imposed value is not finite.
+    #[error("{what} of vertex {vertex} is not finite")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+        /// The vertex.
+        vertex: usize,
+    },
+    /// The free block is singular: the body can move rigidly.
+    #[error(
+        "the stiffness is singular: the constraints ({constrained} fixed or prescribed degrees of freedom) do not prevent rigid motion; fix at least three non-aligned vertices"
+    )]
+    Singular {
+        /// Imposed degrees of freedom.
+        constrained: usize,
+    },
+    /// The factorization failed for another reason.
+    #[error("sparse factorization failed: {0}")]
+    Factorization(String),
+}
+
+/// Solves K u = f for the model as it is (removed tetrahedra excluded;
+/// orphaned vertices keep zero displacement). `loads_n` are per-vertex forces.
+pub fn solve_static(
+    model: &ElasticModel,
+    dirichlet: &Dirichlet,
+    loads_n: &[Vec3],
+) -> Result<StaticSolution, StaticError> {
+    let n = model.vertex_count();
+    for (what, got) in [
+        ("loads", loads_n.len()),
+        ("constraints", dirichlet.dofs.len()),
+    ] {
+        if got != n {
+            return Err(StaticError::Size {
+                what,
+                got,
+                expected: n,
+            });
+        }
+    }
+    if let Some(v) = loads_n.iter().position(|f| !f.is_finite()) {
+        return Err(StaticError::NonFinite {
+            what: "load",
+            vertex: v,
+        });
+    }
+    if let Some(v) = dirichlet
+        .dofs
+        .iter()
+        .position(|d| d.iter().flatten().any(|x| !x.is_finite()))
+    {
+        return Err(StaticError::NonFinite {
+            what: "imposed displacement",
+            vertex: v,
+        });
+    }
+    // Number the free degrees of freedom of vertices that still have material.
+    let topo = model.topology();
+    let mut free = vec![usize::MAX; 3 * n];
+    let mut u = vec![0.0; 3 * n];
+    let mut nf = 0;
+    for v in 0..n {
+        let live = topo.vertex_tet_count(VertexId::from(v)) > 0;
+        for a in 0..3 {
+            match dirichlet.dofs[v][a] {
+                Some(x) => u[3 * v + a] = x,
+                None if live => {
+                    free[3 * v + a] = nf;
+                    nf += 1;
+                }
+                None => {}
+            }
+        }
+    }
+    let f: Vec<Real> = loads_n.iter().flat_map(|l| l.to_array()).collect();
+    // Stiffness blocks as (row vertex, col vertex, block) for both triangles.
+    let blocks = model
+        .vertex_tensors()
+        .iter()
+        .enumerate()
+        .map(|(v, k)| (v, v, *k))
+        .chain(
+            topo.edges()
+                .iter()
+                .zip(model.edge_tensors())
+                .flat_map(|([a, b], k)| {
+                    [(a.idx(), b.idx(), *k), (b.idx(), a.idx(), k.transpose())]
+                }),
+        );
+    let mut triplets = Vec::new();
+    let mut rhs = vec![0.0; nf];
+    for (a, b, k) in blocks {
+        for r in 0..3 {
+            let fr = free[3 * a + r];
+            if fr == usize::MAX {
+                continue;
+            }
+            for c in 0..3 {
+                let val = k.col(c)[r];
+                let fc = free[3 * b + c];
+                if fc == usize::MAX {
+                    rhs[fr] -= val * u[3 * b + c];
+                } else if fr >= fc {
+                    triplets.push(Triplet::new(fr, fc, val));
+                }
+            }
+        }
+    }
+    for (d, &i) in free.iter().enumerate() {
+        if i != usize::MAX {
+            rhs[i] += f[d];
+        }
+    }
+    if nf > 0 {
+        let k = SparseColMat::<usize, Real>::try_new_from_triplets(nf, nf, &triplets)
+            .map_err(|e| StaticError::Factorization(format!("{e:?}")))?;
+        let llt = k.sp_cholesky(faer::Side::Lower).map_err(|e| match e {
+            faer::sparse::linalg::LltError::Numeric(_) => StaticError::Singular {
+                constrained: dirichlet.count(),
+            },
+            other => StaticError::Factorization(other.to_string()),
+        })?;
+        let mut x = faer::Mat::<Real>::from_fn(nf, 1, |i, _| rhs[i]);
+        llt.solve_in_place(x.as_mut());
+        for (d, &i) in free.iter().enumerate() {
+            if i != usize::MAX {
+                u[d] = x[(i, 0)];
+            }
+        }
+    }
+    let displacement_m: Vec<Vec3> = u
+        .chunks_exact(3)
+        .map(|c| Vec3::new(c[0], c[1], c[2]))
+        .collect();
+    let mut ku = vec![Vec3::ZERO; n];
+    model.elastic_forces(&displacement_m, &mut ku);
+    // elastic_forces gives -K u; reaction = K u - f at imposed dofs.
+    let force_n = (0..n)
+        .map(|v| {
+            let mut out = loads_n[v];
+            for a in 0..3 {
+                if free[3 * v + a] == usize::MAX && dirichlet.dofs[v][a].is_some() {
+                    out[a] = -ku[v][a] - loads_n[v][a];
+                }
+            }
+            out
+        })
+        .collect();
+    Ok(StaticSolution {
+        displacement_m,
+        force_n,
+    })
+}

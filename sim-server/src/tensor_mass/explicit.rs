@@ -1,0 +1,461 @@
+//! Explicit central differences with lumped mass and damping (paper 3.4.1):
+//! (m/dt^2 + c/(2dt)) U(t+1) = F + (2m/dt^2) U(t) - (m/dt^2 - c/(2dt)) U(t-1),
+//! with fixed and prescribed vertices, external forces, cutting, and a time
+//! step checked against the stability bound (refused, or split into sub-steps).
+
+use super::kernel::{Kernel, Part, StepInputs, Storage, V3, kind};
+use super::model::{CutChange, CutError, ElasticModel};
+use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use thiserror::Error;
+
+/// What to do when the requested step exceeds the stable step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DtPolicy {
+    /// Refuse with an error naming the bound.
+    Refuse,
+    /// Split each step into the fewest equal sub-steps under the bound.
+    Substep,
+}
+
+/// Integrator settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExplicitConfig {
+    /// The step the caller advances per [`Explicit::step`] (s).
+    pub dt_s: Real,
+    /// Refuse or sub-step when `dt_s` is above the bound.
+    pub policy: DtPolicy,
+    /// Which bound to enforce.
+    pub bound: BoundMethod,
+    /// Worker threads for the step (1 = the calling thread only).
+    pub threads: usize,
+}
+
+impl ExplicitConfig {
+    /// One thread, element bound, sub-stepping.
+    pub fn new(dt_s: Real) -> Self {
+        Self {
+            dt_s,
+            policy: DtPolicy::Substep,
+            bound: BoundMethod::Element,
+            threads: 1,
+        }
+    }
+}
+
+/// Why the integrator could not be set up.
+#[derive(Debug, Error, PartialEq)]
+pub enum ExplicitError {
+    /// The step is not a positive finite number.
+    #[error("dt_s must be a positive finite number, got {0}")]
+    BadDt(Real),
+    /// The step exceeds the stable step and the policy is to refuse.
+    #[error(
+        "dt_s = {dt_s:e} s exceeds the stable step {dt_max_s:e} s ({method} bound, omega_max = {omega_max_rad_s:.4e} rad/s); use dt_s <= {dt_max_s:e} s or sub-stepping"
+    )]
+    Unstable {
+        /// Requested step.
+        dt_s: Real,
+        /// The bound.
+        dt_max_s: Real,
+        /// omega_max.
+        omega_max_rad_s: Real,
+        /// Bound method name.
+        method: &'static str,
+    },
+    /// The thread pool could not be created.
+    #[error("cannot start {threads} worker threads: {reason}")]
+    Threads {
+        /// Requested threads.
+        threads: usize,
+        /// The OS error.
+        reason: String,
+    },
+}
+
+/// Row ranges and the rows each part must finish after the join.
+#[derive(Clone, Debug)]
+struct PartPlan {
+    start: usize,
+    end: usize,
+    deferred_end: usize,
+    spill_len: usize,
+}
+
+/// The explicit tensor-mass simulation, generic over the kernel's storage precision.
+pub struct Explicit<S: Storage> {
+    model: ElasticModel,
+    kernel: Kernel<S>,
+    u: Vec<V3>,
+    next: Vec<V3>,
+    ku: Vec<V3>,
+    coef: Vec<V3>,
+    constraint: Vec<u8>,
+    kind: Vec<u8>,
+    target: Vec<V3>,
+    fext: Vec<V3>,
+    plans: Vec<PartPlan>,
+    spills: Vec<Vec<V3>>,
+    pool: Option<rayon::ThreadPool>,
+    stable: StableStep,
+    dt_s: Real,
+    substeps: usize,
+    steps: u64,
+}
+
+impl<S: Storage> Explicit<S> {
+    /// Sets up the integrator at rest (U = 0).
+    pub fn new(model: ElasticModel, config: ExplicitConfig) -> Result<Self, ExplicitError> {
+        let dt_s = config.dt_s;
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(ExplicitError::BadDt(dt_s));
+        }
+        let stable = match config.bound {
+            BoundMethod::Element => element_bound(&model),
+            BoundMethod::PowerIteration => power_iteration(&model, 1e-6, 2000).step,
+        };
+        let substeps = if dt_s <= stable.dt_max_s {
+            1
+        } else if config.policy == DtPolicy::Substep {
+            (dt_s / stable.dt_max_s).ceil() as usize
+        } else {
+            return Err(ExplicitError::Unstable {
+                dt_s,
+                dt_max_s: stable.dt_max_s,
+                omega_max_rad_s: stable.omega_max_rad_s,
+                method: stable.method.name(),
+            });
+        };
+        let threads = config.threads.max(1);
+        let pool = if threads > 1 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .thread_name(|i| format!("tensor-mass-{i}"))
+                    .build()
+                    .map_err(|e| ExplicitError::Threads {
+                        threads,
+                        reason: e.to_string(),
+                    })?,
+            )
+        } else {
+            None
+        };
+        let kernel = Kernel::new(&model);
+        let n = model.vertex_count();
+        let plans = plan_parts(&kernel, threads);
+        let spills = plans.iter().map(|p| vec![[0.0; 3]; p.spill_len]).collect();
+        let mut sim = Self {
+            kernel,
+            u: vec![[0.0; 3]; n],
+            next: vec![[0.0; 3]; n],
+            ku: vec![[0.0; 3]; n],
+            coef: vec![[0.0; 3]; n],
+            constraint: vec![kind::FREE; n],
+            kind: vec![kind::FREE; n],
+            target: vec![[0.0; 3]; n],
+            fext: Vec::new(),
+            plans,
+            spills,
+            pool,
+            stable,
+            dt_s,
+            substeps,
+            steps: 0,
+            model,
+        };
+        for v in 0..n {
+            sim.refresh_vertex(v);
+        }
+        Ok(sim)
+    }
+
+    /// Recomputes the integration coefficients and kind of vertex `v`.
+    fn refresh_vertex(&mut self, v: usize) {
+        let h = self.dt_s / self.substeps as Real;
+        let m = self.model.masses_kg()[v];
+        let c = self.model.damping_kg_s()[v];
+        if m > 0.0 {
+            let mh = m / (h * h);
+            let ch = c / (2.0 * h);
+            let den = mh + ch;
+            self.coef[v] = [1.0 / den, 2.0 * mh / den, (mh - ch) / den];
+            self.kind[v] = self.constraint[v];
+        } else {
+            self.coef[v] = [0.0; 3];
+            self.kind[v] = kind::INACTIVE;
+        }
+    }
+
+    /// Advances by `dt_s` (in `substeps()` equal sub-steps).
+    pub fn step(&mut self) {
+        for _ in 0..self.substeps {
+            self.substep();
+        }
+        self.steps += 1;
+    }
+
+    fn substep(&mut self) {
+        let Self {
+            kernel,
+            u,
+            next,
+            ku,
+            coef,
+            kind,
+            target,
+            fext,
+            plans,
+            spills,
+            pool,
+            ..
+        } = self;
+        let inputs = StepInputs {
+            u,
+            coef,
+            kind,
+            target,
+            fext,
+        };
+        let mut run = || run_parts(kernel, &inputs, plans, 0, ku, next, spills);
+        match pool {
+            Some(pool) => pool.install(run),
+            None => run(),
+        }
+        if plans.len() > 1 {
+            // Finish the rows that received contributions across a part boundary.
+            for (p, plan) in plans.iter().enumerate() {
+                for (r, s) in spills[p].iter_mut().enumerate() {
+                    let row = &mut ku[plan.end + r];
+                    for d in 0..3 {
+                        row[d] += s[d];
+                    }
+                    *s = [0.0; 3];
+                }
+            }
+            for plan in plans.iter().skip(1) {
+                for i in plan.start..plan.deferred_end {
+                    inputs.integrate(i, ku[i], &mut next[i]);
+                    ku[i] = [0.0; 3];
+                }
+            }
+        }
+        std::mem::swap(u, next);
+    }
+
+    /// Fixes vertex `v` at its rest position.
+    pub fn fix(&mut self, v: VertexId) {
+        self.prescribe(v, Vec3::ZERO);
+    }
+
+    /// Imposes displacement `d_m` on vertex `v` from the next step on.
+    pub fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        self.constraint[v.idx()] = kind::PRESCRIBED;
+        self.target[v.idx()] = d_m.to_array();
+        self.refresh_vertex(v.idx());
+    }
+
+    /// Frees vertex `v` (its current displacement and velocity are kept).
+    pub fn release(&mut self, v: VertexId) {
+        self.constraint[v.idx()] = kind::FREE;
+        self.refresh_vertex(v.idx());
+    }
+
+    /// Sets the external force (N) on vertex `v`. The first call allocates the
+    /// force array; a simulation without loads never reads one.
+    pub fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
+        if self.fext.is_empty() {
+            self.fext = vec![[0.0; 3]; self.u.len()];
+        }
+        self.fext[v.idx()] = f_n.to_array();
+    }
+
+    /// Removes all external forces.
+    pub fn clear_external_forces(&mut self) {
+        self.fext = Vec::new();
+    }
+
+    /// Sets U(t) and U(t-1) (m), e.g. to start with an initial velocity
+    /// (U(t) - U(t-1)) / dt.
+    pub fn set_state(&mut self, u_m: &[Vec3], u_prev_m: &[Vec3]) {
+        for (d, s) in self.u.iter_mut().zip(u_m) {
+            *d = s.to_array();
+        }
+        for (d, s) in self.next.iter_mut().zip(u_prev_m) {
+            *d = s.to_array();
+        }
+    }
+
+    /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
+    pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        let change = self.model.remove_tet(t)?;
+        self.after_cut(&change);
+        Ok(change)
+    }
+
+    /// Adds a removed tetrahedron back.
+    pub fn restore_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        let change = self.model.restore_tet(t)?;
+        self.after_cut(&change);
+        Ok(change)
+    }
+
+    fn after_cut(&mut self, change: &CutChange) {
+        self.kernel.update(&self.model, change);
+        for v in change.vertices {
+            self.refresh_vertex(v.idx());
+        }
+    }
+
+    /// Displacement of vertex `v` (m).
+    pub fn displacement(&self, v: VertexId) -> Vec3 {
+        Vec3::from_array(self.u[v.idx()])
+    }
+
+    /// All displacements (m).
+    pub fn displacements(&self) -> &[V3] {
+        &self.u
+    }
+
+    /// Current position of vertex `v` (m).
+    pub fn position(&self, v: VertexId) -> Vec3 {
+        self.model.mesh().positions_m()[v.idx()] + self.displacement(v)
+    }
+
+    /// The model (tensors, topology, surface).
+    pub fn model(&self) -> &ElasticModel {
+        &self.model
+    }
+
+    /// The hot kernel.
+    pub fn kernel(&self) -> &Kernel<S> {
+        &self.kernel
+    }
+
+    /// The enforced stability bound.
+    pub fn stable_step(&self) -> StableStep {
+        self.stable
+    }
+
+    /// Sub-steps per step (1 when dt is under the bound).
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+
+    /// The step (s).
+    pub fn dt_s(&self) -> Real {
+        self.dt_s
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Kinetic plus elastic energy (J), velocities by the centred difference
+    /// of the last two states (for tests and diagnostics; allocates).
+    pub fn energy_j(&self) -> Real {
+        let h = self.dt_s / self.substeps as Real;
+        let u: Vec<Vec3> = self.u.iter().map(|a| Vec3::from_array(*a)).collect();
+        let kinetic: Real = self
+            .u
+            .iter()
+            .zip(&self.next)
+            .zip(self.model.masses_kg())
+            .map(|((a, b), m)| {
+                let v = (Vec3::from_array(*a) - Vec3::from_array(*b)) / h;
+                0.5 * m * v.length_squared()
+            })
+            .sum();
+        kinetic + self.model.energy_j(&u)
+    }
+
+    /// Bytes the step streams per sub-step: the kernel's tensors and indices
+    /// plus the state arrays (U read, U(t-1) read and written, K U read and
+    /// written, coefficients and kinds read).
+    pub fn bytes_per_substep(&self) -> usize {
+        let n = self.u.len();
+        self.kernel.bytes() + n * (24 + 48 + 48 + 24 + 1)
+    }
+
+    /// The number of parts a step is split into.
+    pub fn parts(&self) -> usize {
+        self.plans.len()
+    }
+}
+
+/// Splits rows into `threads` contiguous parts of about equal work (rows plus
+/// blocks), and finds for each which rows earlier parts reach.
+fn plan_parts<S: Storage>(kernel: &Kernel<S>, threads: usize) -> Vec<PartPlan> {
+    let n = kernel.rows();
+    let work = |i: usize| 1 + kernel.row(i).len();
+    let total: usize = (0..n).map(work).sum();
+    let parts = threads.min(n.max(1));
+    let mut bounds = vec![0usize];
+    let mut acc = 0;
+    for i in 0..n {
+        acc += work(i);
+        if bounds.len() < parts && acc * parts >= total * bounds.len() {
+            bounds.push(i + 1);
+        }
+    }
+    while bounds.len() < parts + 1 {
+        bounds.push(n);
+    }
+    *bounds.last_mut().expect("non-empty") = n;
+    let mut plans = Vec::with_capacity(parts);
+    let mut reach_before = 0usize;
+    for w in bounds.windows(2) {
+        let (start, end) = (w[0], w[1]);
+        let reach = (start..end)
+            .map(|i| kernel.reach(i) + 1)
+            .max()
+            .unwrap_or(end);
+        plans.push(PartPlan {
+            start,
+            end,
+            deferred_end: reach_before.clamp(start, end),
+            spill_len: reach.saturating_sub(end),
+        });
+        reach_before = reach_before.max(reach);
+    }
+    plans
+}
+
+/// Runs parts recursively with `rayon::join` (no allocation per step).
+fn run_parts<S: Storage>(
+    kernel: &Kernel<S>,
+    inputs: &StepInputs<'_>,
+    plans: &[PartPlan],
+    offset: usize,
+    ku: &mut [V3],
+    next: &mut [V3],
+    spills: &mut [Vec<V3>],
+) {
+    if plans.len() == 1 {
+        let p = &plans[0];
+        kernel.run_part(
+            inputs,
+            Part {
+                start: p.start,
+                end: p.end,
+                deferred_end: p.deferred_end,
+                ku: &mut ku[p.start - offset..p.end - offset],
+                next: &mut next[p.start - offset..p.end - offset],
+                spill: &mut spills[0],
+            },
+        );
+        return;
+    }
+    let mid = plans.len() / 2;
+    let split = plans[mid].start - offset;
+    let (ku_a, ku_b) = ku.split_at_mut(split);
+    let (next_a, next_b) = next.split_at_mut(split);
+    let (sp_a, sp_b) = spills.split_at_mut(mid);
+    let (pa, pb) = plans.split_at(mid);
+    rayon::join(
+        || run_parts(kernel, inputs, pa, offset, ku_a, next_a, sp_a),
+        || run_parts(kernel, inputs, pb, plans[mid].start, ku_b, next_b, sp_b),
+    );
+}

@@ -1,0 +1,15 @@
+//! Tensor-mass linear elasticity (paper sections 3.1-3.4): element tensors
+//! derived from the energy, the assembled model with local cutting updates,
+//! the hot kernel, explicit integration and its stability bound.
+
+pub mod element;
+pub mod explicit;
+pub mod kernel;
+pub mod model;
+pub mod stability;
+
+pub use element::{Geometry, TetElastic};
+pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError};
+pub use kernel::{Kernel, Storage};
+pub use model::{CutChange, CutError, ElasticModel, ModelError};
+pub use stability::{BoundMethod, PowerEstimate, StableStep, element_bound, power_iteration};

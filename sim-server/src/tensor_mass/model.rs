@@ -1,0 +1,268 @@
+//! The assembled tensor-mass model in double precision: per-vertex tensors
+//! K_ii, per-edge tensors K_ij, lumped masses and damping, kept current under
+//! cutting by local updates (paper section 3.4). This is the reference the
+//! hot kernel is copied from and checked against.
+
+use super::element::{Geometry, TetElastic};
+use crate::ids::{EdgeId, TetId, VertexId};
+use crate::material_map::{AssignError, TetMaterials};
+use crate::math::{Mat3, Real, Vec3};
+use crate::mesh::{TET_EDGES, TetMesh};
+use crate::topology::{Orphans, Topology};
+use thiserror::Error;
+
+/// Why a model could not be built.
+#[derive(Debug, Error, PartialEq)]
+pub enum ModelError {
+    /// The material map does not cover the mesh.
+    #[error("materials cover {materials} tetrahedra but the mesh has {tets}")]
+    MaterialCount {
+        /// Covered.
+        materials: usize,
+        /// In the mesh.
+        tets: usize,
+    },
+    /// A material assignment problem.
+    #[error(transparent)]
+    Assign(#[from] AssignError),
+}
+
+/// Why a cut (removal or restoration) was refused.
+#[derive(Debug, Error, PartialEq, Eq)]
+pub enum CutError {
+    /// No such tetrahedron.
+    #[error("tetrahedron {0} does not exist")]
+    NoSuchTet(u32),
+    /// Removing a tetrahedron that is already removed.
+    #[error("tetrahedron {0} is already removed")]
+    AlreadyRemoved(u32),
+    /// Restoring a tetrahedron that is present.
+    #[error("tetrahedron {0} is present; only removed tetrahedra can be added back")]
+    AlreadyPresent(u32),
+}
+
+/// What a cut changed: the tetrahedron's 4 vertices and 6 edges (whose
+/// tensors were updated) and those it left orphaned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CutChange {
+    /// The tetrahedron.
+    pub tet: TetId,
+    /// Its vertices.
+    pub vertices: [VertexId; 4],
+    /// Its edges.
+    pub edges: [EdgeId; 6],
+}
+
+/// The tensor-mass model: mesh, materials, topology and assembled tensors.
+#[derive(Clone, Debug)]
+pub struct ElasticModel {
+    mesh: TetMesh,
+    materials: TetMaterials,
+    topo: Topology,
+    vertex_k: Vec<Mat3>,
+    edge_k: Vec<Mat3>,
+    mass_kg: Vec<Real>,
+    damping_kg_s: Vec<Real>,
+    orphans: Orphans,
+}
+
+impl ElasticModel {
+    /// Assembles the model. Materials must cover every tetrahedron and every
+    /// anisotropic tetrahedron needs a fibre direction.
+    pub fn new(mesh: TetMesh, materials: TetMaterials) -> Result<Self, ModelError> {
+        if materials.len() != mesh.tet_count() {
+            return Err(ModelError::MaterialCount {
+                materials: materials.len(),
+                tets: mesh.tet_count(),
+            });
+        }
+        materials.validate()?;
+        let topo = Topology::new(&mesh);
+        let n = mesh.vertex_count();
+        let mut model = Self {
+            vertex_k: vec![Mat3::ZERO; n],
+            edge_k: vec![Mat3::ZERO; topo.edges().len()],
+            mass_kg: vec![0.0; n],
+            damping_kg_s: vec![0.0; n],
+            mesh,
+            materials,
+            topo,
+            orphans: Orphans::default(),
+        };
+        for t in 0..model.mesh.tet_count() {
+            model.accumulate(TetId::from(t), 1.0);
+        }
+        Ok(model)
+    }
+
+    /// The constants and geometry of tetrahedron `t`.
+    pub fn element(&self, t: TetId) -> (TetElastic, Geometry) {
+        let elastic = TetElastic::new(self.materials.material(t), self.materials.fiber(t));
+        (elastic, Geometry::new(self.mesh.tet_points(t)))
+    }
+
+    /// Adds (`sign` = 1) or subtracts (-1) the contribution of `t` to its 4
+    /// vertex tensors, 6 edge tensors, masses and damping: the paper's 10
+    /// local updates.
+    fn accumulate(&mut self, t: TetId, sign: Real) {
+        let (elastic, geom) = self.element(t);
+        let tet = self.mesh.tets()[t.idx()];
+        for (k, v) in tet.iter().enumerate() {
+            self.vertex_k[v.idx()] += elastic.block(&geom, k, k) * sign;
+        }
+        let edges = self.topo.tet_edges(t);
+        for (l, [i, j]) in TET_EDGES.iter().enumerate() {
+            // Edge tensors are stored as K_ab with a < b in vertex numbering.
+            let block = if tet[*i] < tet[*j] {
+                elastic.block(&geom, *i, *j)
+            } else {
+                elastic.block(&geom, *j, *i)
+            };
+            self.edge_k[edges[l].idx()] += block * sign;
+        }
+        let material = self.materials.material(t);
+        let quarter_mass = material.density_kg_m3() * geom.volume_m3 / 4.0;
+        for v in tet {
+            self.mass_kg[v.idx()] += sign * quarter_mass;
+            self.damping_kg_s[v.idx()] += sign * material.damping_per_s() * quarter_mass;
+        }
+    }
+
+    fn check_tet(&self, t: TetId) -> Result<(), CutError> {
+        if t.idx() < self.mesh.tet_count() {
+            Ok(())
+        } else {
+            Err(CutError::NoSuchTet(t.0))
+        }
+    }
+
+    fn change(&self, t: TetId) -> CutChange {
+        CutChange {
+            tet: t,
+            vertices: self.mesh.tets()[t.idx()],
+            edges: self.topo.tet_edges(t),
+        }
+    }
+
+    /// Removes tetrahedron `t`: subtracts its contribution, zeroes the tensors
+    /// of edges and vertices it leaves orphaned (so no round-off residue
+    /// remains) and updates the surface.
+    pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        self.check_tet(t)?;
+        if !self.topo.is_alive(t) {
+            return Err(CutError::AlreadyRemoved(t.0));
+        }
+        self.accumulate(t, -1.0);
+        let mut orphans = std::mem::take(&mut self.orphans);
+        self.topo.remove(t, self.mesh.tets()[t.idx()], &mut orphans);
+        for e in &orphans.edges {
+            self.edge_k[e.idx()] = Mat3::ZERO;
+        }
+        for v in &orphans.vertices {
+            self.vertex_k[v.idx()] = Mat3::ZERO;
+            self.mass_kg[v.idx()] = 0.0;
+            self.damping_kg_s[v.idx()] = 0.0;
+        }
+        self.orphans = orphans;
+        Ok(self.change(t))
+    }
+
+    /// Adds a removed tetrahedron back.
+    pub fn restore_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        self.check_tet(t)?;
+        if self.topo.is_alive(t) {
+            return Err(CutError::AlreadyPresent(t.0));
+        }
+        self.topo.revive(t, self.mesh.tets()[t.idx()]);
+        self.accumulate(t, 1.0);
+        Ok(self.change(t))
+    }
+
+    /// Elastic forces F = -K U (N) for displacements `u` (m), by a plain loop
+    /// over the vertex and edge tensors in double precision.
+    pub fn elastic_forces(&self, u: &[Vec3], out: &mut [Vec3]) {
+        assert_eq!(u.len(), self.vertex_count());
+        assert_eq!(out.len(), self.vertex_count());
+        for (f, (k, ui)) in out.iter_mut().zip(self.vertex_k.iter().zip(u)) {
+            *f = -(*k * *ui);
+        }
+        for ([a, b], k) in self.topo.edges().iter().zip(&self.edge_k) {
+            out[a.idx()] -= *k * u[b.idx()];
+            out[b.idx()] -= k.transpose() * u[a.idx()];
+        }
+    }
+
+    /// Elastic energy (J) of displacements `u`, summed over the live
+    /// tetrahedra from their strains (independent of the assembled tensors).
+    pub fn energy_j(&self, u: &[Vec3]) -> Real {
+        (0..self.mesh.tet_count())
+            .map(TetId::from)
+            .filter(|t| self.topo.is_alive(*t))
+            .map(|t| {
+                let (elastic, geom) = self.element(t);
+                elastic.energy_j(&geom, self.mesh.tets()[t.idx()].map(|v| u[v.idx()]))
+            })
+            .sum()
+    }
+
+    /// The rest mesh.
+    pub fn mesh(&self) -> &TetMesh {
+        &self.mesh
+    }
+
+    /// The material map.
+    pub fn materials(&self) -> &TetMaterials {
+        &self.materials
+    }
+
+    /// Live topology and surface.
+    pub fn topology(&self) -> &Topology {
+        &self.topo
+    }
+
+    /// Number of vertices (including orphans).
+    pub fn vertex_count(&self) -> usize {
+        self.mesh.vertex_count()
+    }
+
+    /// K_ii of every vertex.
+    pub fn vertex_tensors(&self) -> &[Mat3] {
+        &self.vertex_k
+    }
+
+    /// K_ab (a < b) of every edge, in [`Topology::edges`] order.
+    pub fn edge_tensors(&self) -> &[Mat3] {
+        &self.edge_k
+    }
+
+    /// Lumped masses (kg); zero for orphaned vertices.
+    pub fn masses_kg(&self) -> &[Real] {
+        &self.mass_kg
+    }
+
+    /// Damping coefficients c_i (kg/s).
+    pub fn damping_kg_s(&self) -> &[Real] {
+        &self.damping_kg_s
+    }
+
+    /// The full stiffness as a dense 3n x 3n row-major matrix (tests and small meshes only).
+    pub fn dense_stiffness(&self) -> Vec<Real> {
+        let n3 = 3 * self.vertex_count();
+        let mut k = vec![0.0; n3 * n3];
+        let mut put = |a: usize, b: usize, m: &Mat3| {
+            for r in 0..3 {
+                for c in 0..3 {
+                    k[(3 * a + r) * n3 + 3 * b + c] += m.col(c)[r];
+                }
+            }
+        };
+        for (v, m) in self.vertex_k.iter().enumerate() {
+            put(v, v, m);
+        }
+        for ([a, b], m) in self.topo.edges().iter().zip(&self.edge_k) {
+            put(a.idx(), b.idx(), m);
+            put(b.idx(), a.idx(), &m.transpose());
+        }
+        k
+    }
+}
