@@ -561,16 +561,29 @@ mod tests {
     fn engineering_constants_round_trip() {
         for t in [liver(), Isotropic::from_young_poisson(4500.0, 0.3).unwrap()] {
             let mu = t.mu_pa();
-            for (dl, dm) in [(0.0, mu), (-0.2 * mu, 3.0 * mu), (0.5 * mu, -0.3 * mu), (2.0 * mu, 0.0)] {
+            for (dl, dm) in [
+                (0.0, mu),
+                (-0.2 * mu, 3.0 * mu),
+                (0.5 * mu, -0.3 * mu),
+                (2.0 * mu, 0.0),
+            ] {
                 let Ok(m) = TransverselyIsotropic::new(t, dl, dm, Terms::ALL) else {
                     continue;
                 };
                 let eng = m.engineering();
-                let back = TransverselyIsotropic::from_engineering(t, eng.young_fiber_pa, eng.shear_fiber_pa)
-                    .unwrap_or_else(|e| panic!("{eng:?}: {e}"));
+                let back = TransverselyIsotropic::from_engineering(
+                    t,
+                    eng.young_fiber_pa,
+                    eng.shear_fiber_pa,
+                )
+                .unwrap_or_else(|e| panic!("{eng:?}: {e}"));
                 let again = back.engineering();
-                assert!((again.young_fiber_pa - eng.young_fiber_pa).abs() < 1e-8 * eng.young_fiber_pa);
-                assert!((again.shear_fiber_pa - eng.shear_fiber_pa).abs() < 1e-9 * eng.shear_fiber_pa);
+                assert!(
+                    (again.young_fiber_pa - eng.young_fiber_pa).abs() < 1e-8 * eng.young_fiber_pa
+                );
+                assert!(
+                    (again.shear_fiber_pa - eng.shear_fiber_pa).abs() < 1e-9 * eng.shear_fiber_pa
+                );
                 // The paper's closed forms agree with the compliance.
                 let (l, dl, dm) = (t.lambda_pa(), m.delta_lambda_pa(), m.delta_mu_pa());
                 let nu_lt = (l + dl) / (2.0 * (l + mu));
@@ -586,7 +599,10 @@ mod tests {
         let MaterialError::Engineering { max_pa, .. } = err else {
             panic!("{err}")
         };
-        assert!(max_pa < 13500.0 && err.to_string().contains("must lie in"), "{err}");
+        assert!(
+            max_pa < 13500.0 && err.to_string().contains("must lie in"),
+            "{err}"
+        );
         assert!(TransverselyIsotropic::from_engineering(liver(), 0.99 * max_pa, 3104.0).is_ok());
     }
 

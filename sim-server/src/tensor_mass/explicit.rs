@@ -17,6 +17,10 @@ pub enum DtPolicy {
     Refuse,
     /// Split each step into the fewest equal sub-steps under the bound.
     Substep,
+    /// Step as asked even above the bound. For experiments and for systems
+    /// whose constraints lower omega_max below the (constraint-free) bound;
+    /// the caller must detect divergence.
+    Unchecked,
 }
 
 /// Integrator settings.
@@ -115,7 +119,7 @@ impl<S: Storage> Explicit<S> {
             BoundMethod::Element => element_bound(&model),
             BoundMethod::PowerIteration => power_iteration(&model, 1e-6, 2000).step,
         };
-        let substeps = if dt_s <= stable.dt_max_s {
+        let substeps = if dt_s <= stable.dt_max_s || config.policy == DtPolicy::Unchecked {
             1
         } else if config.policy == DtPolicy::Substep {
             (dt_s / stable.dt_max_s).ceil() as usize
