@@ -87,20 +87,28 @@ struct PartPlan {
     spill_len: usize,
 }
 
+/// A part's scratch, allocated once: its accumulator ring, its deferred
+/// rows' K U and its spill past its end.
+#[derive(Clone, Debug)]
+struct PartBuffers {
+    ring: Vec<V3>,
+    deferred: Vec<V3>,
+    spill: Vec<V3>,
+}
+
 /// The explicit tensor-mass simulation, generic over the kernel's storage precision.
 pub struct Explicit<S: Storage> {
     model: ElasticModel,
     kernel: Kernel<S>,
     u: Vec<V3>,
     next: Vec<V3>,
-    ku: Vec<V3>,
     coef: Vec<V3>,
     constraint: Vec<u8>,
     kind: Vec<u8>,
     target: Vec<V3>,
     fext: Vec<V3>,
     plans: Vec<PartPlan>,
-    spills: Vec<Vec<V3>>,
+    buffers: Vec<PartBuffers>,
     pool: Option<rayon::ThreadPool>,
     stable: StableStep,
     dt_s: Real,
@@ -149,19 +157,25 @@ impl<S: Storage> Explicit<S> {
         let kernel = Kernel::new(&model);
         let n = model.vertex_count();
         let plans = plan_parts(&kernel, threads);
-        let spills = plans.iter().map(|p| vec![[0.0; 3]; p.spill_len]).collect();
+        let buffers = plans
+            .iter()
+            .map(|p| PartBuffers {
+                ring: vec![[0.0; 3]; kernel.ring_len()],
+                deferred: vec![[0.0; 3]; p.deferred_end - p.start],
+                spill: vec![[0.0; 3]; p.spill_len],
+            })
+            .collect();
         let mut sim = Self {
             kernel,
             u: vec![[0.0; 3]; n],
             next: vec![[0.0; 3]; n],
-            ku: vec![[0.0; 3]; n],
             coef: vec![[0.0; 3]; n],
             constraint: vec![kind::FREE; n],
             kind: vec![kind::FREE; n],
             target: vec![[0.0; 3]; n],
             fext: Vec::new(),
             plans,
-            spills,
+            buffers,
             pool,
             stable,
             dt_s,
@@ -205,13 +219,12 @@ impl<S: Storage> Explicit<S> {
             kernel,
             u,
             next,
-            ku,
             coef,
             kind,
             target,
             fext,
             plans,
-            spills,
+            buffers,
             pool,
             ..
         } = self;
@@ -222,26 +235,33 @@ impl<S: Storage> Explicit<S> {
             target,
             fext,
         };
-        let mut run = || run_parts(kernel, &inputs, plans, 0, ku, next, spills);
+        let mut run = || run_parts(kernel, &inputs, plans, 0, next, buffers);
         match pool {
             Some(pool) => pool.install(run),
             None => run(),
         }
         if plans.len() > 1 {
-            // Finish the rows that received contributions across a part boundary.
-            for (p, plan) in plans.iter().enumerate() {
-                for (r, s) in spills[p].iter_mut().enumerate() {
-                    let row = &mut ku[plan.end + r];
-                    for d in 0..3 {
-                        row[d] += s[d];
+            // Rows reached across a part boundary: add the spills to their
+            // deferred K U, then finish them.
+            for p in 0..plans.len() {
+                let (before, after) = buffers.split_at_mut(p + 1);
+                let mut q = 0;
+                for (r, s) in before[p].spill.iter_mut().enumerate() {
+                    let row = plans[p].end + r;
+                    while plans[p + 1 + q].end <= row {
+                        q += 1;
+                    }
+                    let d = &mut after[q].deferred[row - plans[p + 1 + q].start];
+                    for k in 0..3 {
+                        d[k] += s[k];
                     }
                     *s = [0.0; 3];
                 }
             }
-            for plan in plans.iter().skip(1) {
-                for i in plan.start..plan.deferred_end {
-                    inputs.integrate(i, ku[i], &mut next[i]);
-                    ku[i] = [0.0; 3];
+            for (plan, buf) in plans.iter().zip(buffers.iter_mut()).skip(1) {
+                for (i, d) in (plan.start..plan.deferred_end).zip(buf.deferred.iter_mut()) {
+                    inputs.integrate(i, *d, &mut next[i]);
+                    *d = [0.0; 3];
                 }
             }
         }
@@ -376,11 +396,12 @@ impl<S: Storage> Explicit<S> {
     }
 
     /// Bytes the step streams per sub-step: the kernel's tensors and indices
-    /// plus the state arrays (U read, U(t-1) read and written, K U read and
-    /// written, coefficients and kinds read).
+    /// plus the state arrays (U read, U(t-1) read and U(t+1) written in its
+    /// place, coefficients and kinds read). The K U accumulators live in a
+    /// cache-sized ring and are not counted.
     pub fn bytes_per_substep(&self) -> usize {
         let n = self.u.len();
-        self.kernel.bytes() + n * (24 + 48 + 48 + 24 + 1)
+        self.kernel.bytes() + n * (24 + 48 + 24 + 1)
     }
 
     /// The number of parts a step is split into.
@@ -433,33 +454,32 @@ fn run_parts<S: Storage>(
     inputs: &StepInputs<'_>,
     plans: &[PartPlan],
     offset: usize,
-    ku: &mut [V3],
     next: &mut [V3],
-    spills: &mut [Vec<V3>],
+    buffers: &mut [PartBuffers],
 ) {
-    if plans.len() == 1 {
-        let p = &plans[0];
+    if let [p] = plans {
+        let b = &mut buffers[0];
         kernel.run_part(
             inputs,
             Part {
                 start: p.start,
                 end: p.end,
                 deferred_end: p.deferred_end,
-                ku: &mut ku[p.start - offset..p.end - offset],
+                ring: &mut b.ring,
+                deferred: &mut b.deferred,
                 next: &mut next[p.start - offset..p.end - offset],
-                spill: &mut spills[0],
+                spill: &mut b.spill,
             },
         );
         return;
     }
     let mid = plans.len() / 2;
     let split = plans[mid].start - offset;
-    let (ku_a, ku_b) = ku.split_at_mut(split);
     let (next_a, next_b) = next.split_at_mut(split);
-    let (sp_a, sp_b) = spills.split_at_mut(mid);
+    let (buf_a, buf_b) = buffers.split_at_mut(mid);
     let (pa, pb) = plans.split_at(mid);
     rayon::join(
-        || run_parts(kernel, inputs, pa, offset, ku_a, next_a, sp_a),
-        || run_parts(kernel, inputs, pb, plans[mid].start, ku_b, next_b, sp_b),
+        || run_parts(kernel, inputs, pa, offset, next_a, buf_a),
+        || run_parts(kernel, inputs, pb, plans[mid].start, next_b, buf_b),
     );
 }
