@@ -3,7 +3,7 @@
 //! with fixed and prescribed vertices, external forces, cutting, and a time
 //! step checked against the stability bound (refused, or split into sub-steps).
 
-use super::kernel::{Kernel, Part, StepInputs, Storage, V3, kind};
+use super::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind};
 use super::model::{CutChange, CutError, ElasticModel};
 use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
 use crate::ids::{TetId, VertexId};
@@ -91,7 +91,7 @@ struct PartPlan {
 /// rows' K U and its spill past its end.
 #[derive(Clone, Debug)]
 struct PartBuffers {
-    ring: Vec<V3>,
+    ring: Vec<R4>,
     deferred: Vec<V3>,
     spill: Vec<V3>,
 }
@@ -160,7 +160,7 @@ impl<S: Storage> Explicit<S> {
         let buffers = plans
             .iter()
             .map(|p| PartBuffers {
-                ring: vec![[0.0; 3]; kernel.ring_len()],
+                ring: vec![[0.0; 4]; kernel.ring_len()],
                 deferred: vec![[0.0; 3]; p.deferred_end - p.start],
                 spill: vec![[0.0; 3]; p.spill_len],
             })

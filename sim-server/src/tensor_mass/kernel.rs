@@ -22,6 +22,12 @@ pub trait Storage: Copy + Default + Send + Sync + std::fmt::Debug + 'static {
     fn from_real(x: Real) -> Self;
     /// Widens to f64.
     fn to_real(self) -> Real;
+    /// Entries 0..4 and 4..8 of a block as two f64x4 (entry 8 is read apart).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn load8(k: &Block<Self>) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d);
 }
 
 impl Storage for f32 {
@@ -33,6 +39,19 @@ impl Storage for f32 {
     #[inline(always)]
     fn to_real(self) -> Real {
         self as Real
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn load8(k: &Block<Self>) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d) {
+        use std::arch::x86_64::*;
+        // SAFETY: `k` has 9 f32, so 8 can be read; the caller guarantees AVX2.
+        unsafe {
+            let v = _mm256_loadu_ps(k.as_ptr());
+            (
+                _mm256_cvtps_pd(_mm256_castps256_ps128(v)),
+                _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)),
+            )
+        }
     }
 }
 
@@ -46,10 +65,20 @@ impl Storage for f64 {
     fn to_real(self) -> Real {
         self
     }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn load8(k: &Block<Self>) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d) {
+        use std::arch::x86_64::*;
+        // SAFETY: `k` has 9 f64, so entries 0..8 can be read; the caller guarantees AVX2.
+        unsafe { (_mm256_loadu_pd(k.as_ptr()), _mm256_loadu_pd(k.as_ptr().add(4))) }
+    }
 }
 
 /// A 3-vector of state.
 pub type V3 = [Real; 3];
+
+/// A ring accumulator: a 3-vector padded to 4 lanes for SIMD.
+pub type R4 = [Real; 4];
 
 /// A 3x3 block, row-major.
 pub type Block<S> = [S; 9];
@@ -59,10 +88,27 @@ fn pack<S: Storage>(m: &Mat3) -> Block<S> {
     r.map(S::from_real)
 }
 
+/// The block's entries in f64 (written out: `array::map` does not always
+/// unroll in the hot loop).
+#[inline(always)]
+fn widen<S: Storage>(k: &Block<S>) -> [Real; 9] {
+    [
+        k[0].to_real(),
+        k[1].to_real(),
+        k[2].to_real(),
+        k[3].to_real(),
+        k[4].to_real(),
+        k[5].to_real(),
+        k[6].to_real(),
+        k[7].to_real(),
+        k[8].to_real(),
+    ]
+}
+
 /// y = K x for a row-major block.
 #[inline(always)]
 fn mul<S: Storage>(k: &Block<S>, x: &V3) -> V3 {
-    let k = k.map(S::to_real);
+    let k = widen(k);
     [
         k[0] * x[0] + k[1] * x[1] + k[2] * x[2],
         k[3] * x[0] + k[4] * x[1] + k[5] * x[2],
@@ -73,7 +119,7 @@ fn mul<S: Storage>(k: &Block<S>, x: &V3) -> V3 {
 /// y = K^T x for a row-major block.
 #[inline(always)]
 fn mul_t<S: Storage>(k: &Block<S>, x: &V3) -> V3 {
-    let k = k.map(S::to_real);
+    let k = widen(k);
     [
         k[0] * x[0] + k[3] * x[1] + k[6] * x[2],
         k[1] * x[0] + k[4] * x[1] + k[7] * x[2],
@@ -262,13 +308,13 @@ pub struct Part<'a> {
     /// K U accumulators of the rows in flight, indexed by row modulo its
     /// length (a power of two above the kernel's span): they stay in cache
     /// instead of streaming an n-long array. All zero on entry and exit.
-    pub ring: &'a mut [V3],
+    pub ring: &'a mut [R4],
     /// Final K U of the deferred rows (`start..deferred_end`), without the
     /// contributions of earlier parts.
     pub deferred: &'a mut [V3],
     /// U(t-1) on entry, U(t+1) on exit, rows `start..end` (deferred rows untouched).
     pub next: &'a mut [V3],
-    /// Scatter into rows `end..end + spill.len()`.
+    /// Scatter into rows `end..end + spill.len()` (overwritten).
     pub spill: &'a mut [V3],
 }
 
@@ -304,22 +350,15 @@ impl<S: Storage> Kernel<S> {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { self.run_part_avx2(inp, part) };
+            unsafe { super::avx2::run_part(self, inp, part) };
             return;
         }
         self.run_part_body(inp, part);
     }
 
-    /// The same pass compiled for AVX2 (4-wide f64). Floating-point
-    /// operations and their order are unchanged (no FMA contraction), so
-    /// both paths give bit-identical results.
-    ///
-    /// # Safety
-    /// The CPU must support AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn run_part_avx2(&self, inp: &StepInputs<'_>, part: Part<'_>) {
-        self.run_part_body(inp, part);
+    /// Diagonal blocks, row pointers and edge records, for the SIMD path.
+    pub(super) fn parts(&self) -> (&[Block<S>], &[u32], &[EdgeBlock<S>]) {
+        (&self.diag, &self.row_start, &self.edges)
     }
 
     /// The pass without the AVX2 dispatch (the path of CPUs without AVX2);
@@ -330,7 +369,7 @@ impl<S: Storage> Kernel<S> {
     }
 
     #[inline(always)]
-    fn run_part_body(&self, inp: &StepInputs<'_>, part: Part<'_>) {
+    pub(super) fn run_part_body(&self, inp: &StepInputs<'_>, part: Part<'_>) {
         let Part {
             start,
             end,
@@ -341,7 +380,10 @@ impl<S: Storage> Kernel<S> {
             spill,
         } = part;
         let mask = ring.len() - 1;
-        debug_assert!(ring.len().is_power_of_two() && ring.len() > self.span);
+        assert!(ring.len().is_power_of_two() && ring.len() > self.span && spill.len() <= self.span);
+        // Indexing a slice of exactly mask + 1 with `& mask` lets the
+        // compiler drop the bounds check.
+        let ring = &mut ring[..=mask];
         let u = inp.u;
         let tile = |v: V3| [v[0], v[1], v[2], v[0], v[1], v[2], v[0], v[1], v[2]];
         for i in start..end {
@@ -349,7 +391,7 @@ impl<S: Storage> Kernel<S> {
             let ti = [
                 ui[0], ui[0], ui[0], ui[1], ui[1], ui[1], ui[2], ui[2], ui[2],
             ];
-            let d = self.diag[i].map(S::to_real);
+            let d = widen(&self.diag[i]);
             let tu = tile(ui);
             let mut m = [0.0; 9];
             for q in 0..9 {
@@ -360,7 +402,7 @@ impl<S: Storage> Kernel<S> {
             for (s, e) in self.edges[r].iter().enumerate() {
                 prefetch(&self.edges, first + s);
                 let j = e.col as usize;
-                let k = e.k.map(S::to_real);
+                let k = widen(&e.k);
                 let tj = tile(u[j]);
                 let mut t = [0.0; 9];
                 for q in 0..9 {
@@ -368,15 +410,17 @@ impl<S: Storage> Kernel<S> {
                     t[q] = k[q] * ti[q];
                 }
                 let kt = [t[0] + t[3] + t[6], t[1] + t[4] + t[7], t[2] + t[5] + t[8]];
-                if j < end {
-                    add(&mut ring[j & mask], kt);
-                } else {
-                    add(&mut spill[j - end], kt);
+                // Rows past the part's end also accumulate in the ring (their
+                // slots are free: j - i <= span < ring length); they are moved
+                // to the spill once the part is done.
+                let slot = &mut ring[j & mask];
+                for d in 0..3 {
+                    slot[d] += kt[d];
                 }
             }
             let slot = &mut ring[i & mask];
-            let mut acc = *slot;
-            *slot = [0.0; 3];
+            let mut acc = [slot[0], slot[1], slot[2]];
+            *slot = [0.0; 4];
             add(
                 &mut acc,
                 [m[0] + m[1] + m[2], m[3] + m[4] + m[5], m[6] + m[7] + m[8]],
@@ -386,6 +430,11 @@ impl<S: Storage> Kernel<S> {
             } else {
                 inp.integrate(i, acc, &mut next[i - start]);
             }
+        }
+        for (r, sp) in spill.iter_mut().enumerate() {
+            let slot = &mut ring[(end + r) & mask];
+            *sp = [slot[0], slot[1], slot[2]];
+            *slot = [0.0; 4];
         }
     }
 }
@@ -424,7 +473,7 @@ mod tests {
             fext: &[],
         };
         let run = |portable: bool| {
-            let mut ring = vec![[0.0; 3]; kernel.ring_len()];
+            let mut ring = vec![[0.0; 4]; kernel.ring_len()];
             let mut next = vec![[0.0; 3]; n];
             let part = Part {
                 start: 0,

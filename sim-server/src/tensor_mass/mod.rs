@@ -2,6 +2,8 @@
 //! derived from the energy, the assembled model with local cutting updates,
 //! the hot kernel, explicit integration and its stability bound.
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 pub mod element;
 pub mod explicit;
 pub mod kernel;
