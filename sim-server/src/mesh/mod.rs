@@ -5,7 +5,10 @@
 //! are alive, edges, the surface) lives in [`crate::topology`].
 
 mod generate;
+pub mod io;
+pub mod quality;
 mod reorder;
+pub mod shapes;
 
 pub use generate::{BoxSpec, CellSize, GenerateError};
 pub use reorder::{bandwidth, rcm_order};
