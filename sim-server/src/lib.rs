@@ -38,6 +38,7 @@ pub mod ids;
 pub mod material;
 pub mod material_map;
 pub mod math;
+pub mod membrane;
 pub mod mesh;
 pub mod static_solve;
 pub mod tensor_mass;

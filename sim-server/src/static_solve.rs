@@ -162,6 +162,34 @@ pub fn solve_static(
                     [(a.idx(), b.idx(), *k), (b.idx(), a.idx(), k.transpose())]
                 }),
         );
+    // A nonlinear membrane enters the static (small-displacement) problem by
+    // its tangent at rest, the same springs linearised.
+    let membrane_blocks: Vec<(usize, usize, crate::math::Mat3)> = match model.membrane() {
+        Some(m) if m.model() == crate::membrane::MembraneModel::Nonlinear => {
+            let rest = model.mesh().positions_m();
+            m.capsule_edges()
+                .iter()
+                .filter(|e| m.stiffness_n_per_m()[e.idx()] > 0.0)
+                .flat_map(|e| {
+                    let [a, b] = topo.edges()[e.idx()];
+                    let t = crate::membrane::Membrane::linear_tensor(
+                        rest,
+                        a,
+                        b,
+                        m.stiffness_n_per_m()[e.idx()],
+                    );
+                    [
+                        (a.idx(), a.idx(), t),
+                        (b.idx(), b.idx(), t),
+                        (a.idx(), b.idx(), -t),
+                        (b.idx(), a.idx(), -t),
+                    ]
+                })
+                .collect()
+        }
+        _ => Vec::new(),
+    };
+    let blocks = blocks.chain(membrane_blocks.iter().copied());
     let mut triplets = Vec::new();
     let mut rhs = vec![0.0; nf];
     for (a, b, k) in blocks {
@@ -209,6 +237,9 @@ pub fn solve_static(
         .collect();
     let mut ku = vec![Vec3::ZERO; n];
     model.elastic_forces(&displacement_m, &mut ku);
+    for (a, b, t) in &membrane_blocks {
+        ku[*a] -= *t * displacement_m[*b];
+    }
     // elastic_forces gives -K u; reaction = K u - f at imposed dofs.
     let force_n = (0..n)
         .map(|v| {

@@ -206,6 +206,12 @@ impl Topology {
         self.surface.len()
     }
 
+    /// The current surface faces as (tetrahedron, local face index into
+    /// [`TET_FACES`]).
+    pub fn surface_faces(&self) -> impl Iterator<Item = (TetId, usize)> + '_ {
+        self.surface.iter().map(|&(t, k)| (t, k as usize))
+    }
+
     /// The current surface triangles, oriented outwards, given the mesh.
     pub fn surface_triangles<'a>(
         &'a self,

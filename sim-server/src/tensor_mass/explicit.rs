@@ -107,6 +107,10 @@ pub struct Explicit<S: Storage> {
     kind: Vec<u8>,
     target: Vec<V3>,
     fext: Vec<V3>,
+    /// Nonlinear membrane forces, and the vertices they touch (empty without
+    /// a nonlinear membrane: a scene without one pays nothing).
+    fmem: Vec<V3>,
+    capsule_vertices: Vec<u32>,
     plans: Vec<PartPlan>,
     buffers: Vec<PartBuffers>,
     pool: Option<rayon::ThreadPool>,
@@ -157,6 +161,20 @@ impl<S: Storage> Explicit<S> {
         let kernel = Kernel::new(&model);
         let n = model.vertex_count();
         let plans = plan_parts(&kernel, threads);
+        let (fmem, capsule_vertices) = match model.membrane() {
+            Some(m) if m.model() == crate::membrane::MembraneModel::Nonlinear => {
+                let edges = model.topology().edges();
+                let mut vs: Vec<u32> = m
+                    .capsule_edges()
+                    .iter()
+                    .flat_map(|e| edges[e.idx()].map(|v| v.0))
+                    .collect();
+                vs.sort_unstable();
+                vs.dedup();
+                (vec![[0.0; 3]; n], vs)
+            }
+            _ => (Vec::new(), Vec::new()),
+        };
         let buffers = plans
             .iter()
             .map(|p| PartBuffers {
@@ -174,6 +192,8 @@ impl<S: Storage> Explicit<S> {
             kind: vec![kind::FREE; n],
             target: vec![[0.0; 3]; n],
             fext: Vec::new(),
+            fmem,
+            capsule_vertices,
             plans,
             buffers,
             pool,
@@ -215,6 +235,12 @@ impl<S: Storage> Explicit<S> {
     }
 
     fn substep(&mut self) {
+        if !self.capsule_vertices.is_empty() {
+            for &v in &self.capsule_vertices {
+                self.fmem[v as usize] = [0.0; 3];
+            }
+            self.model.membrane_forces(&self.u, &mut self.fmem);
+        }
         let Self {
             kernel,
             u,
@@ -223,6 +249,7 @@ impl<S: Storage> Explicit<S> {
             kind,
             target,
             fext,
+            fmem,
             plans,
             buffers,
             pool,
@@ -234,6 +261,7 @@ impl<S: Storage> Explicit<S> {
             kind,
             target,
             fext,
+            fmem,
         };
         let mut run = || run_parts(kernel, &inputs, plans, 0, next, buffers);
         match pool {

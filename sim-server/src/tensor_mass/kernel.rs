@@ -70,7 +70,12 @@ impl Storage for f64 {
     unsafe fn load8(k: &Block<Self>) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d) {
         use std::arch::x86_64::*;
         // SAFETY: `k` has 9 f64, so entries 0..8 can be read; the caller guarantees AVX2.
-        unsafe { (_mm256_loadu_pd(k.as_ptr()), _mm256_loadu_pd(k.as_ptr().add(4))) }
+        unsafe {
+            (
+                _mm256_loadu_pd(k.as_ptr()),
+                _mm256_loadu_pd(k.as_ptr().add(4)),
+            )
+        }
     }
 }
 
@@ -274,6 +279,8 @@ pub struct StepInputs<'a> {
     pub target: &'a [V3],
     /// External forces (N); empty when there are none.
     pub fext: &'a [V3],
+    /// Nonlinear membrane forces (N); empty without a nonlinear membrane.
+    pub fmem: &'a [V3],
 }
 
 impl StepInputs<'_> {
@@ -286,8 +293,9 @@ impl StepInputs<'_> {
                 let [a, b, c] = self.coef[i];
                 let u = self.u[i];
                 let fe = self.fext.get(i).copied().unwrap_or([0.0; 3]);
+                let fm = self.fmem.get(i).copied().unwrap_or([0.0; 3]);
                 for d in 0..3 {
-                    next[d] = a * (fe[d] - ku[d]) + b * u[d] - c * next[d];
+                    next[d] = a * (fe[d] + fm[d] - ku[d]) + b * u[d] - c * next[d];
                 }
             }
             kind::PRESCRIBED => *next = self.target[i],

@@ -7,6 +7,7 @@ use super::element::{Geometry, TetElastic};
 use crate::ids::{EdgeId, TetId, VertexId};
 use crate::material_map::{AssignError, TetMaterials};
 use crate::math::{Mat3, Real, Vec3};
+use crate::membrane::{Membrane, MembraneModel};
 use crate::mesh::{TET_EDGES, TetMesh};
 use crate::topology::{Orphans, Topology};
 use thiserror::Error;
@@ -25,6 +26,9 @@ pub enum ModelError {
     /// A material assignment problem.
     #[error(transparent)]
     Assign(#[from] AssignError),
+    /// The membrane coefficient is not a finite non-negative number.
+    #[error("membrane alpha must be a finite number >= 0 (N/m^2), got {0}")]
+    MembraneAlpha(Real),
 }
 
 /// Why a cut (removal or restoration) was refused.
@@ -63,6 +67,7 @@ pub struct ElasticModel {
     edge_k: Vec<Mat3>,
     mass_kg: Vec<Real>,
     damping_kg_s: Vec<Real>,
+    membrane: Option<Membrane>,
     orphans: Orphans,
 }
 
@@ -87,12 +92,67 @@ impl ElasticModel {
             mesh,
             materials,
             topo,
+            membrane: None,
             orphans: Orphans::default(),
         };
         for t in 0..model.mesh.tet_count() {
             model.accumulate(TetId::from(t), 1.0);
         }
         Ok(model)
+    }
+
+    /// Adds the surface membrane (paper 3.7) on the current surface. With
+    /// [`MembraneModel::Linear`] its springs are folded into the tensors here.
+    pub fn with_membrane(
+        mut self,
+        alpha_n_per_m2: Real,
+        model: MembraneModel,
+    ) -> Result<Self, ModelError> {
+        if !(alpha_n_per_m2.is_finite() && alpha_n_per_m2 >= 0.0) {
+            return Err(ModelError::MembraneAlpha(alpha_n_per_m2));
+        }
+        assert!(self.membrane.is_none(), "the membrane is set once");
+        let membrane = Membrane::new(&self.mesh, &self.topo, alpha_n_per_m2, model);
+        if model == MembraneModel::Linear {
+            let rest = self.mesh.positions_m();
+            for (e, &k) in membrane.stiffness_n_per_m().iter().enumerate() {
+                if k != 0.0 {
+                    let [a, b] = self.topo.edges()[e];
+                    let t = Membrane::linear_tensor(rest, a, b, k);
+                    self.vertex_k[a.idx()] += t;
+                    self.vertex_k[b.idx()] += t;
+                    self.edge_k[e] -= t;
+                }
+            }
+        }
+        self.membrane = Some(membrane);
+        Ok(self)
+    }
+
+    /// The membrane, if the model has one.
+    pub fn membrane(&self) -> Option<&Membrane> {
+        self.membrane.as_ref()
+    }
+
+    /// Adds or removes the capsule faces of `t` (after its element
+    /// contribution), folding linear springs into the tensors.
+    fn accumulate_membrane(&mut self, t: TetId, sign: Real) {
+        let Some(membrane) = self.membrane.as_mut() else {
+            return;
+        };
+        let delta = membrane.apply_tet(&self.topo, t, sign);
+        if membrane.model() == MembraneModel::Linear {
+            let rest = self.mesh.positions_m();
+            for (l, e) in self.topo.tet_edges(t).iter().enumerate() {
+                if delta[l] != 0.0 {
+                    let [a, b] = self.topo.edges()[e.idx()];
+                    let m = Membrane::linear_tensor(rest, a, b, delta[l]);
+                    self.vertex_k[a.idx()] += m;
+                    self.vertex_k[b.idx()] += m;
+                    self.edge_k[e.idx()] -= m;
+                }
+            }
+        }
     }
 
     /// The constants and geometry of tetrahedron `t`.
@@ -153,6 +213,7 @@ impl ElasticModel {
             return Err(CutError::AlreadyRemoved(t.0));
         }
         self.accumulate(t, -1.0);
+        self.accumulate_membrane(t, -1.0);
         let mut orphans = std::mem::take(&mut self.orphans);
         self.topo.remove(t, self.mesh.tets()[t.idx()], &mut orphans);
         for e in &orphans.edges {
@@ -175,11 +236,14 @@ impl ElasticModel {
         }
         self.topo.revive(t, self.mesh.tets()[t.idx()]);
         self.accumulate(t, 1.0);
+        self.accumulate_membrane(t, 1.0);
         Ok(self.change(t))
     }
 
     /// Elastic forces F = -K U (N) for displacements `u` (m), by a plain loop
-    /// over the vertex and edge tensors in double precision.
+    /// over the vertex and edge tensors in double precision. This includes a
+    /// linear membrane (folded into K) but not a nonlinear one: see
+    /// [`ElasticModel::membrane_forces`].
     pub fn elastic_forces(&self, u: &[Vec3], out: &mut [Vec3]) {
         assert_eq!(u.len(), self.vertex_count());
         assert_eq!(out.len(), self.vertex_count());
@@ -192,9 +256,29 @@ impl ElasticModel {
         }
     }
 
-    /// Elastic energy (J) of displacements `u`, summed over the live
-    /// tetrahedra from their strains (independent of the assembled tensors).
+    /// Adds the nonlinear membrane's forces (eq 29) at displacements `u` to
+    /// `out`; nothing for a linear membrane (already in K) or none.
+    pub fn membrane_forces(&self, u: &[[Real; 3]], out: &mut [[Real; 3]]) {
+        if let Some(m) = &self.membrane {
+            if m.model() == MembraneModel::Nonlinear {
+                m.add_forces(&self.topo, self.mesh.positions_m(), u, out);
+            }
+        }
+    }
+
+    /// Total energy (J) of displacements `u`: the live tetrahedra's strain
+    /// energy (computed from their strains, independent of the assembled
+    /// tensors) plus the membrane's spring energy in its model.
     pub fn energy_j(&self, u: &[Vec3]) -> Real {
+        let membrane = self
+            .membrane
+            .as_ref()
+            .map_or(0.0, |m| m.energy_j(&self.topo, self.mesh.positions_m(), u));
+        membrane + self.strain_energy_j(u)
+    }
+
+    /// Strain energy (J) of the live tetrahedra alone.
+    pub fn strain_energy_j(&self, u: &[Vec3]) -> Real {
         (0..self.mesh.tet_count())
             .map(TetId::from)
             .filter(|t| self.topo.is_alive(*t))

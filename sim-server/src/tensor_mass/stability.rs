@@ -78,6 +78,25 @@ pub fn element_lambda(model: &ElasticModel, t: TetId) -> Real {
             }
         }
     }
+    // The capsule springs of this tetrahedron's surface faces belong to its
+    // element: K = sum over tets of (K_e + springs_e) and M = sum of M_e, so
+    // Irons' bound still holds with them (and survives cuts).
+    if let Some(membrane) = model.membrane() {
+        let rest = model.mesh().positions_m();
+        let tet = model.mesh().tets()[t.idx()];
+        for (a, b, kf) in membrane.tet_springs(t) {
+            let s = crate::membrane::Membrane::linear_tensor(rest, tet[a], tet[b], kf);
+            for r in 0..3 {
+                for c in 0..3 {
+                    let v = s.col(c)[r];
+                    k[(3 * a + r, 3 * a + c)] += v;
+                    k[(3 * b + r, 3 * b + c)] += v;
+                    k[(3 * a + r, 3 * b + c)] -= v;
+                    k[(3 * b + r, 3 * a + c)] -= v;
+                }
+            }
+        }
+    }
     let quarter_mass = model.materials().material(t).density_kg_m3() * geom.volume_m3 / 4.0;
     k.symmetric_eigenvalues().max() / quarter_mass
 }
