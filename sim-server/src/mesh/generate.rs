@@ -44,6 +44,31 @@ pub enum GenerateError {
         /// The cell counts per axis.
         cells: [usize; 3],
     },
+    /// A coordinate is NaN or infinite.
+    #[error("{field} must be finite, got {value}")]
+    NotFinite {
+        /// Which input.
+        field: &'static str,
+        /// The value given.
+        value: Real,
+    },
+    /// Nothing of the shape was meshed.
+    #[error("nothing to mesh: {reason}")]
+    Empty {
+        /// Why, in words (which shape, bounds and cell).
+        reason: String,
+    },
+    /// Trimming a lattice to a shape left non-manifold vertices that the
+    /// repair could not remove (a shape with features thinner than a cell).
+    #[error(
+        "{vertices} vertices are still non-manifold after {rounds} repair rounds; use a smaller cell"
+    )]
+    NotManifold {
+        /// Non-manifold vertices left.
+        vertices: usize,
+        /// Repair rounds done.
+        rounds: usize,
+    },
     /// The generated mesh failed validation (cannot happen for valid sizes).
     #[error(transparent)]
     Mesh(#[from] MeshError),
