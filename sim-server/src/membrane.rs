@@ -54,6 +54,22 @@ pub struct Membrane {
     faces_on_edge: Vec<u8>,
     /// Edges that carry a spring at build time (the only ones that ever can).
     capsule_edges: Vec<EdgeId>,
+    /// The same springs packed for the per-step loop of the nonlinear model.
+    springs: Vec<Spring>,
+    /// Index into `springs` of each edge (u32::MAX off the capsule).
+    spring_of_edge: Vec<u32>,
+}
+
+/// One capsule spring, laid out for the per-step loop: no lookups of the
+/// topology or rest positions, no square root for the rest length.
+#[derive(Clone, Copy, Debug)]
+struct Spring {
+    a: u32,
+    b: u32,
+    k_n_per_m: Real,
+    rest_l0_m: Real,
+    /// Rest vector b - a (m).
+    rest_ab_m: [Real; 3],
 }
 
 impl Membrane {
@@ -102,6 +118,8 @@ impl Membrane {
             k_n_per_m: vec![0.0; topo.edges().len()],
             faces_on_edge: vec![0; topo.edges().len()],
             capsule_edges: Vec::new(),
+            springs: Vec::new(),
+            spring_of_edge: vec![u32::MAX; topo.edges().len()],
         };
         for t in 0..mesh.tet_count() {
             membrane.apply_tet(topo, TetId::from(t), 1.0);
@@ -110,6 +128,19 @@ impl Membrane {
             .filter(|&e| membrane.k_n_per_m[e] > 0.0)
             .map(EdgeId::from)
             .collect();
+        let rest = mesh.positions_m();
+        for (i, e) in membrane.capsule_edges.iter().enumerate() {
+            let [a, b] = topo.edges()[e.idx()];
+            let ab = rest[b.idx()] - rest[a.idx()];
+            membrane.springs.push(Spring {
+                a: a.0,
+                b: b.0,
+                k_n_per_m: membrane.k_n_per_m[e.idx()],
+                rest_l0_m: ab.length(),
+                rest_ab_m: ab.to_array(),
+            });
+            membrane.spring_of_edge[e.idx()] = i as u32;
+        }
         membrane
     }
 
@@ -136,6 +167,9 @@ impl Membrane {
                 self.k_n_per_m[e] = 0.0;
             } else {
                 self.k_n_per_m[e] += delta[l];
+            }
+            if let Some(s) = self.springs.get_mut(self.spring_of_edge[e] as usize) {
+                s.k_n_per_m = self.k_n_per_m[e];
             }
         }
         delta
@@ -179,36 +213,28 @@ impl Membrane {
     }
 
     /// Adds the nonlinear spring forces (eq 29) at displacements `u` to `out`
-    /// (N). Allocation-free; `rest` are rest positions.
-    pub fn add_forces(
-        &self,
-        topo: &Topology,
-        rest: &[Vec3],
-        u: &[[Real; 3]],
-        out: &mut [[Real; 3]],
-    ) {
-        let edges = topo.edges();
-        for &e in &self.capsule_edges {
-            let k = self.k_n_per_m[e.idx()];
-            if k == 0.0 {
+    /// (N). Allocation-free; one square root and one division per spring.
+    pub fn add_forces(&self, u: &[[Real; 3]], out: &mut [[Real; 3]]) {
+        for s in &self.springs {
+            if s.k_n_per_m == 0.0 {
                 continue;
             }
-            let [a, b] = edges[e.idx()];
-            let (pa, pb) = (
-                rest[a.idx()] + Vec3::from_array(u[a.idx()]),
-                rest[b.idx()] + Vec3::from_array(u[b.idx()]),
-            );
-            let l0 = rest[a.idx()].distance(rest[b.idx()]);
-            let d = pb - pa;
-            let l = d.length();
+            let (a, b) = (s.a as usize, s.b as usize);
+            let (ua, ub) = (u[a], u[b]);
+            let d = [
+                s.rest_ab_m[0] + ub[0] - ua[0],
+                s.rest_ab_m[1] + ub[1] - ua[1],
+                s.rest_ab_m[2] + ub[2] - ua[2],
+            ];
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             if l <= 0.0 {
                 continue;
             }
             // Force on a: k (l - l0) / l (pb - pa); on b the opposite.
-            let f = d * (k * (l - l0) / l);
-            for c in 0..3 {
-                out[a.idx()][c] += f[c];
-                out[b.idx()][c] -= f[c];
+            let c = s.k_n_per_m * (1.0 - s.rest_l0_m / l);
+            for i in 0..3 {
+                out[a][i] += c * d[i];
+                out[b][i] -= c * d[i];
             }
         }
     }

@@ -479,6 +479,7 @@ mod tests {
             kind: &kind,
             target: &[],
             fext: &[],
+            fmem: &[],
         };
         let run = |portable: bool| {
             let mut ring = vec![[0.0; 4]; kernel.ring_len()];
@@ -498,7 +499,7 @@ mod tests {
                 kernel.run_part(&inputs, part);
             }
             assert!(
-                ring.iter().all(|r| *r == [0.0; 3]),
+                ring.iter().all(|r| *r == [0.0; 4]),
                 "the ring must be left zeroed"
             );
             next

@@ -261,7 +261,7 @@ impl ElasticModel {
     pub fn membrane_forces(&self, u: &[[Real; 3]], out: &mut [[Real; 3]]) {
         if let Some(m) = &self.membrane {
             if m.model() == MembraneModel::Nonlinear {
-                m.add_forces(&self.topo, self.mesh.positions_m(), u, out);
+                m.add_forces(u, out);
             }
         }
     }
