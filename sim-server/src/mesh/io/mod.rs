@@ -1,1 +1,311 @@
-//! Mesh import and export (Gmsh MSH 4.1 / 2.2, VTK legacy, VTU, medit; VTU + PVD, OBJ, STL out).
+//! Mesh import and export: Gmsh MSH 4.1 (ASCII and binary) and 2.2 (ASCII),
+//! legacy VTK (ASCII unstructured grid), VTU (XML, ascii and base64 inline or
+//! appended raw data) and medit `.mesh` in; VTU + PVD, OBJ, binary STL and
+//! medit out.
+//!
+//! Every parser is written by hand over a byte slice: the formats are simple,
+//! the crates that read them lose the line of a fault or pull in large
+//! dependency trees, and a hand-written parser can promise what the fuzzers
+//! check: no panic on any input, and no allocation larger than the input
+//! justifies (a header claiming 10^12 nodes is an error, not an OOM).
+//!
+//! Only 4-node tetrahedra become the mesh. Lower-dimensional elements
+//! (boundary triangles, lines, points) are ignored with a warning; volume
+//! elements of any other kind (10-node tetrahedra, hexahedra, prisms) are
+//! refused, since dropping them would silently remove part of the body.
+
+// `MeshIoError::Invalid` carries the `MeshError` by value so that callers can
+// match on it; that makes the error ~140 bytes. Errors are the cold path of a
+// file import, so the size costs nothing measurable.
+#![allow(clippy::result_large_err)]
+
+mod base64;
+mod error;
+mod export;
+mod gmsh;
+mod gmsh41;
+mod medit;
+mod text;
+mod vtk;
+mod vtu;
+mod xml;
+
+pub use error::{Location, MeshIoError};
+pub use export::{write_obj, write_pvd, write_stl, write_vtu};
+pub use medit::write_medit;
+
+use crate::math::Vec3;
+use crate::mesh::{MeshError, TetMesh};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// A mesh file format, detected from the file extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshFormat {
+    /// Gmsh `.msh`, version 4.1 (ASCII or binary) or 2.2 (ASCII).
+    Msh,
+    /// Legacy VTK `.vtk`, ASCII unstructured grid.
+    VtkLegacy,
+    /// VTK XML unstructured grid `.vtu`.
+    Vtu,
+    /// medit / INRIA `.mesh` (ASCII).
+    Medit,
+}
+
+impl MeshFormat {
+    /// The format for a file extension (case-insensitive), if it is known.
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "msh" => Some(Self::Msh),
+            "vtk" => Some(Self::VtkLegacy),
+            "vtu" => Some(Self::Vtu),
+            "mesh" => Some(Self::Medit),
+            _ => None,
+        }
+    }
+}
+
+/// A tetrahedral mesh read from a file, with what the file said about it.
+#[derive(Clone, Debug)]
+pub struct ImportedMesh {
+    /// The validated mesh (inverted tetrahedra reoriented). Vertices keep the
+    /// file's order; unused vertices are kept.
+    pub mesh: TetMesh,
+    /// The physical tag of each tetrahedron (Gmsh physical group, medit
+    /// reference, VTK cell data `physical` / `gmsh:physical` /
+    /// `CellEntityIds`); 0 when the file has none.
+    pub tet_physical: Vec<i32>,
+    /// What the import changed or left out, for the user to see.
+    pub warnings: Vec<String>,
+}
+
+/// Reads a mesh file, choosing the format by its extension.
+pub fn read_mesh(path: &Path) -> Result<ImportedMesh, MeshIoError> {
+    let name = path.display().to_string();
+    let format = MeshFormat::from_path(path)
+        .ok_or_else(|| MeshIoError::UnknownFormat { file: name.clone() })?;
+    let bytes = std::fs::read(path).map_err(|source| MeshIoError::Io {
+        file: name.clone(),
+        source,
+    })?;
+    parse_mesh(&name, &bytes, format)
+}
+
+/// Parses a mesh from memory; `name` is used in error messages. Never panics,
+/// whatever the bytes.
+pub fn parse_mesh(
+    name: &str,
+    bytes: &[u8],
+    format: MeshFormat,
+) -> Result<ImportedMesh, MeshIoError> {
+    match format {
+        MeshFormat::Msh => gmsh::parse(name, bytes),
+        MeshFormat::VtkLegacy => vtk::parse(name, bytes),
+        MeshFormat::Vtu => vtu::parse(name, bytes),
+        MeshFormat::Medit => medit::parse(name, bytes),
+    }
+}
+
+/// Collects what a parser found and turns it into an [`ImportedMesh`],
+/// translating validation failures back to the file's own numbering.
+pub(crate) struct Builder<'f> {
+    file: &'f str,
+    /// How the file calls an element in messages ("element", "cell", ...).
+    element_word: &'static str,
+    positions: Vec<Vec3>,
+    tets: Vec<[u32; 4]>,
+    tet_physical: Vec<i32>,
+    /// Each tetrahedron's number in the file and where it is.
+    tet_origin: Vec<(u64, Location)>,
+    /// Lower-dimensional elements ignored, by kind (plural noun).
+    ignored: Vec<(&'static str, usize)>,
+    warnings: Vec<String>,
+}
+
+impl<'f> Builder<'f> {
+    /// An empty builder; `element_word` names elements in messages.
+    pub fn new(file: &'f str, element_word: &'static str) -> Self {
+        Self {
+            file,
+            element_word,
+            positions: Vec::new(),
+            tets: Vec::new(),
+            tet_physical: Vec::new(),
+            tet_origin: Vec::new(),
+            ignored: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+
+    /// Reserves room for `n` more vertices, but never more than `cap` (the
+    /// bytes left in the input bound how many records can follow).
+    pub fn reserve_vertices(&mut self, n: u64, cap: usize) {
+        self.positions
+            .reserve(usize::try_from(n).unwrap_or(usize::MAX).min(cap));
+    }
+
+    /// Reserves room for `n` more tetrahedra, capped like
+    /// [`Builder::reserve_vertices`].
+    pub fn reserve_tets(&mut self, n: u64, cap: usize) {
+        let n = usize::try_from(n).unwrap_or(usize::MAX).min(cap);
+        self.tets.reserve(n);
+        self.tet_physical.reserve(n);
+        self.tet_origin.reserve(n);
+    }
+
+    /// Number of vertices so far.
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Adds a vertex; refuses a non-finite coordinate here, where its line is known.
+    pub fn vertex(&mut self, p: [f64; 3], at: Location, label: &str) -> Result<(), MeshIoError> {
+        if !p.iter().all(|c| c.is_finite()) {
+            return Err(text::perr(
+                self.file,
+                at,
+                format!("{label} has a non-finite coordinate {p:?}"),
+            ));
+        }
+        if self.positions.len() >= u32::MAX as usize {
+            return Err(text::perr(
+                self.file,
+                at,
+                "more than 2^32 - 1 vertices (indices are 32-bit)",
+            ));
+        }
+        self.positions.push(Vec3::from_array(p));
+        Ok(())
+    }
+
+    /// Adds a tetrahedron of 0-based vertex indices (already checked to be in
+    /// range by the caller), its physical tag, its number in the file and place.
+    pub fn tet(&mut self, v: [u32; 4], physical: i32, number: u64, at: Location) {
+        self.tets.push(v);
+        self.tet_physical.push(physical);
+        self.tet_origin.push((number, at));
+    }
+
+    /// Counts `n` ignored lower-dimensional elements of a kind (plural noun).
+    pub fn ignore(&mut self, kind: &'static str, n: usize) {
+        if n == 0 {
+            return;
+        }
+        match self.ignored.iter_mut().find(|(k, _)| *k == kind) {
+            Some((_, count)) => *count += n,
+            None => self.ignored.push((kind, n)),
+        }
+    }
+
+    /// Adds a warning.
+    pub fn warn(&mut self, warning: String) {
+        self.warnings.push(warning);
+    }
+
+    /// Validates the mesh and returns it.
+    pub fn finish(mut self) -> Result<ImportedMesh, MeshIoError> {
+        let ignored = if self.ignored.is_empty() {
+            String::new()
+        } else {
+            let parts: Vec<String> = self
+                .ignored
+                .iter()
+                .map(|(k, n)| format!("{n} {k}"))
+                .collect();
+            let list = match parts.split_last() {
+                Some((last, [])) => last.clone(),
+                Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+                None => String::new(),
+            };
+            format!("ignored {list} (lower-dimensional elements)")
+        };
+        if self.tets.is_empty() {
+            return Err(MeshIoError::NoTetrahedra {
+                file: self.file.to_owned(),
+                ignored: if ignored.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({ignored})")
+                },
+            });
+        }
+        if !ignored.is_empty() {
+            self.warnings.push(ignored);
+        }
+        let file = self.file;
+        let element_word = self.element_word;
+        let origin = std::mem::take(&mut self.tet_origin);
+        let mesh = TetMesh::new(self.positions, self.tets).map_err(|source| {
+            let tet = match &source {
+                MeshError::IndexOutOfRange { tet, .. }
+                | MeshError::RepeatedVertex { tet, .. }
+                | MeshError::Degenerate { tet, .. } => Some(*tet),
+                MeshError::Empty | MeshError::NonFinite { .. } => None,
+            };
+            let place = tet.and_then(|t| origin.get(t));
+            MeshIoError::Invalid {
+                file: file.to_owned(),
+                at: place.map(|(_, at)| *at),
+                context: place
+                    .map(|(n, _)| format!("{element_word} {n}: "))
+                    .unwrap_or_default(),
+                source,
+            }
+        })?;
+        if mesh.reoriented() > 0 {
+            self.warnings.push(format!(
+                "{} inverted tetrahedra reoriented",
+                mesh.reoriented()
+            ));
+        }
+        Ok(ImportedMesh {
+            mesh,
+            tet_physical: self.tet_physical,
+            warnings: self.warnings,
+        })
+    }
+}
+
+/// Maps a format's node numbers (Gmsh tags: arbitrary, possibly sparse) to
+/// 0-based vertex indices. Files almost always number nodes 1..n in order, so
+/// that case needs no table; the hash map is built at the first exception.
+pub(crate) struct NodeMap {
+    /// Nodes so far numbered 1..=count in order.
+    dense: usize,
+    sparse: Option<HashMap<u64, u32>>,
+}
+
+impl NodeMap {
+    /// An empty map.
+    pub fn new() -> Self {
+        Self {
+            dense: 0,
+            sparse: None,
+        }
+    }
+
+    /// Records that node `tag` is vertex `index` (the next one). Returns false
+    /// if the tag was seen before.
+    pub fn insert(&mut self, tag: u64, index: u32) -> bool {
+        if self.sparse.is_none() {
+            if tag == self.dense as u64 + 1 && index as usize == self.dense {
+                self.dense += 1;
+                return true;
+            }
+            self.sparse = Some((0..self.dense).map(|i| (i as u64 + 1, i as u32)).collect());
+        }
+        match &mut self.sparse {
+            Some(map) => map.insert(tag, index).is_none(),
+            None => false,
+        }
+    }
+
+    /// The vertex of node `tag`.
+    pub fn get(&self, tag: u64) -> Option<u32> {
+        match &self.sparse {
+            Some(map) => map.get(&tag).copied(),
+            None => (tag >= 1 && tag <= self.dense as u64).then(|| (tag - 1) as u32),
+        }
+    }
+}

@@ -1,0 +1,554 @@
+//! Gmsh MSH 4.1, ASCII and binary, by one reader over two inputs.
+//!
+//! The two encodings hold the same values in the same order (section markers
+//! are text lines in both); only how a value is stored differs. So the
+//! section logic is written once against [`Input`]; the ASCII input also checks
+//! that every record is exactly one line, which is what lets it say
+//! "expected 4 node tags for a tetrahedron, found 3" at the right line.
+//!
+//! Physical tags live on entities: an element block names its volume entity,
+//! and `$Entities` gives that entity's physical groups.
+
+use super::error::{Location, MeshIoError};
+use super::gmsh::{TET4, expect_end, gmsh_type, unsupported};
+use super::text::{Lines, as_text, parse_f64, parse_i64, parse_u64, perr, shown};
+use super::{Builder, ImportedMesh, NodeMap};
+use std::collections::HashMap;
+
+/// How a section reads its values.
+trait Input {
+    /// Where the next value is.
+    fn at(&self) -> Location;
+    /// Bytes left: a bound on how many records can follow.
+    fn remaining(&self) -> usize;
+    /// Starts a record (ASCII: reads the next line and returns its number of
+    /// fields; binary: nothing, `None`).
+    fn record(&mut self, what: &str) -> Result<Option<usize>, MeshIoError>;
+    /// Checks that the record has no values left.
+    fn end_record(&mut self) -> Result<(), MeshIoError>;
+    /// Skips a record of `values` size_t values.
+    fn skip_records(&mut self, count: u64, values: usize, what: &str) -> Result<(), MeshIoError>;
+    /// An unsigned size (`size_t` in binary).
+    fn size(&mut self, what: &str) -> Result<u64, MeshIoError>;
+    /// A signed int (`int` in binary).
+    fn int(&mut self, what: &str) -> Result<i32, MeshIoError>;
+    /// A double.
+    fn float(&mut self, what: &str) -> Result<f64, MeshIoError>;
+    /// The next section marker line (`$Nodes`...), `None` at the end.
+    fn marker(&mut self) -> Result<Option<(Location, String)>, MeshIoError>;
+    /// Skips to the end marker of an unneeded section.
+    fn skip_section(&mut self, name: &str, at: Location) -> Result<(), MeshIoError>;
+}
+
+/// ASCII input: one record per line.
+struct Ascii<'a, 'f> {
+    file: &'f str,
+    lines: Lines<'a>,
+    fields: Vec<&'a str>,
+    next: usize,
+    line: usize,
+}
+
+impl<'a> Ascii<'a, '_> {
+    fn field(&mut self, what: &str) -> Result<&'a str, MeshIoError> {
+        let f = self.fields.get(self.next).copied().ok_or_else(|| {
+            perr(
+                self.file,
+                Location::Line(self.line),
+                format!("line ends early: expected {what}"),
+            )
+        })?;
+        self.next += 1;
+        Ok(f)
+    }
+
+    fn bad(&self, what: &str, found: &str) -> MeshIoError {
+        perr(
+            self.file,
+            Location::Line(self.line),
+            format!("expected {what}, found {}", shown(found)),
+        )
+    }
+}
+
+impl Input for Ascii<'_, '_> {
+    fn at(&self) -> Location {
+        Location::Line(self.line)
+    }
+    fn remaining(&self) -> usize {
+        self.lines.remaining()
+    }
+    fn record(&mut self, what: &str) -> Result<Option<usize>, MeshIoError> {
+        let l = self.lines.next_line().ok_or_else(|| {
+            perr(
+                self.file,
+                Location::Line(self.lines.line_no() + 1),
+                format!("file ends before {what}"),
+            )
+        })?;
+        self.line = l.no;
+        if l.text.trim_start().starts_with('$') {
+            return Err(perr(
+                self.file,
+                l.at(),
+                format!(
+                    "section ends early: expected {what}, found {}",
+                    shown(l.text.trim())
+                ),
+            ));
+        }
+        self.fields = l.fields().collect();
+        self.next = 0;
+        Ok(Some(self.fields.len()))
+    }
+    fn end_record(&mut self) -> Result<(), MeshIoError> {
+        match self.fields.get(self.next) {
+            None => Ok(()),
+            Some(extra) => Err(perr(
+                self.file,
+                Location::Line(self.line),
+                format!(
+                    "unexpected extra value {} at the end of the line",
+                    shown(extra)
+                ),
+            )),
+        }
+    }
+    fn skip_records(&mut self, count: u64, _values: usize, what: &str) -> Result<(), MeshIoError> {
+        for _ in 0..count {
+            self.record(what)?;
+        }
+        Ok(())
+    }
+    fn size(&mut self, what: &str) -> Result<u64, MeshIoError> {
+        let f = self.field(what)?;
+        parse_u64(f).ok_or_else(|| self.bad(what, f))
+    }
+    fn int(&mut self, what: &str) -> Result<i32, MeshIoError> {
+        let f = self.field(what)?;
+        parse_i64(f)
+            .and_then(|v| i32::try_from(v).ok())
+            .ok_or_else(|| self.bad(what, f))
+    }
+    fn float(&mut self, what: &str) -> Result<f64, MeshIoError> {
+        let f = self.field(what)?;
+        parse_f64(f).ok_or_else(|| self.bad(what, f))
+    }
+    fn marker(&mut self) -> Result<Option<(Location, String)>, MeshIoError> {
+        Ok(self.lines.next_line().map(|l| {
+            self.line = l.no;
+            (l.at(), l.text.trim().to_owned())
+        }))
+    }
+    fn skip_section(&mut self, name: &str, at: Location) -> Result<(), MeshIoError> {
+        let end = format!("$End{name}");
+        while let Some(l) = self.lines.next_line() {
+            if l.text.trim() == end {
+                return Ok(());
+            }
+        }
+        Err(perr(self.file, at, format!("section ${name} has no {end}")))
+    }
+}
+
+/// Binary input: native values of the writer's endianness, `size_t` = 8 bytes.
+struct Binary<'a, 'f> {
+    file: &'f str,
+    src: &'a [u8],
+    pos: usize,
+    big_endian: bool,
+}
+
+impl Binary<'_, '_> {
+    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], MeshIoError> {
+        let bytes: Option<[u8; N]> = self
+            .src
+            .get(self.pos..self.pos.saturating_add(N))
+            .and_then(|s| s.try_into().ok());
+        let mut bytes = bytes.ok_or_else(|| {
+            perr(
+                self.file,
+                Location::Byte(self.pos),
+                format!("file ends while reading {what}"),
+            )
+        })?;
+        self.pos += N;
+        if self.big_endian {
+            bytes.reverse();
+        }
+        Ok(bytes)
+    }
+}
+
+impl Input for Binary<'_, '_> {
+    fn at(&self) -> Location {
+        Location::Byte(self.pos)
+    }
+    fn remaining(&self) -> usize {
+        self.src.len().saturating_sub(self.pos)
+    }
+    fn record(&mut self, _what: &str) -> Result<Option<usize>, MeshIoError> {
+        Ok(None)
+    }
+    fn end_record(&mut self) -> Result<(), MeshIoError> {
+        Ok(())
+    }
+    fn skip_records(&mut self, count: u64, values: usize, what: &str) -> Result<(), MeshIoError> {
+        let bytes = count
+            .checked_mul(values as u64 * 8)
+            .and_then(|b| usize::try_from(b).ok())
+            .filter(|&b| b <= self.remaining())
+            .ok_or_else(|| {
+                perr(
+                    self.file,
+                    Location::Byte(self.pos),
+                    format!("file ends inside {count} {what}"),
+                )
+            })?;
+        self.pos += bytes;
+        Ok(())
+    }
+    fn size(&mut self, what: &str) -> Result<u64, MeshIoError> {
+        Ok(u64::from_le_bytes(self.take(what)?))
+    }
+    fn int(&mut self, what: &str) -> Result<i32, MeshIoError> {
+        Ok(i32::from_le_bytes(self.take(what)?))
+    }
+    fn float(&mut self, what: &str) -> Result<f64, MeshIoError> {
+        Ok(f64::from_le_bytes(self.take(what)?))
+    }
+    fn marker(&mut self) -> Result<Option<(Location, String)>, MeshIoError> {
+        while self.src.get(self.pos).is_some_and(u8::is_ascii_whitespace) {
+            self.pos += 1;
+        }
+        if self.pos >= self.src.len() {
+            return Ok(None);
+        }
+        let at = Location::Byte(self.pos);
+        let rest = self.src.get(self.pos..).unwrap_or_default();
+        let end = rest.iter().position(|&b| b == b'\n').unwrap_or(rest.len());
+        // Past the newline: binary values start right after it.
+        self.pos += (end + 1).min(rest.len());
+        Ok(Some((at, as_text(&rest[..end]).trim().to_owned())))
+    }
+    fn skip_section(&mut self, name: &str, at: Location) -> Result<(), MeshIoError> {
+        let end = format!("\n$End{name}");
+        let rest = self.src.get(self.pos..).unwrap_or_default();
+        match rest.windows(end.len()).position(|w| w == end.as_bytes()) {
+            Some(k) => {
+                self.pos += k + end.len();
+                Ok(())
+            }
+            None => Err(perr(
+                self.file,
+                at,
+                format!("section ${name} has no $End{name}"),
+            )),
+        }
+    }
+}
+
+/// Parses the body of an MSH 4.1 file; `lines` has just read the version line.
+pub(super) fn parse(
+    file: &str,
+    bytes: &[u8],
+    mut lines: Lines,
+    binary: bool,
+    data_size: &str,
+    header_line: usize,
+) -> Result<ImportedMesh, MeshIoError> {
+    if !binary {
+        expect_end(file, &mut lines, "$EndMeshFormat")?;
+        let input = Ascii {
+            file,
+            lines,
+            fields: Vec::new(),
+            next: 0,
+            line: header_line,
+        };
+        return body(file, input);
+    }
+    if data_size != "8" {
+        return Err(perr(
+            file,
+            Location::Line(header_line),
+            format!(
+                "data-size {} is not supported (only 8-byte size_t)",
+                shown(data_size)
+            ),
+        ));
+    }
+    // The int 1 written in the writer's byte order tells the endianness.
+    let pos = lines.pos();
+    let one: [u8; 4] = bytes
+        .get(pos..pos + 4)
+        .and_then(|s| s.try_into().ok())
+        .ok_or_else(|| {
+            perr(
+                file,
+                Location::Byte(pos),
+                "file ends before the endianness mark",
+            )
+        })?;
+    let big_endian = match (u32::from_le_bytes(one), u32::from_be_bytes(one)) {
+        (1, _) => false,
+        (_, 1) => true,
+        _ => {
+            return Err(perr(
+                file,
+                Location::Byte(pos),
+                format!("expected the binary integer 1 (endianness mark), found {one:?}"),
+            ));
+        }
+    };
+    let mut input = Binary {
+        file,
+        src: bytes,
+        pos: pos + 4,
+        big_endian,
+    };
+    match input.marker()? {
+        Some((_, m)) if m == "$EndMeshFormat" => body(file, input),
+        Some((at, m)) => Err(perr(
+            file,
+            at,
+            format!("expected $EndMeshFormat, found {}", shown(&m)),
+        )),
+        None => Err(perr(file, input.at(), "file ends before $EndMeshFormat")),
+    }
+}
+
+/// The sections after `$EndMeshFormat`.
+fn body(file: &str, mut input: impl Input) -> Result<ImportedMesh, MeshIoError> {
+    let mut b = Builder::new(file, "element");
+    let mut nodes = NodeMap::new();
+    let mut volume_physical: HashMap<i32, i32> = HashMap::new();
+    while let Some((at, marker)) = input.marker()? {
+        match marker.as_str() {
+            "$Entities" => entities(&mut input, &mut volume_physical, &mut b)?,
+            "$Nodes" => node_blocks(file, &mut input, &mut nodes, &mut b)?,
+            "$Elements" => element_blocks(file, &mut input, &nodes, &volume_physical, &mut b)?,
+            m if m.starts_with("$End") => {
+                return Err(perr(file, at, format!("unexpected {}", shown(m))));
+            }
+            m if m.starts_with('$') => {
+                input.skip_section(&m[1..], at)?;
+                continue;
+            }
+            m => {
+                return Err(perr(
+                    file,
+                    at,
+                    format!("expected a section such as $Nodes, found {}", shown(m)),
+                ));
+            }
+        }
+        let end = format!("$End{}", &marker[1..]);
+        match input.marker()? {
+            Some((_, m)) if m == end => {}
+            Some((at, m)) => {
+                return Err(perr(
+                    file,
+                    at,
+                    format!("expected {end}, found {}", shown(&m)),
+                ));
+            }
+            None => return Err(perr(file, input.at(), format!("file ends before {end}"))),
+        }
+    }
+    b.finish()
+}
+
+/// `$Entities`: keeps the first physical tag of each volume.
+fn entities(
+    input: &mut impl Input,
+    volume_physical: &mut HashMap<i32, i32>,
+    b: &mut Builder,
+) -> Result<(), MeshIoError> {
+    input.record("the entity counts")?;
+    let mut counts = [0u64; 4];
+    for (c, what) in counts
+        .iter_mut()
+        .zip(["numPoints", "numCurves", "numSurfaces", "numVolumes"])
+    {
+        *c = input.size(what)?;
+    }
+    input.end_record()?;
+    for (dim, &count) in counts.iter().enumerate() {
+        for _ in 0..count {
+            input.record("an entity")?;
+            let tag = input.int("an entity tag")?;
+            let coords = if dim == 0 { 3 } else { 6 };
+            for _ in 0..coords {
+                input.float("a bounding-box coordinate")?;
+            }
+            let n_physical = input.size("numPhysicalTags")?;
+            let mut first = None;
+            for _ in 0..n_physical {
+                let p = input.int("a physical tag")?;
+                first.get_or_insert(p);
+            }
+            if dim > 0 {
+                let n_bounding = input.size("the number of bounding entities")?;
+                for _ in 0..n_bounding {
+                    input.int("a bounding entity tag")?;
+                }
+            }
+            input.end_record()?;
+            if dim == 3 {
+                if n_physical > 1 {
+                    b.warn(format!(
+                        "volume {tag} is in {n_physical} physical groups; its tetrahedra get the first, {}",
+                        first.unwrap_or(0)
+                    ));
+                }
+                volume_physical.insert(tag, first.unwrap_or(0));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `$Nodes`: blocks of tags, then coordinates.
+fn node_blocks(
+    file: &str,
+    input: &mut impl Input,
+    nodes: &mut NodeMap,
+    b: &mut Builder,
+) -> Result<(), MeshIoError> {
+    let at = input.at();
+    input.record("the node counts")?;
+    let blocks = input.size("numEntityBlocks")?;
+    let total = input.size("numNodes")?;
+    input.size("minNodeTag")?;
+    input.size("maxNodeTag")?;
+    input.end_record()?;
+    b.reserve_vertices(total, input.remaining() / 8);
+    let before = b.vertex_count();
+    for _ in 0..blocks {
+        input.record("a node block header")?;
+        let dim = input.int("entityDim")?;
+        input.int("entityTag")?;
+        let parametric = input.int("parametric")?;
+        let n = input.size("numNodesInBlock")?;
+        input.end_record()?;
+        let params = match (parametric, dim) {
+            (0, _) => 0,
+            (1, 0..=3) => dim as usize,
+            _ => {
+                return Err(perr(
+                    file,
+                    input.at(),
+                    format!("bad node block: entityDim {dim}, parametric {parametric}"),
+                ));
+            }
+        };
+        let cap = usize::try_from(n)
+            .unwrap_or(usize::MAX)
+            .min(input.remaining() / 8);
+        let mut tags = Vec::with_capacity(cap);
+        for _ in 0..n {
+            input.record("a node tag")?;
+            tags.push(input.size("a node tag")?);
+            input.end_record()?;
+        }
+        for tag in tags {
+            input.record("node coordinates")?;
+            let at = input.at();
+            let p = [input.float("x")?, input.float("y")?, input.float("z")?];
+            for _ in 0..params {
+                input.float("a parametric coordinate")?;
+            }
+            input.end_record()?;
+            let index = b.vertex_count() as u32;
+            b.vertex(p, at, &format!("node {tag}"))?;
+            if !nodes.insert(tag, index) {
+                return Err(perr(file, at, format!("node {tag} is defined twice")));
+            }
+        }
+    }
+    let found = b.vertex_count() - before;
+    if found as u64 != total {
+        return Err(perr(
+            file,
+            at,
+            format!("$Nodes declares {total} nodes but its blocks hold {found}"),
+        ));
+    }
+    Ok(())
+}
+
+/// `$Elements`: blocks of one element type on one entity.
+fn element_blocks(
+    file: &str,
+    input: &mut impl Input,
+    nodes: &NodeMap,
+    volume_physical: &HashMap<i32, i32>,
+    b: &mut Builder,
+) -> Result<(), MeshIoError> {
+    let at = input.at();
+    input.record("the element counts")?;
+    let blocks = input.size("numEntityBlocks")?;
+    let total = input.size("numElements")?;
+    input.size("minElementTag")?;
+    input.size("maxElementTag")?;
+    input.end_record()?;
+    b.reserve_tets(total, input.remaining() / 16);
+    let mut found = 0u64;
+    for _ in 0..blocks {
+        input.record("an element block header")?;
+        let block_at = input.at();
+        let dim = input.int("entityDim")?;
+        let entity = input.int("entityTag")?;
+        let t = input.int("elementType")?;
+        let n = input.size("numElementsInBlock")?;
+        input.end_record()?;
+        found = found.saturating_add(n);
+        let kind = gmsh_type(t.into()).ok_or_else(|| unsupported(file, block_at, t.into()))?;
+        if kind.dim < 3 && dim < 3 {
+            input.skip_records(n, 1 + kind.nodes, kind.plural)?;
+            b.ignore(kind.plural, usize::try_from(n).unwrap_or(usize::MAX));
+            continue;
+        }
+        if i64::from(t) != TET4 {
+            return Err(unsupported(file, block_at, t.into()));
+        }
+        let physical = volume_physical.get(&entity).copied().unwrap_or(0);
+        for _ in 0..n {
+            let fields = input.record("a tetrahedron")?;
+            let at = input.at();
+            if let Some(f) = fields.filter(|&f| f != 5) {
+                return Err(perr(
+                    file,
+                    at,
+                    format!(
+                        "expected 4 node tags for a tetrahedron, found {}",
+                        f.saturating_sub(1)
+                    ),
+                ));
+            }
+            let tag = input.size("an element tag")?;
+            let mut v = [0u32; 4];
+            for slot in &mut v {
+                let nt = input.size("a node tag")?;
+                *slot = nodes.get(nt).ok_or_else(|| {
+                    perr(
+                        file,
+                        at,
+                        format!("element {tag} references node {nt}, which is not in $Nodes"),
+                    )
+                })?;
+            }
+            input.end_record()?;
+            b.tet(v, physical, tag, at);
+        }
+    }
+    if found != total {
+        return Err(perr(
+            file,
+            at,
+            format!("$Elements declares {total} elements but its blocks hold {found}"),
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,535 @@
+//! VTK XML unstructured grid (`.vtu`): `DataArray`s in `ascii`, inline base64
+//! `binary` or `appended` raw format, uncompressed, any number of pieces.
+//!
+//! The markup is scanned first and each array only located (byte ranges, or
+//! offsets into the appended block, which comes last in the file); values are
+//! decoded afterwards. Errors name the line of the `DataArray`, or of the bad
+//! number in ASCII data.
+
+use super::base64;
+use super::error::{Location, MeshIoError};
+use super::text::{Tokens, parse_f64, perr, shown};
+use super::vtk::{PHYSICAL_NAMES, add_cells};
+use super::xml::{Event, LineIndex, Xml};
+use super::{Builder, ImportedMesh};
+use std::ops::Range;
+
+/// Where an array's values are.
+enum Data {
+    Ascii(Range<usize>),
+    Base64(Range<usize>),
+    Appended(u64),
+}
+
+/// A located `DataArray`.
+struct Array {
+    name: String,
+    ty: String,
+    components: u64,
+    data: Data,
+    /// Offset of the `<DataArray` tag.
+    at: usize,
+}
+
+/// The arrays of one `Piece`.
+#[derive(Default)]
+struct Piece {
+    points: u64,
+    cells: u64,
+    at: usize,
+    positions: Option<Array>,
+    connectivity: Option<Array>,
+    offsets: Option<Array>,
+    types: Option<Array>,
+    /// The physical tag array and its rank in [`PHYSICAL_NAMES`].
+    physical: Option<(usize, Array)>,
+}
+
+/// File-level settings from `<VTKFile>`.
+struct Settings {
+    big_endian: bool,
+    header_bytes: usize,
+}
+
+/// Parses a VTU file.
+pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoError> {
+    let lines = LineIndex::new(bytes);
+    let at = |offset: usize| Location::Line(lines.line(offset));
+    let err = |offset: usize, m: String| perr(file, at(offset), m);
+    let mut xml = Xml::new(bytes);
+    let mut stack: Vec<String> = Vec::new();
+    let mut settings: Option<Settings> = None;
+    let mut pieces: Vec<Piece> = Vec::new();
+    // The open DataArray: its attributes and where its content starts.
+    let mut open: Option<(Array, usize)> = None;
+    let mut appended: Option<Range<usize>> = None;
+    loop {
+        let event = xml.next_event().map_err(|(o, m)| err(o, m))?;
+        match event {
+            Event::Eof => break,
+            Event::Text => {}
+            Event::End { name, at: o } => {
+                match stack.pop() {
+                    Some(open_name) if open_name == name => {}
+                    Some(open_name) => {
+                        return Err(err(o, format!("</{name}> closes <{open_name}>")));
+                    }
+                    None => return Err(err(o, format!("</{name}> closes nothing"))),
+                }
+                if name == "DataArray"
+                    && let Some((mut array, content)) = open.take()
+                {
+                    if let Data::Ascii(r) | Data::Base64(r) = &mut array.data {
+                        *r = content..o;
+                    }
+                    store(&stack, pieces.last_mut(), array);
+                }
+            }
+            Event::Start {
+                name,
+                attrs,
+                empty,
+                at: o,
+            } => {
+                let get = |key: &str| attr(&attrs, key);
+                match name {
+                    "VTKFile" => settings = Some(file_settings(&attrs).map_err(|m| err(o, m))?),
+                    "Piece" => {
+                        let count = |key: &str| -> Result<u64, MeshIoError> {
+                            get(key).and_then(|v| v.trim().parse().ok()).ok_or_else(|| {
+                                err(o, format!("<Piece> needs a {key} attribute with a count"))
+                            })
+                        };
+                        pieces.push(Piece {
+                            points: count("NumberOfPoints")?,
+                            cells: count("NumberOfCells")?,
+                            at: o,
+                            ..Piece::default()
+                        });
+                    }
+                    "DataArray" => {
+                        let components = match get("NumberOfComponents") {
+                            None => 1,
+                            Some(v) => v.trim().parse().map_err(|_| {
+                                err(
+                                    o,
+                                    format!(
+                                        "NumberOfComponents must be a count, found {}",
+                                        shown(v)
+                                    ),
+                                )
+                            })?,
+                        };
+                        let data = match get("format").unwrap_or("ascii") {
+                            "ascii" => Data::Ascii(0..0),
+                            "binary" => Data::Base64(0..0),
+                            "appended" => Data::Appended(
+                                get("offset")
+                                    .and_then(|v| v.trim().parse().ok())
+                                    .ok_or_else(|| {
+                                        err(
+                                            o,
+                                            "an appended DataArray needs an offset attribute"
+                                                .into(),
+                                        )
+                                    })?,
+                            ),
+                            f => {
+                                return Err(err(
+                                    o,
+                                    format!("unknown DataArray format {}", shown(f)),
+                                ));
+                            }
+                        };
+                        let array = Array {
+                            name: get("Name").unwrap_or("").to_owned(),
+                            ty: get("type").unwrap_or("").to_owned(),
+                            components,
+                            data,
+                            at: o,
+                        };
+                        if empty {
+                            store(&stack, pieces.last_mut(), array);
+                        } else {
+                            open = Some((array, xml.pos()));
+                        }
+                    }
+                    "AppendedData" => {
+                        // Raw bytes follow a '_' up to the closing tag, which
+                        // is the last one in the file: stop scanning markup.
+                        match get("encoding").unwrap_or("raw") {
+                            "raw" => {}
+                            e => {
+                                return Err(err(
+                                    o,
+                                    format!(
+                                        "appended data encoding {} is not supported (raw is)",
+                                        shown(e)
+                                    ),
+                                ));
+                            }
+                        }
+                        let rest = bytes.get(xml.pos()..).unwrap_or_default();
+                        let start = rest
+                            .iter()
+                            .position(|&b| b == b'_')
+                            .map(|k| xml.pos() + k + 1)
+                            .ok_or_else(|| {
+                                err(o, "<AppendedData> has no '_' before its data".into())
+                            })?;
+                        appended = Some(start..bytes.len());
+                        break;
+                    }
+                    _ => {}
+                }
+                if !empty {
+                    stack.push(name.to_owned());
+                }
+            }
+        }
+    }
+    let settings = settings.ok_or_else(|| err(0, "no <VTKFile> element".into()))?;
+    let mut b = Builder::new(file, "cell");
+    if pieces.is_empty() {
+        return Err(err(0, "no <Piece> element".into()));
+    }
+    for piece in &pieces {
+        let decoder = Decoder {
+            file,
+            bytes,
+            lines: &lines,
+            settings: &settings,
+            appended: appended.clone(),
+        };
+        add_piece(&mut b, &decoder, piece)?;
+    }
+    b.finish()
+}
+
+/// The value of attribute `key`.
+fn attr<'x>(attrs: &'x [(&str, String)], key: &str) -> Option<&'x str> {
+    attrs
+        .iter()
+        .find(|(k, _)| *k == key)
+        .map(|(_, v)| v.as_str())
+}
+
+/// Files the array under the role its enclosing elements give it.
+fn store(stack: &[String], piece: Option<&mut Piece>, array: Array) {
+    let Some(piece) = piece else { return };
+    match stack.last().map(String::as_str) {
+        Some("Points") => piece.positions = Some(array),
+        Some("Cells") => match array.name.as_str() {
+            "connectivity" => piece.connectivity = Some(array),
+            "offsets" => piece.offsets = Some(array),
+            "types" => piece.types = Some(array),
+            _ => {}
+        },
+        Some("CellData") => {
+            if let Some(rank) = PHYSICAL_NAMES.iter().position(|n| *n == array.name)
+                && piece.physical.as_ref().is_none_or(|(held, _)| rank < *held)
+            {
+                piece.physical = Some((rank, array));
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Reads the `<VTKFile>` attributes that matter.
+fn file_settings(attrs: &[(&str, String)]) -> Result<Settings, String> {
+    let get = |key: &str| attr(attrs, key);
+    match get("type") {
+        Some("UnstructuredGrid") => {}
+        t => {
+            return Err(format!(
+                "only type=\"UnstructuredGrid\" is supported, found {t:?}"
+            ));
+        }
+    }
+    if let Some(c) = get("compressor").filter(|c| !c.is_empty()) {
+        return Err(format!(
+            "compressed data ({c}) is not supported: write uncompressed VTU"
+        ));
+    }
+    let big_endian = match get("byte_order").unwrap_or("LittleEndian") {
+        "LittleEndian" => false,
+        "BigEndian" => true,
+        o => return Err(format!("unknown byte_order {}", shown(o))),
+    };
+    let header_bytes = match get("header_type").unwrap_or("UInt32") {
+        "UInt32" => 4,
+        "UInt64" => 8,
+        h => return Err(format!("unknown header_type {}", shown(h))),
+    };
+    Ok(Settings {
+        big_endian,
+        header_bytes,
+    })
+}
+
+/// Decodes arrays to numbers.
+struct Decoder<'a> {
+    file: &'a str,
+    bytes: &'a [u8],
+    lines: &'a LineIndex,
+    settings: &'a Settings,
+    appended: Option<Range<usize>>,
+}
+
+impl Decoder<'_> {
+    fn err(&self, offset: usize, message: String) -> MeshIoError {
+        perr(self.file, Location::Line(self.lines.line(offset)), message)
+    }
+
+    /// The array's values as f64 (exact for every integer an index can be),
+    /// checking that there are `count` of them.
+    fn values(&self, a: &Array, count: u64, what: &str) -> Result<Vec<f64>, MeshIoError> {
+        let width = match a.ty.as_str() {
+            "Int8" | "UInt8" => 1,
+            "Int16" | "UInt16" => 2,
+            "Int32" | "UInt32" | "Float32" => 4,
+            "Int64" | "UInt64" | "Float64" => 8,
+            t => return Err(self.err(a.at, format!("{what}: unknown DataArray type {}", shown(t)))),
+        };
+        let bound = self.bytes.len();
+        let values = match &a.data {
+            Data::Ascii(r) => {
+                let line = self.lines.line(r.start);
+                let mut t = Tokens::new(
+                    self.bytes.get(..r.end).unwrap_or_default(),
+                    r.start,
+                    line,
+                    None,
+                );
+                let mut v =
+                    Vec::with_capacity(usize::try_from(count).unwrap_or(usize::MAX).min(bound / 2));
+                while let Some(tok) = t.next_token() {
+                    v.push(parse_f64(tok.text).ok_or_else(|| {
+                        perr(
+                            self.file,
+                            tok.at(),
+                            format!("{what}: expected a number, found {}", shown(tok.text)),
+                        )
+                    })?);
+                }
+                v
+            }
+            Data::Base64(r) => {
+                let text: Vec<u8> = self
+                    .bytes
+                    .get(r.clone())
+                    .unwrap_or_default()
+                    .iter()
+                    .copied()
+                    .filter(|c| !c.is_ascii_whitespace())
+                    .collect();
+                let raw = self.inline_binary(&text, a, what)?;
+                self.convert(&raw, width, &a.ty)
+            }
+            Data::Appended(offset) => {
+                let region = self.appended.clone().ok_or_else(|| {
+                    self.err(
+                        a.at,
+                        format!("{what}: appended array but no <AppendedData>"),
+                    )
+                })?;
+                let start = usize::try_from(*offset)
+                    .ok()
+                    .and_then(|o| region.start.checked_add(o))
+                    .filter(|&s| s <= region.end)
+                    .ok_or_else(|| {
+                        self.err(
+                            a.at,
+                            format!("{what}: offset {offset} is beyond the appended data"),
+                        )
+                    })?;
+                let raw = self.with_header(
+                    self.bytes.get(start..region.end).unwrap_or_default(),
+                    a,
+                    what,
+                )?;
+                self.convert(raw, width, &a.ty)
+            }
+        };
+        if values.len() as u64 != count {
+            return Err(self.err(
+                a.at,
+                format!("{what}: expected {count} values, found {}", values.len()),
+            ));
+        }
+        Ok(values)
+    }
+
+    /// Base64 inline data: a byte-count header, then the data. VTK encodes
+    /// them as one stream when uncompressed, but some writers encode the
+    /// header separately (padding in the middle): both are accepted.
+    fn inline_binary(&self, text: &[u8], a: &Array, what: &str) -> Result<Vec<u8>, MeshIoError> {
+        if let Ok(raw) = base64::decode(text) {
+            return Ok(self.with_header(&raw, a, what)?.to_vec());
+        }
+        let split = self.settings.header_bytes.div_ceil(3) * 4;
+        let decoded = text.get(..split).zip(text.get(split..)).and_then(|(h, d)| {
+            let mut raw = base64::decode(h).ok()?;
+            raw.extend(base64::decode(d).ok()?);
+            Some(raw)
+        });
+        let raw = decoded.ok_or_else(|| self.err(a.at, format!("{what}: invalid base64 data")))?;
+        Ok(self.with_header(&raw, a, what)?.to_vec())
+    }
+
+    /// Strips the byte-count header and returns exactly that many bytes.
+    fn with_header<'b>(
+        &self,
+        raw: &'b [u8],
+        a: &Array,
+        what: &str,
+    ) -> Result<&'b [u8], MeshIoError> {
+        let hb = self.settings.header_bytes;
+        let header = raw.get(..hb).ok_or_else(|| {
+            self.err(a.at, format!("{what}: binary data shorter than its header"))
+        })?;
+        let mut h = [0u8; 8];
+        h[..hb].copy_from_slice(header);
+        if self.settings.big_endian {
+            h[..hb].reverse();
+        }
+        let n = u64::from_le_bytes(h);
+        usize::try_from(n)
+            .ok()
+            .and_then(|n| raw.get(hb..hb.checked_add(n)?))
+            .ok_or_else(|| {
+                self.err(
+                    a.at,
+                    format!(
+                        "{what}: header says {n} bytes but only {} follow",
+                        raw.len() - hb
+                    ),
+                )
+            })
+    }
+
+    fn convert(&self, raw: &[u8], width: usize, ty: &str) -> Vec<f64> {
+        let big = self.settings.big_endian;
+        raw.chunks_exact(width)
+            .map(|c| {
+                let mut b = [0u8; 8];
+                b[..width].copy_from_slice(c);
+                if big {
+                    b[..width].reverse();
+                }
+                match ty {
+                    "Int8" => f64::from(b[0] as i8),
+                    "UInt8" => f64::from(b[0]),
+                    "Int16" => f64::from(i16::from_le_bytes([b[0], b[1]])),
+                    "UInt16" => f64::from(u16::from_le_bytes([b[0], b[1]])),
+                    "Int32" => f64::from(i32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    "UInt32" => f64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    "Float32" => f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    "Int64" => i64::from_le_bytes(b) as f64,
+                    "UInt64" => u64::from_le_bytes(b) as f64,
+                    _ => f64::from_le_bytes(b),
+                }
+            })
+            .chain(
+                // A trailing partial value makes the count wrong, which is reported.
+                (!raw.len().is_multiple_of(width)).then_some(f64::NAN),
+            )
+            .collect()
+    }
+}
+
+/// Integers from decoded values, refusing fractions and out-of-range values.
+fn integers(d: &Decoder, a: &Array, values: &[f64], what: &str) -> Result<Vec<i64>, MeshIoError> {
+    values
+        .iter()
+        .map(|&v| {
+            (v.fract() == 0.0 && v.abs() < 9.0e15)
+                .then_some(v as i64)
+                .ok_or_else(|| d.err(a.at, format!("{what}: {v} is not an integer")))
+        })
+        .collect()
+}
+
+/// Adds one piece's points and cells.
+fn add_piece(b: &mut Builder, d: &Decoder, p: &Piece) -> Result<(), MeshIoError> {
+    let missing = |what: &str| d.err(p.at, format!("<Piece> has no {what} DataArray"));
+    let pos = p.positions.as_ref().ok_or_else(|| missing("Points"))?;
+    if pos.components != 3 {
+        return Err(d.err(
+            pos.at,
+            format!("Points must have 3 components, found {}", pos.components),
+        ));
+    }
+    let coords = d.values(pos, p.points.saturating_mul(3), "Points")?;
+    let base = b.vertex_count() as i64;
+    for (i, c) in coords.chunks_exact(3).enumerate() {
+        b.vertex(
+            [c[0], c[1], c[2]],
+            Location::Line(d.lines.line(pos.at)),
+            &format!("point {i}"),
+        )?;
+    }
+    if p.cells == 0 {
+        return Ok(());
+    }
+    let conn_a = p
+        .connectivity
+        .as_ref()
+        .ok_or_else(|| missing("connectivity"))?;
+    let offs_a = p.offsets.as_ref().ok_or_else(|| missing("offsets"))?;
+    let types_a = p.types.as_ref().ok_or_else(|| missing("types"))?;
+    let offsets = integers(d, offs_a, &d.values(offs_a, p.cells, "offsets")?, "offsets")?;
+    let types = integers(d, types_a, &d.values(types_a, p.cells, "types")?, "types")?;
+    let conn_len = offsets.last().copied().unwrap_or(0);
+    let conn_len =
+        u64::try_from(conn_len).map_err(|_| d.err(offs_a.at, "offsets: negative offset".into()))?;
+    let connectivity: Vec<i64> = integers(
+        d,
+        conn_a,
+        &d.values(conn_a, conn_len, "connectivity")?,
+        "connectivity",
+    )?
+    .into_iter()
+    .map(|i| if i >= 0 { i + base } else { i })
+    .collect();
+    let mut prev = 0i64;
+    for &o in &offsets {
+        if o < prev {
+            return Err(d.err(
+                offs_a.at,
+                format!("offsets must not decrease, found {o} after {prev}"),
+            ));
+        }
+        prev = o;
+    }
+    let physical = match &p.physical {
+        Some((_, a)) => Some(
+            integers(d, a, &d.values(a, p.cells, &a.name)?, &a.name)?
+                .into_iter()
+                .map(|v| {
+                    i32::try_from(v)
+                        .map_err(|_| d.err(a.at, format!("physical tag {v} is out of range")))
+                })
+                .collect::<Result<Vec<i32>, _>>()?,
+        ),
+        None => None,
+    };
+    let cells_at = Location::Line(d.lines.line(conn_a.at));
+    add_cells(
+        b,
+        d.file,
+        &types,
+        |c| {
+            let s = if c == 0 {
+                0
+            } else {
+                offsets.get(c - 1).copied().unwrap_or(0) as usize
+            };
+            let e = offsets.get(c).copied().unwrap_or(0) as usize;
+            connectivity.get(s..e).unwrap_or_default()
+        },
+        |_| cells_at,
+        physical.as_deref(),
+    )
+}
