@@ -11,7 +11,7 @@ use sim_server::mesh::io::{
 };
 use std::path::{Path, PathBuf};
 
-const MESHES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/meshes/");
+const MESHES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/meshes/");
 
 fn reference(name: &str) -> ImportedMesh {
     let path = PathBuf::from(MESHES).join(name);

@@ -180,3 +180,49 @@ fn unconstrained_static_problem_is_refused() {
         }
     );
 }
+
+/// The static solver reproduces uniaxial stretch exactly on an unstructured
+/// mesh made by Gmsh (not by this project): box 100 x 20 x 20 mm.
+#[test]
+fn uniaxial_stretch_is_exact_on_a_gmsh_mesh() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/meshes/box_v41.msh");
+    let imported = sim_server::mesh::io::read_mesh(std::path::Path::new(path)).unwrap();
+    let mesh = imported.mesh;
+    assert_eq!(mesh.tet_count(), 1816);
+    let n_tets = mesh.tet_count();
+    let model = ElasticModel::new(mesh, TetMaterials::uniform(iso_material(), n_tets)).unwrap();
+    let (len, wid, e) = (0.1, 0.02, 0.02);
+    let p = model.mesh().positions_m().to_vec();
+    let mut bc = Dirichlet::new(p.len());
+    let tol = 1e-9;
+    let mut corners = 0;
+    for (v, x) in p.iter().enumerate() {
+        let v = VertexId::from(v);
+        if x.x < tol {
+            bc.prescribe_axis(v, 0, 0.0);
+        }
+        if x.x > len - tol {
+            bc.prescribe_axis(v, 0, e * len);
+        }
+        if x.x < tol && x.y < tol && x.z < tol {
+            bc.prescribe_axis(v, 1, 0.0);
+            bc.prescribe_axis(v, 2, 0.0);
+            corners += 1;
+        }
+        if x.x < tol && (x.y - wid).abs() < tol && x.z < tol {
+            bc.prescribe_axis(v, 2, 0.0);
+            corners += 1;
+        }
+    }
+    assert_eq!(corners, 2, "the Gmsh box has its corners as nodes");
+    let sol = solve_static(&model, &bc, &vec![Vec3::ZERO; p.len()]).unwrap();
+    let iso = liver_iso();
+    let nu = iso.poisson();
+    for (x, d) in p.iter().zip(&sol.displacement_m) {
+        let exact = Vec3::new(e * x.x, -nu * e * x.y, -nu * e * x.z);
+        assert!((*d - exact).length() < 1e-10 * e * len, "at {x}: {d} vs {exact}");
+    }
+    let reaction: f64 = p.iter().zip(&sol.force_n).filter(|(x, _)| x.x > len - tol).map(|(_, f)| f.x).sum();
+    let expect = iso.young_pa() * e * wid * wid;
+    assert!((reaction - expect).abs() < 1e-9 * expect, "{reaction} vs {expect}");
+}
