@@ -220,9 +220,20 @@ fn uniaxial_stretch_is_exact_on_a_gmsh_mesh() {
     let nu = iso.poisson();
     for (x, d) in p.iter().zip(&sol.displacement_m) {
         let exact = Vec3::new(e * x.x, -nu * e * x.y, -nu * e * x.z);
-        assert!((*d - exact).length() < 1e-10 * e * len, "at {x}: {d} vs {exact}");
+        assert!(
+            (*d - exact).length() < 1e-10 * e * len,
+            "at {x}: {d} vs {exact}"
+        );
     }
-    let reaction: f64 = p.iter().zip(&sol.force_n).filter(|(x, _)| x.x > len - tol).map(|(_, f)| f.x).sum();
+    let reaction: f64 = p
+        .iter()
+        .zip(&sol.force_n)
+        .filter(|(x, _)| x.x > len - tol)
+        .map(|(_, f)| f.x)
+        .sum();
     let expect = iso.young_pa() * e * wid * wid;
-    assert!((reaction - expect).abs() < 1e-9 * expect, "{reaction} vs {expect}");
+    assert!(
+        (reaction - expect).abs() < 1e-9 * expect,
+        "{reaction} vs {expect}"
+    );
 }
