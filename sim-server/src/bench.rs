@@ -76,8 +76,10 @@ pub struct BenchReport {
     pub bandwidth_bound_steps_per_s: Real,
     /// steps_per_s / bandwidth_bound_steps_per_s (above 1 when the data fits in cache).
     pub fraction_of_bandwidth_bound: Real,
-    /// The step (s): 90% of the stable step.
+    /// The step (s): the scene's, or 90% of the stable step.
     pub dt_s: Real,
+    /// Sub-steps per step (1 unless dt is above the bound).
+    pub substeps: usize,
     /// Stability bound used.
     pub bound: &'static str,
     /// Seconds spent building the mesh, model, bound and kernel.
@@ -139,15 +141,26 @@ pub fn probe_bandwidth(threads: usize, bytes: usize) -> Result<Real, BenchError>
     Ok(best)
 }
 
-/// Builds a liver-like cube, clamps its bottom, shears its top by 1 mm and
-/// times the explicit step.
-pub fn run_bench<S: Storage>(cfg: &BenchConfig) -> Result<BenchReport, BenchError> {
-    if cfg.steps == 0 || cfg.tets == 0 || cfg.threads == 0 {
-        return Err(BenchError::Config(
-            "tets, steps and threads must be positive".into(),
-        ));
+/// What to step: a model with its constraints and loads.
+pub struct BenchProblem {
+    /// The model.
+    pub model: ElasticModel,
+    /// Fixed vertices.
+    pub fixed: Vec<VertexId>,
+    /// Imposed displacements (m).
+    pub prescribed: Vec<(VertexId, Vec3)>,
+    /// Per-vertex forces (N), or empty.
+    pub loads_n: Vec<Vec3>,
+    /// Step (s); `None` = 90% of the bound.
+    pub dt_s: Option<Real>,
+}
+
+/// A liver-like cube of about `cfg.tets` tetrahedra, clamped at the bottom
+/// and sheared by 1 mm at the top.
+pub fn box_problem(cfg: &BenchConfig) -> Result<BenchProblem, BenchError> {
+    if cfg.tets == 0 {
+        return Err(BenchError::Config("tets must be positive".into()));
     }
-    let t0 = Instant::now();
     let mut mesh =
         BoxSpec::new(Vec3::splat(cfg.side_m), CellSize::TargetTets(cfg.tets)).generate()?;
     if cfg.reorder {
@@ -156,24 +169,63 @@ pub fn run_bench<S: Storage>(cfg: &BenchConfig) -> Result<BenchReport, BenchErro
     let tissue = Material::isotropic(4500.0, 0.45, 1060.0, 10.0)?;
     let materials = TetMaterials::uniform(tissue, mesh.tet_count());
     let model = ElasticModel::new(mesh, materials)?;
+    let mut fixed = Vec::new();
+    let mut prescribed = Vec::new();
+    for (v, p) in model.mesh().positions_m().iter().enumerate() {
+        if p.z <= 1e-12 {
+            fixed.push(VertexId::from(v));
+        } else if p.z >= cfg.side_m - 1e-12 {
+            prescribed.push((VertexId::from(v), Vec3::new(1e-3, 0.0, 0.0)));
+        }
+    }
+    Ok(BenchProblem {
+        model,
+        fixed,
+        prescribed,
+        loads_n: Vec::new(),
+        dt_s: None,
+    })
+}
+
+/// Times the explicit step of `problem`.
+pub fn run_bench<S: Storage>(
+    problem: BenchProblem,
+    cfg: &BenchConfig,
+) -> Result<BenchReport, BenchError> {
+    if cfg.steps == 0 || cfg.threads == 0 {
+        return Err(BenchError::Config(
+            "steps and threads must be positive".into(),
+        ));
+    }
+    let t0 = Instant::now();
+    let BenchProblem {
+        model,
+        fixed,
+        prescribed,
+        loads_n,
+        dt_s,
+    } = problem;
     let stable = match cfg.bound {
         BoundMethod::Element => crate::tensor_mass::element_bound(&model),
         BoundMethod::PowerIteration => crate::tensor_mass::power_iteration(&model, 1e-6, 2000).step,
     };
-    let dt_s = 0.9 * stable.dt_max_s;
+    let dt_s = dt_s.unwrap_or(0.9 * stable.dt_max_s);
     let config = ExplicitConfig {
         dt_s,
-        policy: DtPolicy::Refuse,
+        policy: DtPolicy::Substep,
         bound: cfg.bound,
         threads: cfg.threads,
     };
     let mut sim = Explicit::<S>::new(model, config)?;
-    let positions = sim.model().mesh().positions_m().to_vec();
-    for (v, p) in positions.iter().enumerate() {
-        if p.z <= 1e-12 {
-            sim.fix(VertexId::from(v));
-        } else if p.z >= cfg.side_m - 1e-12 {
-            sim.prescribe(VertexId::from(v), Vec3::new(1e-3, 0.0, 0.0));
+    for v in fixed {
+        sim.fix(v);
+    }
+    for (v, d) in prescribed {
+        sim.prescribe(v, d);
+    }
+    for (v, f) in loads_n.iter().enumerate() {
+        if *f != Vec3::ZERO {
+            sim.set_external_force(VertexId::from(v), *f);
         }
     }
     let setup_s = t0.elapsed().as_secs_f64();
@@ -216,6 +268,7 @@ pub fn run_bench<S: Storage>(cfg: &BenchConfig) -> Result<BenchReport, BenchErro
         fraction_of_bandwidth_bound: steps_per_s / bound_rate,
         dt_s,
         bound: stable.method.name(),
+        substeps: sim.substeps(),
         setup_s,
         batch_steps_per_s: rates,
     })

@@ -40,6 +40,7 @@ pub mod material_map;
 pub mod math;
 pub mod membrane;
 pub mod mesh;
+pub mod scene;
 pub mod static_solve;
 pub mod tensor_mass;
 pub mod topology;

@@ -1,8 +1,10 @@
 //! The `sim-server` command line.
 
+mod cli;
+
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use sim_server::bench::{BenchConfig, BenchReport, run_bench};
+use sim_server::bench::{BenchConfig, BenchProblem, BenchReport, box_problem, run_bench};
 use sim_server::tensor_mass::BoundMethod;
 use std::path::PathBuf;
 
@@ -41,11 +43,38 @@ enum Bound {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Time the explicit tensor-mass step on a generated mesh.
+    /// Validate a scene (.toml) or a mesh (.msh, .vtk, .vtu, .mesh): counts,
+    /// quality, materials per region, the stable time step, enabled models.
+    /// Without FILE, checks the embedded default scene.
+    Check {
+        /// Scene or mesh file.
+        file: Option<PathBuf>,
+        /// Also write the summary as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Static equilibrium of a scene: writes a VTU with point data
+    /// `displacement` (m) and `force` (N: support reactions at fixed and
+    /// prescribed vertices, the applied load elsewhere).
+    Solve {
+        /// Scene file (default: the embedded scene).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Output .vtu.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write a JSON summary here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Time the explicit tensor-mass step on a generated box or a scene.
     Bench {
-        /// Mesh generator.
+        /// Mesh generator (ignored with --scene).
         #[arg(long, value_enum, default_value = "box")]
         generate: Generator,
+        /// Time this scene instead of a generated box ("default" = the embedded scene).
+        #[arg(long)]
+        scene: Option<PathBuf>,
         /// Target number of tetrahedra.
         #[arg(long, default_value_t = 8000)]
         tets: usize,
@@ -61,6 +90,9 @@ enum Command {
         /// Stability bound that sets dt (90% of it).
         #[arg(long, value_enum, default_value = "element")]
         bound: Bound,
+        /// Step (s); default the scene's dt_s, else 90% of the stable step.
+        #[arg(long)]
+        dt_s: Option<f64>,
         /// Keep the generator's vertex order (no reverse Cuthill-McKee).
         #[arg(long)]
         no_reorder: bool,
@@ -73,8 +105,14 @@ enum Command {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Check { file, json } => cli::check::run(file.as_deref(), json.as_deref())?,
+        Command::Solve { scene, out, json } => {
+            cli::solve::run(scene.as_deref(), &out, json.as_deref())?
+        }
         Command::Bench {
             generate: Generator::Box,
+            scene,
+            dt_s,
             tets,
             steps,
             threads,
@@ -97,9 +135,29 @@ fn main() -> Result<()> {
                 },
                 ..BenchConfig::default()
             };
+            let mut problem = match &scene {
+                Some(path) => {
+                    let path = (path.as_os_str() != "default").then_some(path.as_path());
+                    let (_, b) = cli::load_scene(path)?;
+                    BenchProblem {
+                        model: b.model,
+                        fixed: b.fixed,
+                        prescribed: b.prescribed,
+                        loads_n: b.loads_n,
+                        dt_s: b.settings.dt_s,
+                    }
+                }
+                None => box_problem(&cfg).context("cannot build the benchmark box")?,
+            };
+            if let Some(dt) = dt_s {
+                if !(dt.is_finite() && dt > 0.0) {
+                    bail!("--dt-s must be a positive number of seconds, got {dt}");
+                }
+                problem.dt_s = Some(dt);
+            }
             let report = match precision {
-                Precision::F32 => run_bench::<f32>(&cfg),
-                Precision::F64 => run_bench::<f64>(&cfg),
+                Precision::F32 => run_bench::<f32>(problem, &cfg),
+                Precision::F64 => run_bench::<f64>(problem, &cfg),
             }
             .context("benchmark failed")?;
             print_report(&report);
@@ -115,8 +173,8 @@ fn main() -> Result<()> {
 
 fn print_report(r: &BenchReport) {
     println!(
-        "box {} tets, {} vertices, {} edges | {} thread(s), {} storage | dt {:.3e} s ({} bound)",
-        r.tets, r.vertices, r.edges, r.threads, r.precision, r.dt_s, r.bound
+        "mesh {} tets, {} vertices, {} edges | {} thread(s), {} storage | dt {:.3e} s in {} sub-step(s) ({} bound)",
+        r.tets, r.vertices, r.edges, r.threads, r.precision, r.dt_s, r.substeps, r.bound
     );
     println!(
         "{:.0} steps/s ({:.1} us/step, median of {} batches) | {:.2} MB/step | probe {:.1} GB/s -> bandwidth bound {:.0} steps/s ({:.2}x of it)",

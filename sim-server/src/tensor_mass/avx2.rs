@@ -29,7 +29,11 @@ fn load3(v: &V3) -> __m256d {
 /// # Safety
 /// The CPU must support AVX2.
 #[target_feature(enable = "avx2")]
-pub(super) unsafe fn run_part<S: Storage>(kernel: &Kernel<S>, inp: &StepInputs<'_>, part: Part<'_>) {
+pub(super) unsafe fn run_part<S: Storage>(
+    kernel: &Kernel<S>,
+    inp: &StepInputs<'_>,
+    part: Part<'_>,
+) {
     let Part {
         start,
         end,
@@ -41,7 +45,9 @@ pub(super) unsafe fn run_part<S: Storage>(kernel: &Kernel<S>, inp: &StepInputs<'
     } = part;
     let (diag, row_start, edges) = kernel.parts();
     let mask = ring.len() - 1;
-    assert!(ring.len().is_power_of_two() && ring.len() > kernel.span() && spill.len() <= kernel.span());
+    assert!(
+        ring.len().is_power_of_two() && ring.len() > kernel.span() && spill.len() <= kernel.span()
+    );
     let ring = &mut ring[..=mask];
     let u = inp.u;
     let ahead = edges.as_ptr().wrapping_add(32);
@@ -66,8 +72,14 @@ pub(super) unsafe fn run_part<S: Storage>(kernel: &Kernel<S>, inp: &StepInputs<'
             // SAFETY: AVX2 is enabled for this function.
             let (ka, kb) = unsafe { S::load8(&e.k) };
             let k8 = e.k[8].to_real();
-            ma = _mm256_add_pd(ma, _mm256_mul_pd(ka, _mm256_permute4x64_pd::<0b00_10_01_00>(ujv)));
-            mb = _mm256_add_pd(mb, _mm256_mul_pd(kb, _mm256_permute4x64_pd::<0b01_00_10_01>(ujv)));
+            ma = _mm256_add_pd(
+                ma,
+                _mm256_mul_pd(ka, _mm256_permute4x64_pd::<0b00_10_01_00>(ujv)),
+            );
+            mb = _mm256_add_pd(
+                mb,
+                _mm256_mul_pd(kb, _mm256_permute4x64_pd::<0b01_00_10_01>(ujv)),
+            );
             m8 += k8 * u[j][2];
             let ta = _mm256_mul_pd(ka, tia); // t0 t1 t2 t3
             let tb = _mm256_mul_pd(kb, tib); // t4 t5 t6 t7

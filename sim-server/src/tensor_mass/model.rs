@@ -259,10 +259,10 @@ impl ElasticModel {
     /// Adds the nonlinear membrane's forces (eq 29) at displacements `u` to
     /// `out`; nothing for a linear membrane (already in K) or none.
     pub fn membrane_forces(&self, u: &[[Real; 3]], out: &mut [[Real; 3]]) {
-        if let Some(m) = &self.membrane {
-            if m.model() == MembraneModel::Nonlinear {
-                m.add_forces(u, out);
-            }
+        if let Some(m) = &self.membrane
+            && m.model() == MembraneModel::Nonlinear
+        {
+            m.add_forces(u, out);
         }
     }
 

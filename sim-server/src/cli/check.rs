@@ -1,0 +1,207 @@
+//! `sim-server check [FILE]`: validate a scene or a mesh and say what it makes.
+
+use super::{load_scene, write_json};
+use anyhow::Result;
+use serde::Serialize;
+use sim_server::mesh::io::read_mesh;
+use sim_server::mesh::quality::{QualityReport, quality_report};
+use sim_server::scene::BuiltScene;
+use sim_server::tensor_mass::{element_bound, power_iteration};
+use std::path::Path;
+
+/// The machine-readable form of the check.
+#[derive(Serialize)]
+struct CheckJson {
+    source: String,
+    vertices: usize,
+    tets: usize,
+    edges: usize,
+    surface_triangles: usize,
+    min_dihedral_deg: f64,
+    max_aspect_ratio: f64,
+    shortest_edge_m: f64,
+    components: usize,
+    dt_max_element_s: Option<f64>,
+    dt_max_power_iteration_s: Option<f64>,
+    anisotropic_tets: Option<usize>,
+    membrane: Option<String>,
+    tools: Vec<String>,
+    cutting: bool,
+    warnings: Vec<String>,
+}
+
+fn print_quality(q: &QualityReport) {
+    println!("quality:\n{q}");
+}
+
+/// Runs the check; `path` None = the embedded scene.
+pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
+    let is_mesh = path
+        .and_then(|p| p.extension())
+        .is_some_and(|e| matches!(e.to_str(), Some("msh" | "vtk" | "vtu" | "mesh")));
+    if let (true, Some(p)) = (is_mesh, path) {
+        let imported = read_mesh(p)?;
+        let q = quality_report(&imported.mesh);
+        println!(
+            "mesh {}: {} vertices, {} tetrahedra",
+            p.display(),
+            imported.mesh.vertex_count(),
+            imported.mesh.tet_count()
+        );
+        for w in &imported.warnings {
+            println!("warning: {w}");
+        }
+        print_quality(&q);
+        if let Some(j) = json {
+            let topo = sim_server::topology::Topology::new(&imported.mesh);
+            write_json(
+                j,
+                &CheckJson {
+                    source: p.display().to_string(),
+                    vertices: imported.mesh.vertex_count(),
+                    tets: imported.mesh.tet_count(),
+                    edges: topo.edges().len(),
+                    surface_triangles: topo.surface_len(),
+                    min_dihedral_deg: q.min_dihedral_deg,
+                    max_aspect_ratio: q.max_aspect_ratio,
+                    shortest_edge_m: q.shortest_edge_m,
+                    components: q.components,
+                    dt_max_element_s: None,
+                    dt_max_power_iteration_s: None,
+                    anisotropic_tets: None,
+                    membrane: None,
+                    tools: Vec::new(),
+                    cutting: false,
+                    warnings: imported.warnings,
+                },
+            )?;
+        }
+        return Ok(());
+    }
+    let (src, built) = load_scene(path)?;
+    report_scene(&src.name, &built, json)
+}
+
+fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
+    let model = &b.model;
+    let mesh = model.mesh();
+    let topo = model.topology();
+    let q = quality_report(mesh);
+    let r = &b.report;
+    println!("scene {name}");
+    println!(
+        "mesh: {} ({} vertices, {} tetrahedra, {} edges, {} surface triangles)",
+        r.mesh_source,
+        mesh.vertex_count(),
+        mesh.tet_count(),
+        topo.edges().len(),
+        topo.surface_len()
+    );
+    for w in &r.warnings {
+        println!("warning: {w}");
+    }
+    print_quality(&q);
+    println!("materials:");
+    println!("  default: {}", r.default_material);
+    for (region, tets, m) in &r.regions {
+        println!("  region {region}: {tets} tetrahedra: {m}");
+    }
+    for (vessel, tets) in &r.vessels {
+        println!("  vessel {vessel}: {tets} tetrahedra made transversally isotropic along it");
+    }
+    let element = element_bound(model);
+    let power = power_iteration(model, 1e-6, 2000);
+    println!(
+        "stable step: {:.4e} s (element bound, enforced: survives cutting); {:.4e} s (power iteration, {} iterations; ratio {:.2})",
+        element.dt_max_s,
+        power.step.dt_max_s,
+        power.iterations,
+        power.step.dt_max_s / element.dt_max_s
+    );
+    if let Some(dt) = b.settings.dt_s {
+        let verdict = if dt <= element.dt_max_s {
+            "under the bound".to_string()
+        } else {
+            match b.settings.policy {
+                sim_server::tensor_mass::DtPolicy::Refuse => {
+                    "ABOVE the bound: the simulation will refuse it".into()
+                }
+                _ => format!(
+                    "above the bound: {} sub-steps per step",
+                    (dt / element.dt_max_s).ceil()
+                ),
+            }
+        };
+        println!("dt_s = {dt:.4e} s: {verdict}");
+    }
+    let cutting = b
+        .tools
+        .iter()
+        .any(|t| !matches!(t.kind, sim_server::scene::spec::ToolKind::Hook));
+    println!("models enabled:");
+    println!(
+        "  anisotropy: {}",
+        if r.anisotropic_tets > 0 {
+            format!("{} tetrahedra", r.anisotropic_tets)
+        } else {
+            "off".into()
+        }
+    );
+    println!(
+        "  membrane: {}",
+        r.membrane
+            .as_ref()
+            .map_or("off".to_string(), |(a, m)| format!(
+                "{m}, alpha {a} N/m^2, {} capsule edges",
+                model.membrane().map_or(0, |m| m.capsule_edges().len())
+            ))
+    );
+    println!(
+        "  constraints: {} fixed, {} prescribed vertices; loads on {} vertices",
+        r.fixed_vertices, r.prescribed_vertices, r.loaded_vertices
+    );
+    println!(
+        "  tools: {}",
+        if b.tools.is_empty() {
+            "none".to_string()
+        } else {
+            b.tools
+                .iter()
+                .map(|t| format!("{} ({:?})", t.name, t.kind).to_lowercase())
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    );
+    println!(
+        "  cutting: {}",
+        if cutting {
+            "yes (cutting tools declared)"
+        } else {
+            "off"
+        }
+    );
+    if let Some(j) = json {
+        write_json(
+            j,
+            &CheckJson {
+                source: name.to_string(),
+                vertices: mesh.vertex_count(),
+                tets: mesh.tet_count(),
+                edges: topo.edges().len(),
+                surface_triangles: topo.surface_len(),
+                min_dihedral_deg: q.min_dihedral_deg,
+                max_aspect_ratio: q.max_aspect_ratio,
+                shortest_edge_m: q.shortest_edge_m,
+                components: q.components,
+                dt_max_element_s: Some(element.dt_max_s),
+                dt_max_power_iteration_s: Some(power.step.dt_max_s),
+                anisotropic_tets: Some(r.anisotropic_tets),
+                membrane: r.membrane.as_ref().map(|(a, m)| format!("{m} {a}")),
+                tools: b.tools.iter().map(|t| t.name.clone()).collect(),
+                cutting,
+                warnings: r.warnings.clone(),
+            },
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,559 @@
+//! Building a scene: the mesh, per-tetrahedron materials (default, regions,
+//! vessels), the membrane, constraints, loads, tools and settings. Only what
+//! the scene declares is built.
+
+use super::materials::resolve;
+use super::select::{Region, distance_to_segment, segment_crosses_tet};
+use super::spec::{
+    BackendName, BoundName, DtPolicyName, LatticeKind, MembraneModelName, PrecisionName, SceneSpec,
+    ShapeKind, ToolKind,
+};
+use super::{SceneError, SceneSource};
+use crate::ids::{TetId, VertexId};
+use crate::material_map::TetMaterials;
+use crate::math::{Real, Vec3};
+use crate::membrane::MembraneModel;
+use crate::mesh::{BoxSpec, CellSize, TetMesh, io, rcm_order, shapes};
+use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
+use serde::Serialize;
+
+/// A tool as declared (the contact models come with the tool issue).
+#[derive(Clone, Debug, Serialize)]
+pub struct ToolDecl {
+    /// Unique name.
+    pub name: String,
+    /// Kind.
+    pub kind: ToolKind,
+    /// Insertion point (m).
+    pub fulcrum_m: [Real; 3],
+    /// Shaft length (m).
+    pub length_m: Real,
+    /// Shaft radius (m).
+    pub radius_m: Real,
+    /// Tip segment length (m).
+    pub tip_length_m: Real,
+}
+
+/// Simulation settings with defaults applied.
+#[derive(Clone, Debug)]
+pub struct SimSettings {
+    /// Requested step (s); `None` = 90% of the stable step.
+    pub dt_s: Option<Real>,
+    /// Target rate (Hz) for real-time runs.
+    pub rate_hz: Option<Real>,
+    /// Worker threads.
+    pub threads: usize,
+    /// f32 (true) or f64 tensor storage.
+    pub single_precision: bool,
+    /// Refuse or sub-step.
+    pub policy: DtPolicy,
+    /// Which bound.
+    pub bound: BoundMethod,
+}
+
+/// What the scene made, for `check` and logs.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SceneReport {
+    /// Where the mesh came from.
+    pub mesh_source: String,
+    /// Importer and builder warnings.
+    pub warnings: Vec<String>,
+    /// (name, tetrahedra, material) per region, in order.
+    pub regions: Vec<(String, usize, String)>,
+    /// (name, tetrahedra made anisotropic) per vessel.
+    pub vessels: Vec<(String, usize)>,
+    /// Tetrahedra with an anisotropic material.
+    pub anisotropic_tets: usize,
+    /// The default material.
+    pub default_material: String,
+    /// Membrane: alpha and model, if any.
+    pub membrane: Option<(Real, String)>,
+    /// Vertices held fixed.
+    pub fixed_vertices: usize,
+    /// Vertices with an imposed displacement.
+    pub prescribed_vertices: usize,
+    /// Vertices carrying a force.
+    pub loaded_vertices: usize,
+}
+
+/// A built scene.
+pub struct BuiltScene {
+    /// The model (mesh, materials, tensors, membrane).
+    pub model: ElasticModel,
+    /// Fixed vertices.
+    pub fixed: Vec<VertexId>,
+    /// Imposed displacements (m).
+    pub prescribed: Vec<(VertexId, Vec3)>,
+    /// Per-vertex forces (N); empty when the scene has no force or traction load.
+    pub loads_n: Vec<Vec3>,
+    /// Declared tools.
+    pub tools: Vec<ToolDecl>,
+    /// Settings.
+    pub settings: SimSettings,
+    /// Summary.
+    pub report: SceneReport,
+}
+
+fn describe(m: &crate::material::Material) -> String {
+    let l = m.lame();
+    let mut s = format!(
+        "E {:.4} kPa, nu {:.3}, rho {:.0} kg/m3, damping {:.3} /s",
+        l.young_pa() / 1e3,
+        l.poisson(),
+        m.density_kg_m3(),
+        m.damping_per_s()
+    );
+    if let crate::material::Elasticity::Transverse(t) = m.elasticity() {
+        let e = t.engineering();
+        s += &format!(
+            ", transversally isotropic: delta_lambda {:.4} kPa, delta_mu {:.4} kPa, E_fibre {:.4} kPa, G_fibre {:.4} kPa, terms {}",
+            t.delta_lambda_pa() / 1e3,
+            t.delta_mu_pa() / 1e3,
+            e.young_fiber_pa / 1e3,
+            e.shear_fiber_pa / 1e3,
+            t.terms()
+        );
+    }
+    s
+}
+
+fn positive(src: &SceneSource, v: &toml::Spanned<Real>, what: &str) -> Result<Real, SceneError> {
+    let x = *v.get_ref();
+    if x.is_finite() && x > 0.0 {
+        Ok(x)
+    } else {
+        Err(src.error(
+            v.span(),
+            format!("{what} must be a positive finite number, got {x}"),
+        ))
+    }
+}
+
+fn unit(src: &SceneSource, v: &toml::Spanned<[Real; 3]>, what: &str) -> Result<Vec3, SceneError> {
+    let a = Vec3::from_array(*v.get_ref());
+    if a.is_finite() && a.length() > 0.0 {
+        Ok(a.normalize())
+    } else {
+        Err(src.error(v.span(), format!("{what} must be a finite non-zero vector")))
+    }
+}
+
+fn load_mesh(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    report: &mut SceneReport,
+) -> Result<(TetMesh, Vec<i32>), SceneError> {
+    let m = spec.mesh.get_ref();
+    let (mesh, physical) = match (&m.file, &m.generate) {
+        (Some(file), None) => {
+            let path = src.dir.join(file.get_ref());
+            let imported =
+                io::read_mesh(&path).map_err(|e| src.error(file.span(), e.to_string()))?;
+            report.mesh_source = path.display().to_string();
+            report.warnings.extend(imported.warnings);
+            (imported.mesh, imported.tet_physical)
+        }
+        (None, Some(g)) => {
+            let gen_span = g.span();
+            let g = g.get_ref();
+            let cell = g
+                .cell_m
+                .as_ref()
+                .map(|c| positive(src, c, "cell_m"))
+                .transpose()?;
+            let need_cell =
+                || cell.ok_or_else(|| src.error(gen_span.clone(), "this generator needs `cell_m`"));
+            let lattice = match g.lattice.unwrap_or(LatticeKind::Bcc) {
+                LatticeKind::Bcc => shapes::Lattice::BodyCentred,
+                LatticeKind::Cubic => shapes::Lattice::Cubic,
+            };
+            let fail = |e: crate::mesh::GenerateError| src.error(gen_span.clone(), e.to_string());
+            let mesh = match g.shape {
+                ShapeKind::Box => {
+                    let size = g.size_m.as_ref().ok_or_else(|| {
+                        src.error(gen_span.clone(), "shape \"box\" needs `size_m`")
+                    })?;
+                    let cells = match (cell, &g.tets) {
+                        (Some(h), None) => CellSize::EdgeM(h),
+                        (None, Some(n)) => CellSize::TargetTets(*n.get_ref()),
+                        _ => {
+                            return Err(src.error(
+                                gen_span.clone(),
+                                "shape \"box\" needs exactly one of `cell_m`, `tets`",
+                            ));
+                        }
+                    };
+                    let spec = BoxSpec {
+                        origin_m: Vec3::from_array(g.origin_m.unwrap_or([0.0; 3])),
+                        size_m: Vec3::from_array(*size.get_ref()),
+                        cells,
+                    };
+                    spec.generate()
+                        .map_err(|e| src.error(size.span(), e.to_string()))?
+                }
+                ShapeKind::Ellipsoid => {
+                    let radii = g.radii_m.as_ref().ok_or_else(|| {
+                        src.error(gen_span.clone(), "shape \"ellipsoid\" needs `radii_m`")
+                    })?;
+                    let centre = Vec3::from_array(g.center_m.unwrap_or([0.0; 3]));
+                    shapes::ellipsoid(
+                        centre,
+                        Vec3::from_array(*radii.get_ref()),
+                        need_cell()?,
+                        lattice,
+                    )
+                    .map_err(fail)?
+                }
+                ShapeKind::Liver => shapes::liver(need_cell()?, lattice).map_err(fail)?,
+            };
+            if g.shape != ShapeKind::Box && g.tets.is_some() {
+                return Err(src.error(
+                    gen_span,
+                    "`tets` only sizes the box generator; use `cell_m`",
+                ));
+            }
+            report.mesh_source = format!("generated {:?}", g.shape).to_lowercase();
+            let n = mesh.tet_count();
+            (mesh, vec![0; n])
+        }
+        _ => {
+            return Err(src.error(
+                spec.mesh.span(),
+                "[mesh] needs exactly one of `file`, `generate`",
+            ));
+        }
+    };
+    if mesh.reoriented() > 0 {
+        report.warnings.push(format!(
+            "{} inverted tetrahedra were reoriented",
+            mesh.reoriented()
+        ));
+    }
+    let mesh = if m.reorder.unwrap_or(true) {
+        mesh.permuted(&rcm_order(&mesh))
+    } else {
+        mesh
+    };
+    Ok((mesh, physical))
+}
+
+/// Builds everything `spec` declares.
+pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, SceneError> {
+    let mut report = SceneReport::default();
+    let (mesh, physical) = load_mesh(src, spec, &mut report)?;
+    let n_tets = mesh.tet_count();
+
+    // Materials: default, then regions in order, then vessels.
+    let default_keys = spec.material.get_ref().material_keys();
+    let default_fiber = spec
+        .material
+        .get_ref()
+        .fiber
+        .as_ref()
+        .map(|f| unit(src, f, "[material] fiber"))
+        .transpose()?;
+    let default = resolve(
+        src,
+        &default_keys,
+        default_fiber.is_some(),
+        spec.material.span(),
+        "[material]",
+    )?;
+    report.default_material = describe(&default);
+    let mut mats = TetMaterials::uniform(default, n_tets);
+    if let Some(f) = default_fiber {
+        for t in 0..n_tets {
+            mats.set_fiber(TetId::from(t), f)
+                .expect("valid tet and fibre");
+        }
+    }
+    let too_many = |span| src.error(span, "too many distinct materials (at most 65535)");
+    for (i, region) in spec.region.iter().enumerate() {
+        let r = region.get_ref();
+        let name = r
+            .name
+            .clone()
+            .unwrap_or_else(|| format!("region {}", i + 1));
+        let what = format!("[[region]] {name:?}");
+        let fiber = match &r.fiber {
+            Some(f) => Some(unit(src, f, &format!("{what} fiber"))?),
+            None => default_fiber,
+        };
+        let keys = r.material_keys().over(default_keys);
+        let material = resolve(src, &keys, fiber.is_some(), region.span(), &what)?;
+        let tets = Region::new(src, &r.select)?.tets(&mesh, &physical);
+        if tets.is_empty() {
+            return Err(src.error(r.select.span(), format!("{what} selects no tetrahedron")));
+        }
+        let id = mats.add(material).map_err(|_| too_many(region.span()))?;
+        for &t in &tets {
+            mats.assign(t, id).expect("tet in range");
+            if let Some(f) = fiber {
+                mats.set_fiber(t, f).expect("unit fibre");
+            }
+        }
+        report.regions.push((name, tets.len(), describe(&material)));
+    }
+    for (i, vessel) in spec.vessel.iter().enumerate() {
+        let v = vessel.get_ref();
+        let name = v
+            .name
+            .clone()
+            .unwrap_or_else(|| format!("vessel {}", i + 1));
+        let what = format!("[[vessel]] {name:?}");
+        let points: Vec<Vec3> = v
+            .points_m
+            .get_ref()
+            .iter()
+            .map(|p| Vec3::from_array(*p))
+            .collect();
+        if points.len() < 2
+            || points.iter().any(|p| !p.is_finite())
+            || points.windows(2).any(|w| w[0] == w[1])
+        {
+            return Err(src.error(
+                v.points_m.span(),
+                format!("{what}: points_m needs at least two distinct finite points per segment"),
+            ));
+        }
+        let radius = positive(src, &v.radius_m, &format!("{what} radius_m"))?;
+        let keys = v.material_keys().over(default_keys);
+        let material = resolve(src, &keys, true, vessel.span(), &what)?;
+        let id = mats.add(material).map_err(|_| too_many(vessel.span()))?;
+        let mut count = 0;
+        for t in (0..n_tets).map(TetId::from) {
+            let p = mesh.tet_points(t);
+            let centroid = (p[0] + p[1] + p[2] + p[3]) / 4.0;
+            // The closest crossing segment gives the direction.
+            let best = points
+                .windows(2)
+                .filter(|w| {
+                    segment_crosses_tet(w[0], w[1], p)
+                        || distance_to_segment(centroid, w[0], w[1]) <= radius
+                })
+                .min_by(|a, b| {
+                    distance_to_segment(centroid, a[0], a[1])
+                        .total_cmp(&distance_to_segment(centroid, b[0], b[1]))
+                });
+            if let Some(w) = best {
+                mats.assign(t, id).expect("tet in range");
+                mats.set_fiber(t, w[1] - w[0]).expect("distinct points");
+                count += 1;
+            }
+        }
+        if count == 0 {
+            return Err(src.error(v.points_m.span(), format!("{what} crosses no tetrahedron")));
+        }
+        report.vessels.push((name, count));
+    }
+    report.anisotropic_tets = (0..n_tets)
+        .filter(|&t| mats.material(TetId::from(t)).is_anisotropic())
+        .count();
+    let mut model = ElasticModel::new(mesh, mats)
+        .map_err(|e| src.error(spec.material.span(), e.to_string()))?;
+
+    if let Some(m) = &spec.membrane {
+        let alpha = *m.get_ref().alpha.get_ref();
+        let kind = match m.get_ref().model.unwrap_or(MembraneModelName::Linear) {
+            MembraneModelName::Linear => MembraneModel::Linear,
+            MembraneModelName::Nonlinear => MembraneModel::Nonlinear,
+        };
+        if !(alpha.is_finite() && alpha > 0.0) {
+            return Err(src.error(
+                m.get_ref().alpha.span(),
+                format!("[membrane] alpha must be a positive finite number (N/m^2), got {alpha}"),
+            ));
+        }
+        model = model.with_membrane(alpha, kind).expect("alpha checked");
+        report.membrane = Some((alpha, format!("{kind:?}").to_lowercase()));
+    }
+
+    let mesh = model.mesh();
+    let n = mesh.vertex_count();
+    let mut fixed = Vec::new();
+    for f in &spec.fixed {
+        let vs = Region::new(src, &f.get_ref().select)?.vertices(mesh, &physical);
+        if vs.is_empty() {
+            return Err(src.error(f.get_ref().select.span(), "[[fixed]] selects no vertex"));
+        }
+        fixed.extend(vs);
+    }
+    fixed.sort_unstable();
+    fixed.dedup();
+    let mut prescribed = Vec::new();
+    let mut loads_n: Vec<Vec3> = Vec::new();
+    for load in &spec.load {
+        let l = load.get_ref();
+        let given = l.displacement_m.is_some() as u8
+            + l.force_n.is_some() as u8
+            + l.traction_pa.is_some() as u8;
+        if given != 1 {
+            return Err(src.error(
+                load.span(),
+                "[[load]] needs exactly one of displacement_m, force_n, traction_pa",
+            ));
+        }
+        let vs = Region::new(src, &l.select)?.vertices(mesh, &physical);
+        if vs.is_empty() {
+            return Err(src.error(l.select.span(), "[[load]] selects no vertex"));
+        }
+        let vector = |v: &toml::Spanned<[Real; 3]>| {
+            let x = Vec3::from_array(*v.get_ref());
+            if x.is_finite() {
+                Ok(x)
+            } else {
+                Err(src.error(v.span(), "load values must be finite"))
+            }
+        };
+        if let Some(d) = &l.displacement_m {
+            let d = vector(d)?;
+            prescribed.extend(vs.iter().map(|v| (*v, d)));
+            continue;
+        }
+        if loads_n.is_empty() {
+            loads_n = vec![Vec3::ZERO; n];
+        }
+        if let Some(f) = &l.force_n {
+            let each = vector(f)? / vs.len() as Real;
+            for v in &vs {
+                loads_n[v.idx()] += each;
+            }
+        } else if let Some(t) = &l.traction_pa {
+            let t = vector(t)?;
+            let mut selected = vec![false; n];
+            for v in &vs {
+                selected[v.idx()] = true;
+            }
+            let p = mesh.positions_m();
+            let mut faces = 0;
+            for [a, b, c] in model.topology().surface_triangles(mesh) {
+                if selected[a.idx()] && selected[b.idx()] && selected[c.idx()] {
+                    let area = 0.5
+                        * (p[b.idx()] - p[a.idx()])
+                            .cross(p[c.idx()] - p[a.idx()])
+                            .length();
+                    for v in [a, b, c] {
+                        loads_n[v.idx()] += t * (area / 3.0);
+                    }
+                    faces += 1;
+                }
+            }
+            if faces == 0 {
+                return Err(src.error(l.select.span(), "[[load]] traction_pa: no surface triangle has all three vertices in the selection"));
+            }
+        }
+    }
+    // A vertex both fixed and prescribed is an error in the scene.
+    if let Some((v, _)) = prescribed
+        .iter()
+        .find(|(v, _)| fixed.binary_search(v).is_ok())
+    {
+        let span = spec.load.first().map_or(spec.mesh.span(), |l| l.span());
+        return Err(src.error(
+            span,
+            format!("vertex {} is both fixed and given a displacement", v.0),
+        ));
+    }
+    report.fixed_vertices = fixed.len();
+    report.prescribed_vertices = prescribed.len();
+    report.loaded_vertices = loads_n.iter().filter(|f| **f != Vec3::ZERO).count();
+
+    let mut tools: Vec<ToolDecl> = Vec::new();
+    for tool in &spec.tool {
+        let t = tool.get_ref();
+        let name = t.name.get_ref().clone();
+        if name.is_empty() || tools.iter().any(|x| x.name == name) {
+            return Err(src.error(
+                t.name.span(),
+                format!("tool names must be unique and non-empty: {name:?}"),
+            ));
+        }
+        let what = format!("[[tool]] {name:?}");
+        let fulcrum = Vec3::from_array(*t.fulcrum_m.get_ref());
+        if !fulcrum.is_finite() {
+            return Err(src.error(
+                t.fulcrum_m.span(),
+                format!("{what} fulcrum_m must be finite"),
+            ));
+        }
+        let length = positive(src, &t.length_m, &format!("{what} length_m"))?;
+        let radius = positive(src, &t.radius_m, &format!("{what} radius_m"))?;
+        let tip = positive(src, &t.tip_length_m, &format!("{what} tip_length_m"))?;
+        if tip > length {
+            return Err(src.error(
+                t.tip_length_m.span(),
+                format!("{what}: tip_length_m ({tip}) exceeds length_m ({length})"),
+            ));
+        }
+        tools.push(ToolDecl {
+            name,
+            kind: t.kind,
+            fulcrum_m: fulcrum.to_array(),
+            length_m: length,
+            radius_m: radius,
+            tip_length_m: tip,
+        });
+    }
+    let settings = settings(src, spec)?;
+    Ok(BuiltScene {
+        model,
+        fixed,
+        prescribed,
+        loads_n,
+        tools,
+        settings,
+        report,
+    })
+}
+
+fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneError> {
+    let mut s = SimSettings {
+        dt_s: None,
+        rate_hz: None,
+        threads: 1,
+        single_precision: true,
+        policy: DtPolicy::Substep,
+        bound: BoundMethod::Element,
+    };
+    let Some(sim) = &spec.simulation else {
+        return Ok(s);
+    };
+    let sim = sim.get_ref();
+    if let Some(b) = &sim.backend
+        && *b.get_ref() != BackendName::TensorMass
+    {
+        return Err(src.error(
+            b.span(),
+            format!(
+                "backend {:?} is not available yet; use \"tensor-mass\"",
+                b.get_ref()
+            ),
+        ));
+    }
+    s.dt_s = sim
+        .dt_s
+        .as_ref()
+        .map(|d| positive(src, d, "[simulation] dt_s"))
+        .transpose()?;
+    s.rate_hz = sim
+        .rate_hz
+        .as_ref()
+        .map(|r| positive(src, r, "[simulation] rate_hz"))
+        .transpose()?;
+    if let Some(t) = &sim.threads {
+        if *t.get_ref() == 0 {
+            return Err(src.error(t.span(), "[simulation] threads must be at least 1"));
+        }
+        s.threads = *t.get_ref();
+    }
+    s.single_precision = sim.precision.unwrap_or(PrecisionName::F32) == PrecisionName::F32;
+    s.policy = match sim.dt_policy.unwrap_or(DtPolicyName::Substep) {
+        DtPolicyName::Refuse => DtPolicy::Refuse,
+        DtPolicyName::Substep => DtPolicy::Substep,
+    };
+    s.bound = match sim.bound.unwrap_or(BoundName::Element) {
+        BoundName::Element => BoundMethod::Element,
+        BoundName::PowerIteration => BoundMethod::PowerIteration,
+    };
+    Ok(s)
+}

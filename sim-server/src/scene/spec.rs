@@ -1,0 +1,389 @@
+//! The scene file format (TOML), as typed structures. Unknown keys are
+//! refused by serde (`deny_unknown_fields`) with their position; values that
+//! need checking beyond their type keep their span (`Spanned`) so the
+//! builder can name the line and column of a bad one.
+//!
+//! Key names follow the architecture page; extend, don't rename.
+
+use serde::Deserialize;
+use toml::Spanned;
+
+/// A whole scene.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    /// `[mesh]`: a file or a generator.
+    pub mesh: Spanned<MeshSpec>,
+    /// `[material]`: the default material.
+    pub material: Spanned<MaterialSpec>,
+    /// `[[region]]`: material overrides on selections, applied in order.
+    #[serde(default)]
+    pub region: Vec<Spanned<RegionSpec>>,
+    /// `[[vessel]]`: polylines whose tetrahedra become anisotropic along them.
+    #[serde(default)]
+    pub vessel: Vec<Spanned<VesselSpec>>,
+    /// `[membrane]`: the surface capsule.
+    pub membrane: Option<Spanned<MembraneSpec>>,
+    /// `[[fixed]]`: vertices held at rest.
+    #[serde(default)]
+    pub fixed: Vec<Spanned<FixedSpec>>,
+    /// `[[load]]`: displacements, forces or tractions.
+    #[serde(default)]
+    pub load: Vec<Spanned<LoadSpec>>,
+    /// `[[tool]]`: laparoscopic tools.
+    #[serde(default)]
+    pub tool: Vec<Spanned<ToolSpec>>,
+    /// `[simulation]`: backend, step and threads.
+    pub simulation: Option<Spanned<SimulationSpec>>,
+}
+
+/// `[mesh]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSpec {
+    /// A mesh file (.msh, .vtk, .vtu, .mesh), relative to the scene file.
+    pub file: Option<Spanned<String>>,
+    /// A generated mesh.
+    pub generate: Option<Spanned<GenerateSpec>>,
+    /// Renumber vertices for memory locality (default true).
+    pub reorder: Option<bool>,
+}
+
+/// The generators.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapeKind {
+    /// A box split into cubes.
+    Box,
+    /// An ellipsoid.
+    Ellipsoid,
+    /// The liver-like organ.
+    Liver,
+}
+
+/// Lattice of the implicit-shape generators.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum LatticeKind {
+    /// Cubes split into 6 tetrahedra.
+    Cubic,
+    /// Body-centred cubic tetrahedra (better shaped).
+    Bcc,
+}
+
+/// `generate = { shape = ..., ... }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GenerateSpec {
+    /// Which shape.
+    pub shape: ShapeKind,
+    /// Box sides (m).
+    pub size_m: Option<Spanned<[f64; 3]>>,
+    /// Box minimum corner (m), default the origin.
+    pub origin_m: Option<[f64; 3]>,
+    /// Ellipsoid radii (m).
+    pub radii_m: Option<Spanned<[f64; 3]>>,
+    /// Ellipsoid centre (m), default the origin.
+    pub center_m: Option<[f64; 3]>,
+    /// Cell edge (m).
+    pub cell_m: Option<Spanned<f64>>,
+    /// Box only: target tetrahedron count instead of a cell edge.
+    pub tets: Option<Spanned<usize>>,
+    /// Lattice for ellipsoid and liver (default bcc).
+    pub lattice: Option<LatticeKind>,
+}
+
+/// One of the anisotropic energy terms.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum TermName {
+    /// Stretch along the fibre.
+    Stretch,
+    /// Cross-stretch.
+    Cross,
+    /// Shear.
+    Shear,
+}
+
+/// Generates a table type holding the material keys (shared by
+/// `[material]`, `[[region]]` and `[[vessel]]`) plus its own keys. serde's
+/// `flatten` cannot be combined with `deny_unknown_fields`, hence a macro.
+macro_rules! with_material_keys {
+    ($(#[$doc:meta])* $name:ident { $($(#[$fdoc:meta])* $field:ident : $ty:ty,)* }) => {
+        $(#[$doc])*
+        #[derive(Debug, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct $name {
+            $($(#[$fdoc])* pub $field: $ty,)*
+            /// Young's modulus (Pa); for anisotropic materials, of the transverse plane.
+            pub young_pa: Option<Spanned<f64>>,
+            /// Poisson's ratio (of the transverse plane when anisotropic).
+            pub poisson: Option<Spanned<f64>>,
+            /// Density (kg/m^3).
+            pub density_kg_m3: Option<Spanned<f64>>,
+            /// Mass-proportional damping (1/s).
+            pub damping_per_s: Option<Spanned<f64>>,
+            /// lambda_L - lambda_T (Pa), the paper's parameter.
+            pub delta_lambda_pa: Option<Spanned<f64>>,
+            /// mu_L - mu_T (Pa), the paper's parameter.
+            pub delta_mu_pa: Option<Spanned<f64>>,
+            /// Young's modulus along the fibre (Pa), engineering form.
+            pub young_fiber_pa: Option<Spanned<f64>>,
+            /// Shear modulus in planes containing the fibre (Pa), engineering form.
+            pub shear_fiber_pa: Option<Spanned<f64>>,
+            /// Enabled anisotropic terms (default all three).
+            pub terms: Option<Spanned<Vec<TermName>>>,
+        }
+
+        impl $name {
+            /// The material keys of this table.
+            pub fn material_keys(&self) -> MaterialKeys<'_> {
+                MaterialKeys {
+                    young_pa: self.young_pa.as_ref(),
+                    poisson: self.poisson.as_ref(),
+                    density_kg_m3: self.density_kg_m3.as_ref(),
+                    damping_per_s: self.damping_per_s.as_ref(),
+                    delta_lambda_pa: self.delta_lambda_pa.as_ref(),
+                    delta_mu_pa: self.delta_mu_pa.as_ref(),
+                    young_fiber_pa: self.young_fiber_pa.as_ref(),
+                    shear_fiber_pa: self.shear_fiber_pa.as_ref(),
+                    terms: self.terms.as_ref(),
+                }
+            }
+        }
+    };
+}
+
+/// The material keys of one table, by reference with their spans.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MaterialKeys<'a> {
+    /// `young_pa`.
+    pub young_pa: Option<&'a Spanned<f64>>,
+    /// `poisson`.
+    pub poisson: Option<&'a Spanned<f64>>,
+    /// `density_kg_m3`.
+    pub density_kg_m3: Option<&'a Spanned<f64>>,
+    /// `damping_per_s`.
+    pub damping_per_s: Option<&'a Spanned<f64>>,
+    /// `delta_lambda_pa`.
+    pub delta_lambda_pa: Option<&'a Spanned<f64>>,
+    /// `delta_mu_pa`.
+    pub delta_mu_pa: Option<&'a Spanned<f64>>,
+    /// `young_fiber_pa`.
+    pub young_fiber_pa: Option<&'a Spanned<f64>>,
+    /// `shear_fiber_pa`.
+    pub shear_fiber_pa: Option<&'a Spanned<f64>>,
+    /// `terms`.
+    pub terms: Option<&'a Spanned<Vec<TermName>>>,
+}
+
+impl<'a> MaterialKeys<'a> {
+    /// These keys over `base`: each key from `self` if given, else from `base`.
+    pub fn over(self, base: MaterialKeys<'a>) -> MaterialKeys<'a> {
+        MaterialKeys {
+            young_pa: self.young_pa.or(base.young_pa),
+            poisson: self.poisson.or(base.poisson),
+            density_kg_m3: self.density_kg_m3.or(base.density_kg_m3),
+            damping_per_s: self.damping_per_s.or(base.damping_per_s),
+            delta_lambda_pa: self.delta_lambda_pa.or(base.delta_lambda_pa),
+            delta_mu_pa: self.delta_mu_pa.or(base.delta_mu_pa),
+            young_fiber_pa: self.young_fiber_pa.or(base.young_fiber_pa),
+            shear_fiber_pa: self.shear_fiber_pa.or(base.shear_fiber_pa),
+            terms: self.terms.or(base.terms),
+        }
+    }
+
+    /// Whether any anisotropic key is given.
+    pub fn any_anisotropic(&self) -> bool {
+        self.delta_lambda_pa.is_some()
+            || self.delta_mu_pa.is_some()
+            || self.young_fiber_pa.is_some()
+            || self.shear_fiber_pa.is_some()
+    }
+}
+
+with_material_keys!(
+    /// `[material]`: every key required except the anisotropic ones.
+    MaterialSpec {
+        /// Fibre direction for an anisotropic default material.
+        fiber: Option<Spanned<[f64; 3]>>,
+    }
+);
+
+with_material_keys!(
+    /// `[[region]]`: a selection and material overrides.
+    RegionSpec {
+        /// A name for reports.
+        name: Option<String>,
+        /// Which tetrahedra (by centroid, or by physical tag).
+        select: Spanned<Selection>,
+        /// Fibre direction (makes the region transversally isotropic).
+        fiber: Option<Spanned<[f64; 3]>>,
+    }
+);
+
+with_material_keys!(
+    /// `[[vessel]]`: a polyline; tetrahedra crossed by a segment (or with
+    /// their centroid within `radius_m` of it) become transversally
+    /// isotropic along the segment.
+    VesselSpec {
+        /// A name for reports.
+        name: Option<String>,
+        /// The polyline's points (m), at least two.
+        points_m: Spanned<Vec<[f64; 3]>>,
+        /// Radius (m) around the segments.
+        radius_m: Spanned<f64>,
+    }
+);
+
+/// A selection: exactly one of the keys.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Selection {
+    /// Axis-aligned box [[x0, y0, z0], [x1, y1, z1]] (m).
+    pub box_m: Option<[[f64; 3]; 2]>,
+    /// Sphere [cx, cy, cz, r] (m).
+    pub sphere_m: Option<[f64; 4]>,
+    /// A physical tag of the imported mesh.
+    pub physical: Option<i32>,
+}
+
+/// Membrane model names.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MembraneModelName {
+    /// Linearised springs folded into the tensors (no per-step cost).
+    Linear,
+    /// Paper eq 29 every step.
+    Nonlinear,
+}
+
+/// `[membrane]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MembraneSpec {
+    /// k = alpha * h (N/m^2).
+    pub alpha: Spanned<f64>,
+    /// Spring model (default linear).
+    pub model: Option<MembraneModelName>,
+}
+
+/// `[[fixed]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixedSpec {
+    /// A name for reports.
+    pub name: Option<String>,
+    /// Which vertices.
+    pub select: Spanned<Selection>,
+}
+
+/// `[[load]]`: exactly one of the load keys.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    /// A name for reports.
+    pub name: Option<String>,
+    /// Which vertices (tractions: the surface triangles with all three vertices selected).
+    pub select: Spanned<Selection>,
+    /// Prescribed displacement (m), like a fixed set moved.
+    pub displacement_m: Option<Spanned<[f64; 3]>>,
+    /// Total force (N) spread equally over the selected vertices.
+    pub force_n: Option<Spanned<[f64; 3]>>,
+    /// Traction (Pa) on the selected surface.
+    pub traction_pa: Option<Spanned<[f64; 3]>>,
+}
+
+/// Tool kinds.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ToolKind {
+    /// Jaws: grips, and cuts when closed on tissue.
+    Grasper,
+    /// A hook: pushes and pulls.
+    Hook,
+    /// Removes every tetrahedron touching its tip.
+    Cavitron,
+}
+
+/// `[[tool]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolSpec {
+    /// Unique name.
+    pub name: Spanned<String>,
+    /// Kind.
+    pub kind: ToolKind,
+    /// Insertion point (m).
+    pub fulcrum_m: Spanned<[f64; 3]>,
+    /// Shaft length (m).
+    pub length_m: Spanned<f64>,
+    /// Shaft radius (m).
+    pub radius_m: Spanned<f64>,
+    /// Tip segment length (m).
+    pub tip_length_m: Spanned<f64>,
+}
+
+/// Backends by name.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum BackendName {
+    /// Explicit tensor-mass.
+    TensorMass,
+    /// Precomputed (Cotin): not built yet.
+    Precomputed,
+    /// Hybrid: not built yet.
+    Hybrid,
+    /// Implicit: not built yet.
+    Implicit,
+}
+
+/// Kernel precision names.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum PrecisionName {
+    /// f32 tensor storage.
+    F32,
+    /// f64 tensor storage.
+    F64,
+}
+
+/// dt policy names.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum DtPolicyName {
+    /// Refuse a dt above the bound.
+    Refuse,
+    /// Sub-step.
+    Substep,
+}
+
+/// Bound names.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum BoundName {
+    /// Irons' element bound.
+    Element,
+    /// Power iteration.
+    PowerIteration,
+}
+
+/// `[simulation]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationSpec {
+    /// Backend (default tensor-mass).
+    pub backend: Option<Spanned<BackendName>>,
+    /// Step (s); default 90% of the stable step.
+    pub dt_s: Option<Spanned<f64>>,
+    /// Target simulation rate (Hz) for real-time runs.
+    pub rate_hz: Option<Spanned<f64>>,
+    /// Worker threads (default 1).
+    pub threads: Option<Spanned<usize>>,
+    /// Kernel storage precision (default f32).
+    pub precision: Option<PrecisionName>,
+    /// What to do when dt exceeds the bound (default substep).
+    pub dt_policy: Option<DtPolicyName>,
+    /// Which bound to enforce (default element).
+    pub bound: Option<BoundName>,
+}

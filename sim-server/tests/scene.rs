@@ -1,0 +1,390 @@
+//! Scene files: a scene with every section builds what it declares; each
+//! kind of mistake is refused with the line (and column) of the mistake; a
+//! scene builds only what it asks for; the embedded scene is valid.
+
+use sim_server::scene::{BuiltScene, SceneError, SceneSource, build_scene};
+
+fn source(text: &str) -> SceneSource {
+    SceneSource {
+        name: "test.toml".into(),
+        dir: std::path::PathBuf::from("."),
+        text: text.into(),
+    }
+}
+
+fn build(text: &str) -> Result<BuiltScene, SceneError> {
+    let src = source(text);
+    let spec = src.parse()?;
+    build_scene(&src, &spec)
+}
+
+const BASE: &str = r#"
+[mesh]
+generate = { shape = "box", size_m = [0.06, 0.02, 0.02], cell_m = 0.005 }
+
+[material]
+young_pa = 4500.0
+poisson = 0.45
+density_kg_m3 = 1060.0
+"#;
+
+const FULL: &str = r#"
+[mesh]
+generate = { shape = "box", size_m = [0.06, 0.02, 0.02], cell_m = 0.005 }
+reorder = true
+
+[material]
+young_pa = 4500.0
+poisson = 0.45
+density_kg_m3 = 1060.0
+damping_per_s = 5.0
+
+[[region]]
+name = "stiff end"
+select = { box_m = [[0.04, -1.0, -1.0], [1.0, 1.0, 1.0]] }
+young_pa = 9000.0
+
+[[region]]
+name = "fibres"
+select = { sphere_m = [0.02, 0.01, 0.01, 0.008] }
+fiber = [1.0, 0.0, 0.0]
+delta_lambda_pa = 500.0
+delta_mu_pa = 2000.0
+terms = ["stretch", "shear"]
+
+[[vessel]]
+name = "vein"
+points_m = [[0.0, 0.01, 0.01], [0.03, 0.012, 0.01], [0.06, 0.01, 0.012]]
+radius_m = 0.003
+young_fiber_pa = 9000.0
+shear_fiber_pa = 3000.0
+
+[membrane]
+alpha = 3000.0
+model = "nonlinear"
+
+[[fixed]]
+name = "left"
+select = { box_m = [[-1.0, -1.0, -1.0], [0.0001, 1.0, 1.0]] }
+
+[[load]]
+select = { box_m = [[0.0599, -1.0, -1.0], [1.0, 1.0, 1.0]] }
+traction_pa = [0.0, 0.0, -50.0]
+
+[[load]]
+select = { sphere_m = [0.03, 0.0, 0.01, 0.004] }
+force_n = [0.0, 0.01, 0.0]
+
+[[tool]]
+name = "grasper"
+kind = "grasper"
+fulcrum_m = [0.03, 0.0, 0.2]
+length_m = 0.35
+radius_m = 0.005
+tip_length_m = 0.01
+
+[[tool]]
+name = "burner"
+kind = "cavitron"
+fulcrum_m = [0.0, 0.0, 0.2]
+length_m = 0.35
+radius_m = 0.004
+tip_length_m = 0.01
+
+[simulation]
+backend = "tensor-mass"
+dt_s = 0.0005
+rate_hz = 1000.0
+threads = 2
+precision = "f64"
+dt_policy = "refuse"
+bound = "power-iteration"
+"#;
+
+#[test]
+fn a_scene_with_every_section_builds_what_it_declares() {
+    let b = build(FULL).unwrap_or_else(|e| panic!("{e}"));
+    let r = &b.report;
+    assert_eq!(r.regions.len(), 2);
+    assert!(r.regions.iter().all(|(_, n, _)| *n > 0));
+    assert!(
+        r.regions[1].2.contains("terms [stretch, shear]"),
+        "{}",
+        r.regions[1].2
+    );
+    assert_eq!(r.vessels.len(), 1);
+    assert!(r.vessels[0].1 > 0);
+    assert_eq!(
+        r.anisotropic_tets,
+        r.regions[1].1.max(1) + r.vessels[0].1 - overlap(&b)
+    );
+    assert!(b.model.membrane().is_some());
+    assert!(!b.fixed.is_empty());
+    // Loads: the traction's total equals traction x area of the end face.
+    let total: sim_server::math::Vec3 = b.loads_n.iter().sum();
+    assert!((total.z + 50.0 * 0.02 * 0.02).abs() < 1e-9, "{total}");
+    assert!((total.y - 0.01).abs() < 1e-12);
+    assert_eq!(b.tools.len(), 2);
+    assert_eq!(b.settings.threads, 2);
+    assert!(!b.settings.single_precision);
+    assert_eq!(b.settings.dt_s, Some(0.0005));
+}
+
+/// Tetrahedra of the fibre region later taken over by the vessel.
+fn overlap(b: &BuiltScene) -> usize {
+    let fibres = b.report.regions[1].1;
+    let vessel = b.report.vessels[0].1;
+    fibres + vessel - b.report.anisotropic_tets
+}
+
+#[test]
+fn a_scene_builds_only_what_it_asks_for() {
+    let b = build(BASE).unwrap();
+    assert!(b.model.membrane().is_none());
+    assert!(!b.model.materials().any_anisotropic());
+    assert!(b.loads_n.is_empty(), "no load array without loads");
+    assert!(b.fixed.is_empty() && b.prescribed.is_empty() && b.tools.is_empty());
+    assert_eq!(b.report.anisotropic_tets, 0);
+}
+
+/// Asserts that `text` fails at `line` with a message containing `needle`.
+fn fails_at(text: &str, line: usize, needle: &str) {
+    let err = match build(text) {
+        Ok(_) => panic!("accepted a scene that should fail with {needle:?}"),
+        Err(e) => e,
+    };
+    let msg = err.to_string();
+    assert!(msg.contains(needle), "expected {needle:?} in: {msg}");
+    assert_eq!(
+        err.position().map(|p| p.0),
+        Some(line),
+        "wrong line in: {msg}"
+    );
+    assert!(msg.starts_with(&format!("test.toml:{line}:")), "{msg}");
+}
+
+#[test]
+fn each_kind_of_mistake_names_its_line() {
+    // Unknown key in a table.
+    fails_at(
+        &format!("{BASE}\n[membrane]\nalpha = 1.0\nstiffness = 2.0\n"),
+        12,
+        "unknown field `stiffness`",
+    );
+    // Unknown section.
+    fails_at(
+        &format!("{BASE}\n[solver]\nx = 1\n"),
+        10,
+        "unknown field `solver`",
+    );
+    // Wrong type.
+    fails_at(
+        &BASE.replace("young_pa = 4500.0", "young_pa = \"soft\""),
+        6,
+        "invalid type",
+    );
+    // Unknown enum value.
+    fails_at(
+        &BASE.replace("shape = \"box\"", "shape = \"torus\""),
+        3,
+        "unknown variant `torus`",
+    );
+    // TOML syntax.
+    fails_at(&BASE.replace("poisson = 0.45", "poisson = = 0.45"), 7, "");
+    // Impossible material, placed on the value.
+    fails_at(
+        &BASE.replace("poisson = 0.45", "poisson = 0.6"),
+        7,
+        "poisson must lie in (-1, 0.5)",
+    );
+    fails_at(
+        &BASE.replace("density_kg_m3 = 1060.0", "density_kg_m3 = -1.0"),
+        8,
+        "density_kg_m3",
+    );
+    // Missing required key.
+    fails_at(
+        &BASE.replace("young_pa = 4500.0\n", ""),
+        5,
+        "missing `young_pa`",
+    );
+    // Missing [material] section.
+    fails_at(
+        "[mesh]\ngenerate = { shape = \"box\", size_m = [0.1, 0.1, 0.1], cell_m = 0.05 }\n",
+        1,
+        "missing field `material`",
+    );
+    // Generator missing a size.
+    fails_at(
+        &BASE.replace("size_m = [0.06, 0.02, 0.02], ", ""),
+        3,
+        "needs `size_m`",
+    );
+    // Selection with two keys / selecting nothing.
+    fails_at(
+        &format!(
+            "{BASE}\n[[fixed]]\nselect = {{ box_m = [[0, 0, 0], [1, 1, 1]], physical = 2 }}\n"
+        ),
+        11,
+        "exactly one of box_m",
+    );
+    fails_at(
+        &format!("{BASE}\n[[fixed]]\nselect = {{ sphere_m = [5.0, 5.0, 5.0, 0.01] }}\n"),
+        11,
+        "selects no vertex",
+    );
+    fails_at(
+        &format!("{BASE}\n[[region]]\nselect = {{ physical = 7 }}\nyoung_pa = 1.0\n"),
+        11,
+        "selects no tetrahedron",
+    );
+    // Anisotropic constants without a fibre; a fibre without constants; both forms.
+    fails_at(
+        &format!(
+            "{BASE}\n[[region]]\nselect = {{ sphere_m = [0.03, 0.01, 0.01, 0.01] }}\ndelta_mu_pa = 100.0\n"
+        ),
+        12,
+        "need a `fiber`",
+    );
+    fails_at(
+        &format!(
+            "{BASE}\n[[region]]\nselect = {{ sphere_m = [0.03, 0.01, 0.01, 0.01] }}\nfiber = [1.0, 0.0, 0.0]\n"
+        ),
+        10,
+        "needs anisotropic constants",
+    );
+    fails_at(
+        &format!(
+            "{BASE}\n[[region]]\nselect = {{ sphere_m = [0.03, 0.01, 0.01, 0.01] }}\nfiber = [1.0, 0.0, 0.0]\ndelta_mu_pa = 10.0\nyoung_fiber_pa = 5000.0\nshear_fiber_pa = 2000.0\n"
+        ),
+        14,
+        "not both",
+    );
+    // A non-positive-definite anisotropy, placed on delta_lambda.
+    fails_at(
+        &format!(
+            "{BASE}\n[[region]]\nselect = {{ sphere_m = [0.03, 0.01, 0.01, 0.01] }}\nfiber = [0.0, 0.0, 1.0]\ndelta_lambda_pa = 1e9\n"
+        ),
+        13,
+        "must lie in",
+    );
+    // Zero fibre.
+    fails_at(
+        &format!(
+            "{BASE}\n[[region]]\nselect = {{ sphere_m = [0.03, 0.01, 0.01, 0.01] }}\nfiber = [0.0, 0.0, 0.0]\ndelta_mu_pa = 1.0\n"
+        ),
+        12,
+        "non-zero vector",
+    );
+    // Vessel outside the mesh, too few points, bad radius.
+    fails_at(
+        &format!(
+            "{BASE}\n[[vessel]]\npoints_m = [[1.0, 1.0, 1.0], [2.0, 1.0, 1.0]]\nradius_m = 0.001\ndelta_mu_pa = 100.0\n"
+        ),
+        11,
+        "crosses no tetrahedron",
+    );
+    fails_at(
+        &format!(
+            "{BASE}\n[[vessel]]\npoints_m = [[0.0, 0.01, 0.01]]\nradius_m = 0.001\ndelta_mu_pa = 100.0\n"
+        ),
+        11,
+        "at least two distinct",
+    );
+    fails_at(
+        &format!(
+            "{BASE}\n[[vessel]]\npoints_m = [[0.0, 0.01, 0.01], [0.05, 0.01, 0.01]]\nradius_m = -0.001\ndelta_mu_pa = 100.0\n"
+        ),
+        12,
+        "radius_m must be a positive",
+    );
+    // Membrane alpha.
+    fails_at(
+        &format!("{BASE}\n[membrane]\nalpha = -5.0\n"),
+        11,
+        "alpha must be a positive",
+    );
+    // Load with two kinds.
+    fails_at(
+        &format!(
+            "{BASE}\n[[load]]\nselect = {{ box_m = [[0, 0, 0], [1, 1, 1]] }}\nforce_n = [0, 0, 1]\ndisplacement_m = [0, 0, 0.001]\n"
+        ),
+        10,
+        "exactly one of displacement_m",
+    );
+    // Tools: tip longer than the shaft, duplicate names.
+    let tool = "\n[[tool]]\nname = \"g\"\nkind = \"grasper\"\nfulcrum_m = [0, 0, 0.2]\nlength_m = 0.3\nradius_m = 0.005\ntip_length_m = 0.5\n";
+    fails_at(&format!("{BASE}{tool}"), 16, "exceeds length_m");
+    let ok_tool = tool.replace("tip_length_m = 0.5", "tip_length_m = 0.01");
+    fails_at(&format!("{BASE}{ok_tool}{ok_tool}"), 19, "unique");
+    // Simulation: a backend that does not exist yet, zero threads, negative dt.
+    fails_at(
+        &format!("{BASE}\n[simulation]\nbackend = \"implicit\"\n"),
+        11,
+        "not available yet",
+    );
+    fails_at(
+        &format!("{BASE}\n[simulation]\nthreads = 0\n"),
+        11,
+        "at least 1",
+    );
+    fails_at(
+        &format!("{BASE}\n[simulation]\ndt_s = -1e-3\n"),
+        11,
+        "dt_s must be a positive",
+    );
+    // A mesh file that does not exist.
+    fails_at(
+        "[mesh]\nfile = \"no/such/mesh.msh\"\n[material]\nyoung_pa = 1.0\npoisson = 0.3\ndensity_kg_m3 = 1.0\n",
+        2,
+        "no/such/mesh.msh",
+    );
+}
+
+#[test]
+fn the_embedded_scene_is_valid_and_complete() {
+    let src = SceneSource::embedded();
+    let b = build_scene(&src, &src.parse().unwrap()).unwrap_or_else(|e| panic!("{e}"));
+    let tets = b.model.mesh().tet_count();
+    assert!((6500..=9500).contains(&tets), "{tets} tetrahedra");
+    assert!(b.report.vessels.len() >= 3, "a vessel tree");
+    assert!(b.report.anisotropic_tets > 50);
+    assert!(b.model.membrane().is_some());
+    assert!(!b.fixed.is_empty());
+    assert_eq!(b.tools.len(), 2);
+    let young = b
+        .model
+        .materials()
+        .material(sim_server::ids::TetId(0))
+        .lame()
+        .young_pa();
+    assert!((3000.0..=6000.0).contains(&young));
+}
+
+#[test]
+fn benchmark_variants_stay_in_sync_with_the_embedded_scene() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
+    let embedded = std::fs::read_to_string(format!("{dir}/liver.toml")).unwrap();
+    assert_eq!(embedded, sim_server::scene::DEFAULT_SCENE);
+    let body = |s: &str| {
+        s.lines()
+            .skip_while(|l| l.starts_with('#'))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let nonlinear =
+        std::fs::read_to_string(format!("{dir}/bench/liver-nonlinear-membrane.toml")).unwrap();
+    assert_eq!(
+        body(&nonlinear),
+        body(&embedded).replace("model = \"linear\"", "model = \"nonlinear\"")
+    );
+    for variant in ["liver-nonlinear-membrane", "liver-isotropic"] {
+        let path = std::path::PathBuf::from(format!("{dir}/bench/{variant}.toml"));
+        let src = SceneSource::read(&path).unwrap();
+        let b = build_scene(&src, &src.parse().unwrap()).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(b.fixed.len(), {
+            let e = SceneSource::embedded();
+            build_scene(&e, &e.parse().unwrap()).unwrap().fixed.len()
+        });
+    }
+}
