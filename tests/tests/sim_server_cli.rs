@@ -71,3 +71,93 @@ fn bench_refuses_bad_arguments_clearly() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("sphere"));
 }
+
+#[test]
+fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
+    let out = Command::new(binary("sim-server"))
+        .arg("check")
+        .output()
+        .expect("run sim-server");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    for needle in [
+        "tetrahedra",
+        "dihedral",
+        "stable step",
+        "membrane: linear",
+        "anisotropy",
+        "vessel",
+    ] {
+        assert!(text.contains(needle), "missing {needle:?} in:\n{text}");
+    }
+    let dir = scratch_dir("check");
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[mesh]\ngenerate = { shape = \"box\", size_m = [0.1, 0.1, 0.1], cell_m = 0.05 }\n[material]\nyoung_pa = 1000.0\npoisson = 0.7\ndensity_kg_m3 = 1000.0\n",
+    )
+    .unwrap();
+    let out = Command::new(binary("sim-server"))
+        .arg("check")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.toml:5:11") && err.contains("poisson"),
+        "{err}"
+    );
+}
+
+#[test]
+fn solve_writes_displacement_and_force_and_balances_the_load() {
+    let dir = scratch_dir("solve");
+    let scene = dir.join("sag.toml");
+    std::fs::write(
+        &scene,
+        r#"[mesh]
+generate = { shape = "box", size_m = [0.1, 0.02, 0.02], cell_m = 0.005 }
+[material]
+young_pa = 4500.0
+poisson = 0.45
+density_kg_m3 = 1060.0
+[[fixed]]
+select = { box_m = [[-1, -1, -1], [0.0001, 1, 1]] }
+[[load]]
+select = { box_m = [[0.0999, -1, -1], [1, 1, 1]] }
+force_n = [0.0, 0.0, -0.01]
+"#,
+    )
+    .unwrap();
+    let (vtu, json) = (dir.join("sag.vtu"), dir.join("sag.json"));
+    let out = Command::new(binary("sim-server"))
+        .args(["solve", "--scene"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&vtu)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let xml = std::fs::read_to_string(&vtu).unwrap();
+    assert!(xml.contains("Name=\"displacement\"") && xml.contains("Name=\"force\""));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let load = v["total_load_n"][2].as_f64().unwrap();
+    let reaction = v["total_reaction_n"][2].as_f64().unwrap();
+    assert!(
+        (load + 0.01).abs() < 1e-12 && (reaction - 0.01).abs() < 1e-9,
+        "{v}"
+    );
+    assert!(v["max_displacement_m"].as_f64().unwrap() > 0.0);
+}
