@@ -1,8 +1,8 @@
 //! What crosses a process boundary between the sim-server, the haptic daemon
 //! and the viewer: session naming and the clock every payload is stamped with.
 //!
-//! The payload types and the iceoryx2 services arrive with the protocol; this
-//! crate already fixes the two conventions they rely on.
+//! [`protocol`] holds the payloads (`#[repr(C)]`, fixed size, versioned),
+//! documented field by field in `docs/protocol.md`.
 //!
 //! ```
 //! use shared::{monotonic_ns, SessionName};
@@ -14,6 +14,8 @@
 #![warn(missing_docs)]
 
 mod clock;
+pub mod protocol;
+pub mod services;
 mod session;
 
 pub use clock::{NS_PER_S, monotonic_ns};

@@ -1,0 +1,209 @@
+//! A simulated device: a hand modelled as a mass held by a spring and damper
+//! to a scripted path (a CSV trajectory or a built-in slow poke), so that the
+//! rendered forces push back on it like on a real hand. No hardware needed.
+
+use super::{Device, DeviceError, DeviceSpecs, DeviceState, Trajectory};
+use crate::math::V3;
+
+/// Hand parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HandModel {
+    /// Effective mass of hand and handle (kg).
+    pub mass_kg: f64,
+    /// Grip stiffness towards the intended path (N/m).
+    pub stiffness_n_per_m: f64,
+    /// Grip damping (N s/m).
+    pub damping_n_s_per_m: f64,
+}
+
+impl Default for HandModel {
+    /// A relaxed grip: 0.3 kg, 300 N/m, critically damped (about 19 N s/m).
+    fn default() -> Self {
+        let (m, k) = (0.3, 300.0);
+        Self {
+            mass_kg: m,
+            stiffness_n_per_m: k,
+            damping_n_s_per_m: 2.0 * (k * m).sqrt(),
+        }
+    }
+}
+
+/// The intended path of the hand.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Path {
+    /// A CSV trajectory.
+    Trajectory(Trajectory),
+    /// Moves along `direction` from `start_m` by `depth_m * (1 - cos(2 pi t / period_s)) / 2`.
+    Poke {
+        /// Rest point (m).
+        start_m: V3,
+        /// Unit direction.
+        direction: V3,
+        /// Peak excursion (m).
+        depth_m: f64,
+        /// Period (s).
+        period_s: f64,
+    },
+}
+
+impl Path {
+    fn at(&self, t_s: f64) -> (V3, f64) {
+        match self {
+            Path::Trajectory(t) => t.sample(t_s),
+            Path::Poke {
+                start_m,
+                direction,
+                depth_m,
+                period_s,
+            } => {
+                let s = depth_m * 0.5 * (1.0 - (std::f64::consts::TAU * t_s / period_s).cos());
+                (std::array::from_fn(|d| start_m[d] + s * direction[d]), 1.0)
+            }
+        }
+    }
+}
+
+/// The simulated device.
+pub struct Simulated {
+    hand: HandModel,
+    path: Path,
+    start_ns: Option<u64>,
+    last_ns: u64,
+    position_m: V3,
+    velocity_m_s: V3,
+    force_n: V3,
+    gripper: f64,
+    max_force_n: f64,
+}
+
+impl Simulated {
+    /// A simulated device following `path` with `hand`, reporting `max_force_n`.
+    pub fn new(path: Path, hand: HandModel, max_force_n: f64) -> Self {
+        let (p0, jaw) = path.at(0.0);
+        Self {
+            hand,
+            path,
+            start_ns: None,
+            last_ns: 0,
+            position_m: p0,
+            velocity_m_s: [0.0; 3],
+            force_n: [0.0; 3],
+            gripper: jaw,
+            max_force_n,
+        }
+    }
+
+    /// Advances the hand to `now_ns`: m a = k (target - x) - c v + F_rendered,
+    /// semi-implicit Euler in steps of at most 0.5 ms (stable far beyond it).
+    fn advance(&mut self, now_ns: u64) {
+        let start = *self.start_ns.get_or_insert(now_ns);
+        if self.last_ns == 0 {
+            self.last_ns = now_ns;
+        }
+        let mut remaining = now_ns.saturating_sub(self.last_ns) as f64 * 1e-9;
+        // A stalled caller (a debugger, SIGSTOP) must not make the hand jump.
+        remaining = remaining.min(0.05);
+        let h = &self.hand;
+        while remaining > 0.0 {
+            let dt = remaining.min(5e-4);
+            remaining -= dt;
+            let t_s = (self.last_ns.saturating_sub(start)) as f64 * 1e-9;
+            let (target, jaw) = self.path.at(t_s);
+            self.gripper = jaw;
+            #[allow(clippy::needless_range_loop)] // three parallel arrays indexed together
+            for d in 0..3 {
+                let a = (h.stiffness_n_per_m * (target[d] - self.position_m[d])
+                    - h.damping_n_s_per_m * self.velocity_m_s[d]
+                    + self.force_n[d])
+                    / h.mass_kg;
+                self.velocity_m_s[d] += a * dt;
+                self.position_m[d] += self.velocity_m_s[d] * dt;
+            }
+            self.last_ns += (dt * 1e9) as u64;
+        }
+        self.last_ns = now_ns;
+    }
+}
+
+impl Device for Simulated {
+    fn specs(&self) -> DeviceSpecs {
+        DeviceSpecs {
+            name: "simulated",
+            max_force_n: self.max_force_n,
+            max_stiffness_n_per_m: 3000.0,
+            workspace_min_m: [-0.3; 3],
+            workspace_max_m: [0.3; 3],
+        }
+    }
+
+    fn enable(&mut self, now_ns: u64) -> Result<(), DeviceError> {
+        self.start_ns = Some(now_ns);
+        self.last_ns = now_ns;
+        Ok(())
+    }
+
+    fn disable(&mut self) {
+        self.force_n = [0.0; 3];
+    }
+
+    fn read(&mut self, now_ns: u64) -> Result<DeviceState, DeviceError> {
+        self.advance(now_ns);
+        Ok(DeviceState {
+            position_m: self.position_m,
+            velocity_m_s: self.velocity_m_s,
+            gripper: self.gripper,
+            buttons: 0,
+        })
+    }
+
+    fn write_force(&mut self, force_n: V3, _now_ns: u64) -> Result<(), DeviceError> {
+        if force_n.iter().any(|f| !f.is_finite()) {
+            return Err(DeviceError::NonFinite("force command"));
+        }
+        self.force_n = force_n;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn poke() -> Path {
+        Path::Poke {
+            start_m: [0.0, 0.0, 0.1],
+            direction: [0.0, 0.0, -1.0],
+            depth_m: 0.02,
+            period_s: 2.0,
+        }
+    }
+
+    #[test]
+    fn the_hand_follows_its_path_and_yields_to_force() {
+        let mut dev = Simulated::new(poke(), HandModel::default(), 5.0);
+        dev.enable(1_000_000_000).unwrap();
+        let mut t = 1_000_000_000u64;
+        for _ in 0..1000 {
+            t += 1_000_000;
+            dev.read(t).unwrap();
+        }
+        // After 1 s (half a period) the path is at its deepest: z = 0.08.
+        let z_free = dev.read(t).unwrap().position_m[2];
+        assert!((z_free - 0.08).abs() < 2e-3, "{z_free}");
+        // A constant 1 N upward force holds the hand 1/300 m higher at rest.
+        let mut held = Simulated::new(poke(), HandModel::default(), 5.0);
+        held.enable(1_000_000_000).unwrap();
+        held.write_force([0.0, 0.0, 1.0], 0).unwrap();
+        let mut t = 1_000_000_000u64;
+        for _ in 0..1000 {
+            t += 1_000_000;
+            held.read(t).unwrap();
+        }
+        let z_held = held.read(t).unwrap().position_m[2];
+        assert!(
+            (z_held - z_free - 1.0 / 300.0).abs() < 5e-4,
+            "{z_held} vs {z_free}"
+        );
+        assert!(held.write_force([f64::NAN, 0.0, 0.0], t).is_err());
+    }
+}

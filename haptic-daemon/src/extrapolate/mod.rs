@@ -1,0 +1,198 @@
+//! Force extrapolators (paper section 7, "Force extrapolation", and the
+//! local model of "Beyond the paper").
+//!
+//! The simulation sends force samples at ~30 Hz-1 kHz; the haptic loop needs
+//! a force at 1-10 kHz. An [`Extrapolator`] keeps the last two accepted
+//! samples (fixed size, no allocation) and evaluates the chosen [`Method`]
+//! at the haptic loop's time and tool position. Time is passed in, never
+//! read here, so tests drive it.
+//!
+//! # Degenerate cases (every method)
+//!
+//! - No sample yet: zero force.
+//! - [`Extrapolator::push`] ignores a sample with a non-finite field or a
+//!   `seq` not newer than the latest accepted one; the previous samples are
+//!   kept. So stored samples are always finite.
+//! - One sample only: the two-sample methods (linear in time, linear in
+//!   position, signed) give the constant force `F_n`; the local model needs
+//!   only the latest sample and applies.
+//! - Linear in time: equal or decreasing sample times give `F_n`; the time
+//!   factor is clamped to `[0, 1]` ([`MAX_TIME_FACTOR`]): a query before
+//!   `t_n` gives `F_n`, a query more than one period after `t_n` holds
+//!   the value one period ahead (staleness is the safety filter's watchdog's
+//!   business).
+//! - Linear in position (both forms): `|P_n - P_n-1| < MIN_STEP_M` (1 nm)
+//!   gives `F_n`; the factor is clamped to `[-2, 2]` (signed) or `[0, 2]`
+//!   (paper) ([`MAX_POSITION_FACTOR`]).
+//! - Local model: a sample not in contact counts as zero stiffness, i.e.
+//!   `F_n`. The displacement is not capped (the model is linear; the safety
+//!   filter clamps the magnitude).
+//! - Any method whose result is not finite (a NaN or infinite query
+//!   position, or an overflow from huge but finite samples) gives `F_n`,
+//!   which is finite because only finite samples are stored. Hence
+//!   [`Extrapolator::force`] is always finite.
+//!
+//! Bound: with `|factor| <= 2`, the two-sample methods give
+//! `|F| <= 3 |F_n| + 2 |F_n-1|`, and the local model
+//! `|F| <= |F_n| + |K|_Frobenius |P_n - P|`.
+
+mod formulas;
+
+pub use formulas::{
+    MAX_POSITION_FACTOR, MAX_TIME_FACTOR, MIN_STEP_M, linear, local_model, paper_position_factor,
+    signed_position_factor, time_factor,
+};
+
+use crate::math::{M3, V3, ZERO, is_finite, is_finite_m3};
+
+/// One force sample from the simulation (tool 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceSample {
+    /// Simulation time of the step (ns, same clock as the haptic loop).
+    pub t_ns: u64,
+    /// The simulation's sample counter (strictly increasing).
+    pub seq: u64,
+    /// Tool position the step used (m).
+    pub position_m: V3,
+    /// Force on the tool (N).
+    pub force_n: V3,
+    /// Contact stiffness, row-major: dF = -K dP (N/m).
+    pub stiffness_n_per_m: M3,
+    /// The tool touched the tissue in this step.
+    pub in_contact: bool,
+}
+
+impl ForceSample {
+    /// Every floating-point field is finite.
+    pub fn is_finite(&self) -> bool {
+        is_finite(self.position_m)
+            && is_finite(self.force_n)
+            && is_finite_m3(&self.stiffness_n_per_m)
+    }
+}
+
+/// An extrapolation method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// `F = F_n` (zero-order hold).
+    Constant,
+    /// Linear in time (eq 31).
+    LinearTime,
+    /// Linear in position as the paper writes it (eq 32, ratio of norms).
+    LinearPosition,
+    /// Linear in position with the signed factor.
+    LinearPositionSigned,
+    /// `F = F_n + K (P_n - P)` with the sample's contact stiffness.
+    LocalModel,
+}
+
+impl Method {
+    /// Every method, in telemetry code order.
+    pub const ALL: [Method; 5] = [
+        Method::Constant,
+        Method::LinearTime,
+        Method::LinearPosition,
+        Method::LinearPositionSigned,
+        Method::LocalModel,
+    ];
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Constant => "constant",
+            Method::LinearTime => "linear-time",
+            Method::LinearPosition => "linear-position",
+            Method::LinearPositionSigned => "linear-position-signed",
+            Method::LocalModel => "local-model",
+        }
+    }
+
+    /// The method with this exact command-line name.
+    pub fn parse(s: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == s)
+    }
+}
+
+/// Extrapolates the last two accepted samples with one method.
+#[derive(Clone, Copy, Debug)]
+pub struct Extrapolator {
+    method: Method,
+    prev: Option<ForceSample>,
+    last: Option<ForceSample>,
+}
+
+impl Extrapolator {
+    /// No sample yet.
+    pub fn new(method: Method) -> Self {
+        Self {
+            method,
+            prev: None,
+            last: None,
+        }
+    }
+
+    /// The method.
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    /// Accepts `s` as the latest sample, unless a field is non-finite or
+    /// `s.seq` is not greater than the latest accepted `seq` (a duplicate or
+    /// a reordered message): then `s` is ignored and the stored samples are
+    /// kept. A simulation that restarts its counter must be announced with
+    /// [`Extrapolator::reset`].
+    pub fn push(&mut self, s: &ForceSample) {
+        if !s.is_finite() {
+            return;
+        }
+        if self.last.is_some_and(|l| s.seq <= l.seq) {
+            return;
+        }
+        self.prev = self.last;
+        self.last = Some(*s);
+    }
+
+    /// Forgets every sample (a new simulation, whose `seq` starts again).
+    pub fn reset(&mut self) {
+        self.prev = None;
+        self.last = None;
+    }
+
+    /// The latest accepted sample.
+    pub fn latest(&self) -> Option<&ForceSample> {
+        self.last.as_ref()
+    }
+
+    /// The force at `now_ns` for the tool at `position_m` (N). Always
+    /// finite; see the module documentation for the degenerate cases.
+    pub fn force(&self, now_ns: u64, position_m: V3) -> V3 {
+        let Some(last) = self.last.as_ref() else {
+            return ZERO;
+        };
+        let f_n = last.force_n;
+        let f = match (self.method, self.prev.as_ref()) {
+            (Method::Constant, _) => f_n,
+            (Method::LocalModel, _) if last.in_contact => {
+                local_model(f_n, &last.stiffness_n_per_m, last.position_m, position_m)
+            }
+            (Method::LocalModel, _) => f_n,
+            (_, None) => f_n,
+            (Method::LinearTime, Some(prev)) => time_factor(prev.t_ns, last.t_ns, now_ns)
+                .map_or(f_n, |k| linear(prev.force_n, f_n, k)),
+            (Method::LinearPosition, Some(prev)) => {
+                paper_position_factor(prev.position_m, last.position_m, position_m)
+                    .map_or(f_n, |k| linear(prev.force_n, f_n, k))
+            }
+            (Method::LinearPositionSigned, Some(prev)) => {
+                signed_position_factor(prev.position_m, last.position_m, position_m)
+                    .map_or(f_n, |k| linear(prev.force_n, f_n, k))
+            }
+        };
+        // Overflow of huge samples or a non-finite query position: hold the
+        // (finite) latest force rather than let NaN or inf out.
+        if is_finite(f) { f } else { f_n }
+    }
+}
+
+#[cfg(test)]
+mod tests;

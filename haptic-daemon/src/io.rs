@@ -1,0 +1,203 @@
+//! The I/O thread (not real time): publishes the pose the RT thread left in
+//! its slot, drains the telemetry queue into statistics, the record CSV and
+//! telemetry batches, and watches whether a simulation is publishing.
+
+use crate::daemon::Shared;
+use crate::rt::LatenessHistogram;
+use iceoryx2::prelude::*;
+use shared::SessionName;
+use shared::protocol::{
+    PROTOCOL_VERSION, PoseMsg, TELEMETRY_BATCH, TOOL_PRESENT, TelemetryBatch, TelemetryTick,
+};
+use shared::services::{self, Ipc, ServiceError};
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use thiserror::Error;
+
+/// Statistics the I/O thread keeps for the status line and the summary.
+#[derive(Default)]
+pub struct Stats {
+    /// Ticks seen.
+    pub ticks: u64,
+    /// Lateness histogram.
+    pub lateness: LatenessHistogram,
+    /// Largest |force| sent (N).
+    pub max_force_n: f64,
+    /// Last force sent (N).
+    pub last_force_n: [f64; 3],
+    /// Last sample age (ns; u64::MAX = none).
+    pub last_age_ns: u64,
+    /// Last safety state code.
+    pub last_state: u32,
+    /// Rows written to the record.
+    pub recorded: u64,
+    /// Gaps in the tick sequence seen by the I/O thread (queue overflow).
+    pub gaps: u64,
+    /// First and last tick times (ns).
+    pub first_t_ns: u64,
+    /// Last tick time (ns).
+    pub last_t_ns: u64,
+}
+
+/// I/O thread failures.
+#[derive(Debug, Error)]
+pub enum IoError {
+    /// A service could not be opened.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// The record file failed.
+    #[error("record {file}: {source}")]
+    Record {
+        /// The file.
+        file: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+}
+
+/// The record CSV's header (columns listed in the architecture page, then extras).
+pub const RECORD_HEADER: &str = "t_ns,seq,pos_x_m,pos_y_m,pos_z_m,force_x_n,force_y_n,force_z_n,sample_age_ns,lateness_ns,method,safety_state";
+
+fn write_row(w: &mut impl Write, t: &TelemetryTick) -> std::io::Result<()> {
+    let age = if t.sample_age_ns == u64::MAX {
+        String::new()
+    } else {
+        t.sample_age_ns.to_string()
+    };
+    writeln!(
+        w,
+        "{},{},{},{},{},{},{},{},{},{},{},{}",
+        t.t_ns,
+        t.seq,
+        t.position_m[0],
+        t.position_m[1],
+        t.position_m[2],
+        t.force_n[0],
+        t.force_n[1],
+        t.force_n[2],
+        age,
+        t.lateness_ns,
+        t.method,
+        t.safety_state
+    )
+}
+
+/// Runs until the RT thread is done and the queue is drained.
+pub fn run_io(
+    shared: Arc<Shared>,
+    session: SessionName,
+    record: Option<PathBuf>,
+    stats: Arc<Mutex<Stats>>,
+) -> Result<(), IoError> {
+    let node = services::node("haptic-daemon-io")?;
+    let pose_pub = services::publisher(&services::pose_service(&node, &session)?)?;
+    let tele_pub = services::publisher(&services::telemetry_service(&node, &session)?)?;
+    let force_service = services::force_service(&node, &session)?;
+    let mut writer = match &record {
+        Some(path) => {
+            let err = |source| IoError::Record {
+                file: path.display().to_string(),
+                source,
+            };
+            let file = std::fs::File::create(path).map_err(err)?;
+            let mut w = std::io::BufWriter::new(file);
+            writeln!(w, "{RECORD_HEADER}").map_err(err)?;
+            Some(w)
+        }
+        None => None,
+    };
+    let record_err = |source| IoError::Record {
+        file: record
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default(),
+        source,
+    };
+    let mut batch = TelemetryBatch::default();
+    let mut batches = 0u64;
+    let mut last_pose_seq = 0u64;
+    let mut pose_msgs = 0u64;
+    let mut next_seq = 0u64;
+    let mut loops = 0u64;
+    loop {
+        let done = shared.flags.rt_done.load(Ordering::Acquire);
+        if let Some(p) = shared.pose.read()
+            && p.seq != last_pose_seq
+        {
+            last_pose_seq = p.seq;
+            let mut msg = PoseMsg {
+                version: PROTOCOL_VERSION,
+                tool_count: 1,
+                seq: pose_msgs,
+                t_ns: p.t_ns,
+                ..PoseMsg::default()
+            };
+            msg.tools[0].tip_m = p.position_m;
+            msg.tools[0].jaw_opening = p.jaw;
+            msg.tools[0].buttons = p.buttons;
+            msg.tools[0].flags = TOOL_PRESENT;
+            let _ = pose_pub.send_copy(msg);
+            pose_msgs += 1;
+        }
+        {
+            let mut s = stats.lock().expect("stats lock");
+            while let Some(t) = shared.telemetry.pop() {
+                if t.seq != next_seq {
+                    s.gaps += 1;
+                }
+                next_seq = t.seq + 1;
+                if s.ticks == 0 {
+                    s.first_t_ns = t.t_ns;
+                }
+                s.ticks += 1;
+                s.last_t_ns = t.t_ns;
+                s.lateness.record(t.lateness_ns);
+                let f = (t.force_n[0].powi(2) + t.force_n[1].powi(2) + t.force_n[2].powi(2)).sqrt();
+                s.max_force_n = s.max_force_n.max(f);
+                s.last_force_n = t.force_n;
+                s.last_age_ns = t.sample_age_ns;
+                s.last_state = t.safety_state;
+                if let Some(w) = writer.as_mut() {
+                    write_row(w, &t).map_err(record_err)?;
+                    s.recorded += 1;
+                }
+                batch.ticks[batch.count as usize] = t;
+                batch.count += 1;
+                if batch.count as usize == TELEMETRY_BATCH {
+                    batch.seq = batches;
+                    batches += 1;
+                    let _ = tele_pub.send_copy(batch);
+                    batch.count = 0;
+                }
+            }
+        }
+        if loops.is_multiple_of(20) {
+            // Reap dead nodes so a crashed simulation's publisher disappears,
+            // then see whether anyone publishes forces.
+            let _ = Node::<Ipc>::list(node.config(), |state| {
+                if let NodeState::Dead(view) = state {
+                    let _ = view.try_remove_stale_resources();
+                }
+                CallbackProgression::Continue
+            });
+            let alive = force_service.dynamic_config().number_of_publishers() > 0;
+            shared.flags.peer_alive.store(alive, Ordering::Relaxed);
+        }
+        loops += 1;
+        if done && shared.telemetry.is_empty() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    if batch.count > 0 {
+        batch.seq = batches;
+        let _ = tele_pub.send_copy(batch);
+    }
+    if let Some(mut w) = writer {
+        w.flush().map_err(record_err)?;
+    }
+    Ok(())
+}

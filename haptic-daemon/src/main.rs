@@ -1,0 +1,370 @@
+//! `haptic-daemon run`: the hard-real-time haptic loop.
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use haptic_daemon::daemon::{RtLoop, Shared};
+use haptic_daemon::device::{Device, HandModel, Path, Replay, Simulated, Trajectory};
+use haptic_daemon::extrapolate::Method;
+use haptic_daemon::io::{Stats, run_io};
+use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
+use haptic_daemon::safety::{SafetyConfig, SafetyState};
+use serde::Serialize;
+use shared::{SessionName, monotonic_ns, services};
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+#[derive(Parser)]
+#[command(
+    name = "haptic-daemon",
+    version,
+    about = "Hard-real-time haptic loop: device, extrapolation, safety"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the haptic loop.
+    Run(RunArgs),
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// simulated (a hand poking along z), simulated:FILE.csv (a hand following a
+    /// trajectory), replay:FILE.csv (open-loop positions). haply and plugin
+    /// devices come with a later release.
+    #[arg(long, default_value = "simulated")]
+    device: String,
+    /// Loop rate (Hz), 100 to 10000.
+    #[arg(long, default_value_t = 1000.0)]
+    rate: f64,
+    /// constant, linear-time, linear-position, linear-position-signed, local-model.
+    #[arg(long, default_value = "linear-position-signed")]
+    extrapolation: String,
+    /// Force limit (N); at most the device's own.
+    #[arg(long)]
+    max_force: Option<f64>,
+    /// Session name shared with the simulation.
+    #[arg(long, default_value = "default")]
+    session: String,
+    /// Stop after this many seconds (default: until SIGINT/SIGTERM).
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Write the summary as JSON here at exit.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Record every tick to this CSV.
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// SCHED_FIFO priority to ask for (0 = do not ask).
+    #[arg(long, default_value_t = 80)]
+    rt_priority: i32,
+    /// Pin the loop to this CPU.
+    #[arg(long)]
+    cpu: Option<usize>,
+    /// No live status line.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Serialize)]
+struct Lateness {
+    p50: f64,
+    p99: f64,
+    p999: f64,
+    max: f64,
+}
+
+#[derive(Serialize)]
+struct Summary {
+    ticks: u64,
+    rate_hz: f64,
+    target_rate_hz: f64,
+    lateness_us: Lateness,
+    max_force_n: f64,
+    device_max_force_n: f64,
+    force_limit_n: f64,
+    extrapolation: &'static str,
+    device: String,
+    samples_received: u64,
+    telemetry_dropped: u64,
+    overruns: u64,
+    recorded_rows: u64,
+    warnings: Vec<String>,
+}
+
+fn make_device(spec: &str, max_force_n: f64) -> Result<DeviceChoice> {
+    let (kind, arg) = spec
+        .split_once(':')
+        .map_or((spec, None), |(k, a)| (k, Some(a)));
+    match (kind, arg) {
+        ("simulated", None) => {
+            let path = Path::Poke {
+                start_m: [0.0, 0.0, 0.05],
+                direction: [0.0, 0.0, -1.0],
+                depth_m: 0.03,
+                period_s: 4.0,
+            };
+            Ok(DeviceChoice::Simulated(Simulated::new(
+                path,
+                HandModel::default(),
+                max_force_n,
+            )))
+        }
+        ("simulated", Some(file)) => {
+            let t = Trajectory::read(std::path::Path::new(file))?;
+            Ok(DeviceChoice::Simulated(Simulated::new(
+                Path::Trajectory(t),
+                HandModel::default(),
+                max_force_n,
+            )))
+        }
+        ("replay", Some(file)) => {
+            let t = Trajectory::read(std::path::Path::new(file))?;
+            Ok(DeviceChoice::Replay(Replay::new(t, max_force_n)))
+        }
+        ("haply" | "plugin", _) => bail!(
+            "device {kind:?} is not available in this release; use simulated or replay:FILE.csv"
+        ),
+        _ => bail!("unknown device {spec:?}: use simulated, simulated:FILE.csv or replay:FILE.csv"),
+    }
+}
+
+/// The devices this binary knows, as a closed set (the loop is generic).
+enum DeviceChoice {
+    Simulated(Simulated),
+    Replay(Replay),
+}
+
+/// The device's own limit for the simulated and replayed devices (N).
+const SIMULATED_DEVICE_MAX_FORCE_N: f64 = 8.0;
+
+fn main() -> Result<()> {
+    let Cli {
+        command: Command::Run(args),
+    } = Cli::parse();
+    if !(100.0..=10_000.0).contains(&args.rate) {
+        bail!("--rate must lie in 100..=10000 Hz, got {}", args.rate);
+    }
+    let method = Method::parse(&args.extrapolation).with_context(|| {
+        format!(
+            "unknown --extrapolation {:?}: use one of {}",
+            args.extrapolation,
+            Method::ALL.map(|m| m.name()).join(", ")
+        )
+    })?;
+    let device_max = SIMULATED_DEVICE_MAX_FORCE_N;
+    let limit = match args.max_force {
+        Some(f) if !(f.is_finite() && f > 0.0) => {
+            bail!("--max-force must be a positive number of newtons")
+        }
+        Some(f) if f > device_max => {
+            bail!("--max-force {f} N exceeds the device's limit of {device_max} N")
+        }
+        Some(f) => f,
+        None => device_max,
+    };
+    let session = SessionName::new(&args.session)?;
+    let device = make_device(&args.device, device_max)?;
+    let safety = SafetyConfig::new(limit)?;
+    let shared = Arc::new(Shared::new(1 << 16));
+    let stop_signal = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop_signal.clone())?;
+    }
+    let stats = Arc::new(Mutex::new(Stats::default()));
+    let io = {
+        let (shared, session, record, stats) = (
+            shared.clone(),
+            session.clone(),
+            args.record.clone(),
+            stats.clone(),
+        );
+        std::thread::Builder::new()
+            .name("haptic-io".into())
+            .spawn(move || run_io(shared, session, record, stats))?
+    };
+    let period_ns = (1e9 / args.rate).round() as u64;
+    let (report_tx, report_rx) = std::sync::mpsc::channel::<RtReport>();
+    let rt = {
+        let shared = shared.clone();
+        let session = session.clone();
+        let (priority, cpu) = (args.rt_priority, args.cpu);
+        std::thread::Builder::new().name("haptic-rt".into()).spawn(
+            move || -> Result<(u64, u64)> {
+                let mut report = RtReport {
+                    mlockall: Some(lock_memory()),
+                    ..RtReport::default()
+                };
+                if priority > 0 {
+                    report.sched_fifo = Some(set_fifo(priority));
+                }
+                if let Some(c) = cpu {
+                    report.affinity = Some(pin_to_cpu(c));
+                }
+                let _ = report_tx.send(report);
+                let node = services::node("haptic-daemon-rt")?;
+                let sub = services::subscriber(&services::force_service(&node, &session)?)?;
+                let result = match device {
+                    DeviceChoice::Simulated(d) => {
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns)
+                    }
+                    DeviceChoice::Replay(d) => {
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns)
+                    }
+                };
+                shared.flags.rt_done.store(true, Ordering::Release);
+                result
+            },
+        )?
+    };
+    let warnings: Vec<String> = report_rx.recv().map(|r| r.warnings()).unwrap_or_default();
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let start = Instant::now();
+    let mut last_status = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(50));
+        let expired = args
+            .duration_s
+            .is_some_and(|d| start.elapsed().as_secs_f64() >= d);
+        if expired || stop_signal.load(Ordering::Relaxed) || rt.is_finished() {
+            shared.flags.stop.store(true, Ordering::Release);
+            break;
+        }
+        if !args.quiet && last_status.elapsed() >= Duration::from_secs(1) {
+            last_status = Instant::now();
+            let s = stats.lock().expect("stats");
+            let span = (s.last_t_ns.saturating_sub(s.first_t_ns)) as f64 * 1e-9;
+            let rate = if span > 0.0 {
+                (s.ticks.saturating_sub(1)) as f64 / span
+            } else {
+                0.0
+            };
+            let age = if s.last_age_ns == u64::MAX {
+                "none".to_string()
+            } else {
+                format!("{:.1} ms", s.last_age_ns as f64 / 1e6)
+            };
+            let f = s.last_force_n;
+            eprintln!(
+                "{rate:7.0} Hz | lateness p50 {:.0} us p99 {:.0} us max {:.0} us | sample age {age} | force {:+.3} {:+.3} {:+.3} N | {}",
+                s.lateness.quantile_us(0.5),
+                s.lateness.quantile_us(0.99),
+                s.lateness.max_us(),
+                f[0],
+                f[1],
+                f[2],
+                if shared.flags.peer_alive.load(Ordering::Relaxed) {
+                    "sim connected"
+                } else {
+                    "no sim"
+                }
+            );
+        }
+    }
+    let rt_result = rt
+        .join()
+        .map_err(|_| anyhow::anyhow!("the real-time thread panicked (the device was disabled)"))?;
+    let io_result = io
+        .join()
+        .map_err(|_| anyhow::anyhow!("the I/O thread panicked"))?;
+    let (ticks, overruns) = rt_result?;
+    io_result?;
+    let s = stats.lock().expect("stats");
+    let span = (s.last_t_ns.saturating_sub(s.first_t_ns)) as f64 * 1e-9;
+    let mut warnings = warnings;
+    if shared.flags.version_mismatch.load(Ordering::Relaxed) {
+        warnings.push(format!(
+            "ignored force samples of another protocol version (this daemon speaks {})",
+            shared::protocol::PROTOCOL_VERSION
+        ));
+    }
+    let summary = Summary {
+        ticks,
+        rate_hz: if span > 0.0 {
+            (s.ticks.saturating_sub(1)) as f64 / span
+        } else {
+            0.0
+        },
+        target_rate_hz: args.rate,
+        lateness_us: Lateness {
+            p50: s.lateness.quantile_us(0.5),
+            p99: s.lateness.quantile_us(0.99),
+            p999: s.lateness.quantile_us(0.999),
+            max: s.lateness.max_us(),
+        },
+        max_force_n: s.max_force_n,
+        device_max_force_n: device_max,
+        force_limit_n: limit,
+        extrapolation: method.name(),
+        device: args.device.clone(),
+        samples_received: shared.samples.load(Ordering::Relaxed),
+        telemetry_dropped: shared.telemetry_dropped.load(Ordering::Relaxed),
+        overruns,
+        recorded_rows: s.recorded,
+        warnings,
+    };
+    println!(
+        "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples",
+        summary.ticks,
+        summary.rate_hz,
+        summary.target_rate_hz,
+        summary.lateness_us.p50,
+        summary.lateness_us.p99,
+        summary.lateness_us.p999,
+        summary.lateness_us.max,
+        summary.max_force_n,
+        summary.force_limit_n,
+        summary.samples_received
+    );
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&summary)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// The loop on the RT thread: ticks until stop, then ramps the force to zero
+/// and disables the device. A panic inside is caught so the device is still
+/// zeroed and disabled. Returns (ticks, overruns).
+fn run_loop<D: Device>(
+    device: D,
+    method: Method,
+    safety: SafetyConfig,
+    sub: iceoryx2::port::subscriber::Subscriber<services::Ipc, shared::protocol::ForceMsg, ()>,
+    shared: Arc<Shared>,
+    period_ns: u64,
+) -> Result<(u64, u64)> {
+    let mut rt = RtLoop::new(device, method, safety, Some(sub), shared.clone());
+    let start = monotonic_ns();
+    rt.enable(start)?;
+    let mut pacer = Pacer::new(period_ns, start);
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let mut stopping = false;
+        loop {
+            let (deadline, lateness) = pacer.wait();
+            if !stopping && shared.flags.stop.load(Ordering::Acquire) {
+                rt.shutdown(deadline);
+                stopping = true;
+            }
+            rt.tick(deadline.saturating_add(lateness.max(0) as u64), lateness);
+            if stopping && matches!(rt.safety_state(), SafetyState::Stopped(_)) {
+                break;
+            }
+        }
+    }));
+    rt.disable();
+    if outcome.is_err() {
+        bail!("the real-time loop panicked; the device was zeroed and disabled");
+    }
+    Ok((rt.ticks(), pacer.overruns()))
+}

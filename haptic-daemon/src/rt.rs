@@ -1,0 +1,244 @@
+//! Real-time plumbing: absolute-deadline pacing with `clock_nanosleep`,
+//! memory locking, SCHED_FIFO and CPU affinity (each tried, each reported),
+//! and a preallocated lateness histogram.
+
+use shared::monotonic_ns;
+
+/// Paces a loop on absolute deadlines: drift-free, and a late tick does not
+/// make the next ones early (missed deadlines are skipped and counted).
+pub struct Pacer {
+    period_ns: u64,
+    next_ns: u64,
+    overruns: u64,
+}
+
+impl Pacer {
+    /// First deadline one period after `start_ns`.
+    pub fn new(period_ns: u64, start_ns: u64) -> Self {
+        Self {
+            period_ns,
+            next_ns: start_ns + period_ns,
+            overruns: 0,
+        }
+    }
+
+    /// Sleeps until the next deadline and returns (deadline, lateness_ns):
+    /// how long after the deadline the thread woke. Allocation-free; the only
+    /// system call is `clock_nanosleep(TIMER_ABSTIME)`.
+    pub fn wait(&mut self) -> (u64, i64) {
+        let deadline = self.next_ns;
+        let ts = libc::timespec {
+            tv_sec: (deadline / 1_000_000_000) as libc::time_t,
+            tv_nsec: (deadline % 1_000_000_000) as libc::c_long,
+        };
+        loop {
+            // SAFETY: `ts` is a valid timespec; a null remainder is allowed
+            // with TIMER_ABSTIME.
+            let rc = unsafe {
+                libc::clock_nanosleep(
+                    libc::CLOCK_MONOTONIC,
+                    libc::TIMER_ABSTIME,
+                    &ts,
+                    std::ptr::null_mut(),
+                )
+            };
+            if rc != libc::EINTR {
+                break;
+            }
+        }
+        let now = monotonic_ns();
+        let lateness = now as i64 - deadline as i64;
+        self.next_ns += self.period_ns;
+        if now >= self.next_ns {
+            // More than a period late: skip the missed deadlines instead of
+            // running a burst of ticks.
+            let missed = (now - self.next_ns) / self.period_ns + 1;
+            self.overruns += missed;
+            self.next_ns += missed * self.period_ns;
+        }
+        (deadline, lateness)
+    }
+
+    /// Deadlines skipped because a tick ran more than a period late.
+    pub fn overruns(&self) -> u64 {
+        self.overruns
+    }
+}
+
+/// What the real-time setup achieved (each item: Ok or the reason it failed).
+#[derive(Debug, Default)]
+pub struct RtReport {
+    /// `mlockall(MCL_CURRENT | MCL_FUTURE)`.
+    pub mlockall: Option<Result<(), String>>,
+    /// SCHED_FIFO at the given priority.
+    pub sched_fifo: Option<Result<i32, String>>,
+    /// CPU affinity.
+    pub affinity: Option<Result<usize, String>>,
+}
+
+impl RtReport {
+    /// Human-readable warnings for whatever failed, with the fix.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if let Some(Err(e)) = &self.mlockall {
+            w.push(format!(
+                "mlockall failed ({e}): pages may fault during the loop; raise the memlock limit (ulimit -l unlimited, or LimitMEMLOCK=infinity)"
+            ));
+        }
+        if let Some(Err(e)) = &self.sched_fifo {
+            w.push(format!(
+                "SCHED_FIFO refused ({e}): running at normal priority, expect larger lateness; grant CAP_SYS_NICE (setcap cap_sys_nice+ep) or an rtprio limit"
+            ));
+        }
+        if let Some(Err(e)) = &self.affinity {
+            w.push(format!(
+                "CPU affinity refused ({e}): the loop may migrate between cores"
+            ));
+        }
+        w
+    }
+}
+
+fn errno_string() -> String {
+    std::io::Error::last_os_error().to_string()
+}
+
+/// Locks memory (process-wide).
+pub fn lock_memory() -> Result<(), String> {
+    // SAFETY: plain system call with constant flags.
+    let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+    if rc == 0 { Ok(()) } else { Err(errno_string()) }
+}
+
+/// Puts the calling thread under SCHED_FIFO at `priority` (1-99).
+pub fn set_fifo(priority: i32) -> Result<i32, String> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: `param` is valid for the call; pid 0 = the calling thread.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(priority)
+    } else {
+        Err(errno_string())
+    }
+}
+
+/// Pins the calling thread to `cpu`.
+pub fn pin_to_cpu(cpu: usize) -> Result<usize, String> {
+    // SAFETY: cpu_set_t is plain data; CPU_SET writes inside it for cpu <
+    // CPU_SETSIZE (checked); pid 0 = the calling thread.
+    unsafe {
+        if cpu >= libc::CPU_SETSIZE as usize {
+            return Err(format!("cpu {cpu} is out of range"));
+        }
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0 {
+            Ok(cpu)
+        } else {
+            Err(errno_string())
+        }
+    }
+}
+
+/// A lateness histogram with 1 us buckets up to 20 ms (preallocated; `record`
+/// never allocates), plus exact maximum.
+pub struct LatenessHistogram {
+    buckets: Vec<u64>,
+    count: u64,
+    max_ns: i64,
+}
+
+const BUCKET_NS: i64 = 1_000;
+const BUCKETS: usize = 20_000;
+
+impl Default for LatenessHistogram {
+    fn default() -> Self {
+        Self {
+            buckets: vec![0; BUCKETS + 1],
+            count: 0,
+            max_ns: i64::MIN,
+        }
+    }
+}
+
+impl LatenessHistogram {
+    /// Records one lateness (negative = early, counted in the first bucket).
+    pub fn record(&mut self, lateness_ns: i64) {
+        let b = (lateness_ns.max(0) / BUCKET_NS).min(BUCKETS as i64) as usize;
+        self.buckets[b] += 1;
+        self.count += 1;
+        self.max_ns = self.max_ns.max(lateness_ns);
+    }
+
+    /// Number of samples.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// The q-quantile (0..1) in microseconds (bucket upper edge; the last
+    /// bucket holds everything above 20 ms); `max_us` for q = 1.
+    pub fn quantile_us(&self, q: f64) -> f64 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        if q >= 1.0 {
+            return self.max_us();
+        }
+        let rank = ((q * self.count as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for (b, n) in self.buckets.iter().enumerate() {
+            seen += n;
+            if seen >= rank {
+                return ((b as i64 + 1) * BUCKET_NS) as f64 / 1e3;
+            }
+        }
+        self.max_us()
+    }
+
+    /// The largest lateness (us).
+    pub fn max_us(&self) -> f64 {
+        if self.count == 0 {
+            0.0
+        } else {
+            self.max_ns as f64 / 1e3
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_quantiles() {
+        let mut h = LatenessHistogram::default();
+        for us in 0..1000 {
+            h.record(us * 1000 + 500);
+        }
+        assert_eq!(h.count(), 1000);
+        assert_eq!(h.quantile_us(0.5), 500.0);
+        assert_eq!(h.quantile_us(0.99), 990.0);
+        assert!((h.max_us() - 999.5).abs() < 1e-9);
+        h.record(-5000);
+        h.record(50_000_000);
+        assert_eq!(h.max_us(), 50_000.0);
+    }
+
+    #[test]
+    fn pacer_keeps_absolute_deadlines() {
+        let start = monotonic_ns();
+        let mut p = Pacer::new(1_000_000, start);
+        let mut last = 0;
+        for k in 1..=20u64 {
+            let (deadline, lateness) = p.wait();
+            assert!(lateness >= 0, "woke {lateness} ns before its deadline");
+            if p.overruns() == 0 {
+                assert_eq!(deadline, start + k * 1_000_000);
+            }
+            assert!(deadline > last);
+            last = deadline;
+        }
+    }
+}

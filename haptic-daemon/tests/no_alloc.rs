@@ -1,0 +1,151 @@
+//! `Extrapolator::push`/`force` and `Safety::filter`/`shutdown` allocate
+//! nothing: a counting global allocator counts allocations made on this
+//! thread during 10,000 ticks per method (samples every 3rd tick, NaN
+//! samples and requests, stale and dead-peer spells, backward clock steps,
+//! and a shutdown at the end).
+
+use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
+use haptic_daemon::safety::{Safety, SafetyConfig, SafetyState, StopReason};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note() {
+    // `try_with`: the allocator may run while this thread's locals are
+    // being torn down; such allocations are outside any counted loop.
+    let _ = COUNTING.try_with(|on| {
+        if on.get() {
+            let _ = COUNT.try_with(|c| c.set(c.get() + 1));
+        }
+    });
+}
+
+// SAFETY: forwards to the system allocator; the bookkeeping touches only
+// const-initialised thread-locals, which never allocate.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+const MS: u64 = 1_000_000;
+
+/// The sample of tick `k`; every 97th one has a NaN force.
+fn sample(k: u64, now: u64) -> ForceSample {
+    let x = k as f64 * 1e-3;
+    let z = if k.is_multiple_of(97) {
+        f64::NAN
+    } else {
+        x.sin()
+    };
+    ForceSample {
+        t_ns: now,
+        seq: k,
+        position_m: [0.0, 0.0, 0.05 - x.sin() * 0.01],
+        force_n: [0.0, 0.0, z],
+        stiffness_n_per_m: [[100.0, 0.0, 0.0], [0.0, 100.0, 0.0], [0.0, 0.0, 100.0]],
+        in_contact: k % 500 < 400,
+    }
+}
+
+#[test]
+fn ten_thousand_ticks_allocate_nothing() {
+    for method in Method::ALL {
+        let mut e = Extrapolator::new(method);
+        let mut safety = Safety::new(SafetyConfig::new(5.0).unwrap());
+        let t0 = 1_000 * MS;
+        let mut last_sample_t: Option<u64> = None;
+        let mut max_out = 0.0f64;
+
+        COUNT.with(|c| c.set(0));
+        COUNTING.with(|c| c.set(true));
+        for k in 0..10_000u64 {
+            // A backward step of the clock now and then.
+            let now = if k % 1000 == 999 {
+                t0 + (k - 5) * MS
+            } else {
+                t0 + k * MS
+            };
+            // Samples every 3rd tick, except for a 100 ms gap (stale).
+            if k.is_multiple_of(3) && !(3000..3100).contains(&k) {
+                e.push(&sample(k, now));
+                last_sample_t = Some(now);
+            }
+            let x = k as f64 * 1e-3;
+            let position = [
+                0.0,
+                0.0,
+                if k.is_multiple_of(211) {
+                    f64::INFINITY
+                } else {
+                    0.05 - x.sin() * 0.012
+                },
+            ];
+            let mut requested = e.force(now, position);
+            if k.is_multiple_of(1234) {
+                requested[1] = f64::NAN;
+            }
+            let age = last_sample_t.map(|t| now.saturating_sub(t));
+            let alive = !(6000..6050).contains(&k);
+            if k == 9_900 {
+                safety.shutdown(now);
+            }
+            let out = safety.filter(now, requested, age, alive);
+            max_out = max_out.max(out.iter().fold(0.0, |m, v| m.max(v.abs())));
+            std::hint::black_box(out);
+        }
+        COUNTING.with(|c| c.set(false));
+        let allocations = COUNT.with(Cell::get);
+
+        assert_eq!(
+            allocations,
+            0,
+            "{}: {allocations} allocations in 10,000 ticks",
+            method.name()
+        );
+        assert!(
+            max_out > 0.1,
+            "{}: the loop never produced a force",
+            method.name()
+        );
+        assert_eq!(safety.state(), SafetyState::Stopped(StopReason::Shutdown));
+    }
+}
+
+#[test]
+fn the_counter_counts() {
+    COUNT.with(|c| c.set(0));
+    COUNTING.with(|c| c.set(true));
+    let v = std::hint::black_box(vec![1u8; 16]);
+    COUNTING.with(|c| c.set(false));
+    drop(v);
+    assert!(
+        COUNT.with(Cell::get) >= 1,
+        "the counting allocator must see a Vec"
+    );
+}

@@ -1,0 +1,250 @@
+//! The payloads that cross process boundaries. Every payload is `#[repr(C)]`,
+//! fixed size (`MAX_TOOLS` arrays, no pointers or `Vec`), made of plain
+//! `f64`/`u64`/`u32` fields, and starts with the protocol version, so a
+//! program in another language can read it from `docs/protocol.md` alone.
+//!
+//! iceoryx2 also compares the type names (`type_name`, which carry the
+//! version) and layouts when a service is opened, so a reader built for
+//! another version is refused at open time; [`check_version`] catches a
+//! mismatch on each payload as a second line of defence.
+
+use iceoryx2::prelude::ZeroCopySend;
+use thiserror::Error;
+
+/// The protocol version; bumped on any change of a payload or its meaning.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Tools per session (fixed so payloads have a fixed size).
+pub const MAX_TOOLS: usize = 4;
+
+/// Telemetry ticks per batch.
+pub const TELEMETRY_BATCH: usize = 64;
+
+/// A payload of another protocol version.
+#[derive(Debug, Error, PartialEq, Eq)]
+#[error(
+    "protocol version mismatch on {stream}: this program speaks version {expected}, the peer sent {found}; rebuild both from the same release"
+)]
+pub struct VersionError {
+    /// Which stream.
+    pub stream: &'static str,
+    /// Ours.
+    pub expected: u32,
+    /// Theirs.
+    pub found: u32,
+}
+
+/// Checks a payload's version field.
+pub fn check_version(stream: &'static str, found: u32) -> Result<(), VersionError> {
+    if found == PROTOCOL_VERSION {
+        Ok(())
+    } else {
+        Err(VersionError {
+            stream,
+            expected: PROTOCOL_VERSION,
+            found,
+        })
+    }
+}
+
+/// One tool's pose as the device reads it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.ToolPose.v1")]
+pub struct ToolPose {
+    /// Tool tip position (m), scene frame.
+    pub tip_m: [f64; 3],
+    /// Unit shaft direction, from the fulcrum towards the tip (zero: derive it
+    /// from the scene's fulcrum).
+    pub shaft_dir: [f64; 3],
+    /// Jaw opening, 0 closed to 1 fully open.
+    pub jaw_opening: f64,
+    /// Device button bits.
+    pub buttons: u32,
+    /// Bit 0: this tool is present.
+    pub flags: u32,
+}
+
+/// `ToolPose::flags`: the tool is present.
+pub const TOOL_PRESENT: u32 = 1;
+
+/// Daemon -> sim: the latest device pose of every tool (haptic rate, latest value).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.PoseMsg.v1")]
+pub struct PoseMsg {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Tools in use (<= `MAX_TOOLS`).
+    pub tool_count: u32,
+    /// Increments by one per message (gaps show losses).
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` (ns) when the device was read.
+    pub t_ns: u64,
+    /// Per tool.
+    pub tools: [ToolPose; MAX_TOOLS],
+}
+
+/// One tool's share of a simulation step.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.ToolForce.v1")]
+pub struct ToolForce {
+    /// The tool tip position this step used (m).
+    pub position_m: [f64; 3],
+    /// Force of the tissue on the tool (N).
+    pub force_n: [f64; 3],
+    /// Contact stiffness (N/m), row-major: dF = -K dP for a small tool motion dP.
+    pub stiffness_n_per_m: [[f64; 3]; 3],
+    /// `seq` of the pose this step used.
+    pub pose_seq: u64,
+    /// [`CONTACT`], [`GRIPPING`], [`CUTTING`] bits.
+    pub flags: u32,
+    /// Padding (keeps the layout explicit).
+    pub reserved: u32,
+}
+
+/// `ToolForce::flags`: the tool touches tissue.
+pub const CONTACT: u32 = 1;
+/// `ToolForce::flags`: the jaws hold tissue.
+pub const GRIPPING: u32 = 2;
+/// `ToolForce::flags`: the tool removed tissue this step.
+pub const CUTTING: u32 = 4;
+
+/// Sim -> daemon: one message per simulation step.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.ForceMsg.v1")]
+pub struct ForceMsg {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Tools in use.
+    pub tool_count: u32,
+    /// Increments by one per step.
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` (ns) when the step finished.
+    pub t_ns: u64,
+    /// Simulated time (ns since the simulation started).
+    pub sim_time_ns: u64,
+    /// Wall-clock period of the last step (ns).
+    pub step_period_ns: u64,
+    /// Per tool.
+    pub tools: [ToolForce; MAX_TOOLS],
+}
+
+/// Sim -> viewer: the user header of the mesh-state slice stream (the slice
+/// holds `vertex_count` positions as `[f32; 3]` in metres).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.MeshHeader.v1")]
+pub struct MeshHeader {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Vertices in the slice.
+    pub vertex_count: u32,
+    /// Increments by one per frame.
+    pub frame_seq: u64,
+    /// Changes whenever the surface changes (cuts); matches `TopologyHeader::topology_version`.
+    pub topology_version: u64,
+    /// `CLOCK_MONOTONIC` (ns) of the state.
+    pub t_ns: u64,
+}
+
+/// Sim -> viewer: the user header of the topology slice stream (the slice
+/// holds `triangle_count` surface triangles as `[u32; 3]`, outward).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.TopologyHeader.v1")]
+pub struct TopologyHeader {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Triangles in the slice.
+    pub triangle_count: u32,
+    /// The version these triangles describe.
+    pub topology_version: u64,
+}
+
+/// One haptic tick as the daemon saw it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.TelemetryTick.v1")]
+pub struct TelemetryTick {
+    /// `CLOCK_MONOTONIC` (ns) of the tick.
+    pub t_ns: u64,
+    /// Tick number.
+    pub seq: u64,
+    /// Device position of tool 0 (m).
+    pub position_m: [f64; 3],
+    /// Force sent to the device (N).
+    pub force_n: [f64; 3],
+    /// Tick start minus its deadline (ns; negative = early).
+    pub lateness_ns: i64,
+    /// Age of the force sample used (ns; `u64::MAX` = none).
+    pub sample_age_ns: u64,
+    /// Extrapolation method index (0 constant, 1 linear-time, 2 linear-position, 3 linear-position-signed, 4 local-model).
+    pub method: u32,
+    /// Safety state (0 waiting, 1 ramping in, 2 active, 3 ramping down, 4 stopped).
+    pub safety_state: u32,
+}
+
+/// Daemon -> recorder/bench: telemetry in batches (haptic rate / `TELEMETRY_BATCH`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.TelemetryBatch.v1")]
+pub struct TelemetryBatch {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Valid ticks in `ticks`.
+    pub count: u32,
+    /// Increments by one per batch.
+    pub seq: u64,
+    /// The ticks.
+    pub ticks: [TelemetryTick; TELEMETRY_BATCH],
+}
+
+impl Default for TelemetryBatch {
+    fn default() -> Self {
+        Self {
+            version: PROTOCOL_VERSION,
+            count: 0,
+            seq: 0,
+            ticks: [TelemetryTick::default(); TELEMETRY_BATCH],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The layouts documented in docs/protocol.md: sizes a reader in another
+    /// language relies on. A change here is a protocol change.
+    #[test]
+    fn payload_sizes_are_the_documented_ones() {
+        assert_eq!(std::mem::size_of::<ToolPose>(), 64);
+        assert_eq!(std::mem::size_of::<PoseMsg>(), 24 + 64 * MAX_TOOLS);
+        assert_eq!(std::mem::size_of::<ToolForce>(), 136);
+        assert_eq!(std::mem::size_of::<ForceMsg>(), 40 + 136 * MAX_TOOLS);
+        assert_eq!(std::mem::size_of::<MeshHeader>(), 32);
+        assert_eq!(std::mem::size_of::<TopologyHeader>(), 16);
+        assert_eq!(std::mem::size_of::<TelemetryTick>(), 88);
+        assert_eq!(
+            std::mem::size_of::<TelemetryBatch>(),
+            16 + 88 * TELEMETRY_BATCH
+        );
+        for align in [
+            std::mem::align_of::<PoseMsg>(),
+            std::mem::align_of::<ForceMsg>(),
+            std::mem::align_of::<TelemetryBatch>(),
+        ] {
+            assert_eq!(align, 8);
+        }
+    }
+
+    #[test]
+    fn version_mismatch_is_refused_clearly() {
+        assert!(check_version("force", PROTOCOL_VERSION).is_ok());
+        let e = check_version("force", PROTOCOL_VERSION + 1).unwrap_err();
+        assert!(e.to_string().contains("version mismatch on force"), "{e}");
+    }
+}

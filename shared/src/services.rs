@@ -1,0 +1,219 @@
+//! The iceoryx2 services of a session: names, settings and opening them with
+//! the protocol version as a service attribute, so that a peer of another
+//! version is refused when it opens a service, with a message saying so.
+
+use crate::SessionName;
+use crate::protocol::{ForceMsg, PROTOCOL_VERSION, PoseMsg, TelemetryBatch};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue, AttributeVerifier};
+use iceoryx2::service::port_factory::PortFactory as _;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use thiserror::Error;
+
+/// The attribute key that carries the protocol version on every service.
+pub const VERSION_KEY: &str = "hapsim.protocol";
+
+/// Stream names (suffixes of `hapsim/<session>/`).
+pub mod stream {
+    /// Daemon -> sim tool poses.
+    pub const POSE: &str = "pose";
+    /// Sim -> daemon force samples.
+    pub const FORCE: &str = "force";
+    /// Daemon -> recorder telemetry.
+    pub const TELEMETRY: &str = "telemetry";
+}
+
+/// Why a service could not be used.
+#[derive(Debug, Error)]
+pub enum ServiceError {
+    /// The node could not be created.
+    #[error("cannot create the iceoryx2 node {name:?}: {reason}")]
+    Node {
+        /// Node name.
+        name: String,
+        /// iceoryx2's error.
+        reason: String,
+    },
+    /// The service exists with another protocol version or payload layout.
+    #[error(
+        "service {service} speaks another protocol version or payload layout (this program speaks version {PROTOCOL_VERSION}): rebuild both sides from the same release ({reason})"
+    )]
+    Version {
+        /// Service name.
+        service: String,
+        /// iceoryx2's error.
+        reason: String,
+    },
+    /// Any other failure to open or create a service or port.
+    #[error("cannot open {service}: {reason}")]
+    Open {
+        /// Service name.
+        service: String,
+        /// iceoryx2's error.
+        reason: String,
+    },
+}
+
+/// The iceoryx2 service type of the project: inter-process, shared memory.
+pub type Ipc = ipc::Service;
+
+/// Creates a node named `name` (shows in iceoryx2's node listings).
+/// Signal handling stays with the program, which must zero forces itself.
+pub fn node(name: &str) -> Result<Node<Ipc>, ServiceError> {
+    let err = |reason: String| ServiceError::Node {
+        name: name.to_string(),
+        reason,
+    };
+    // iceoryx2 warns on stderr that it runs without a config file; that is
+    // the intended set-up here, so only errors are shown.
+    set_log_level(LogLevel::Error);
+    let node_name = NodeName::new(name).map_err(|e| err(format!("{e:?}")))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Ipc>()
+        .map_err(|e| err(format!("{e:?}")))
+}
+
+fn verifier(service: &str) -> Result<AttributeVerifier, ServiceError> {
+    let open = |reason: String| ServiceError::Open {
+        service: service.to_string(),
+        reason,
+    };
+    let key = AttributeKey::new(VERSION_KEY.as_bytes()).map_err(|e| open(format!("{e:?}")))?;
+    let value = AttributeValue::new(PROTOCOL_VERSION.to_string().as_bytes())
+        .map_err(|e| open(format!("{e:?}")))?;
+    AttributeVerifier::new()
+        .require(&key, &value)
+        .map_err(|e| open(format!("{e:?}")))
+}
+
+/// A publish-subscribe service of `T` in `session`.
+fn open<T: std::fmt::Debug + ZeroCopySend>(
+    node: &Node<Ipc>,
+    session: &SessionName,
+    stream: &str,
+    buffer: usize,
+) -> Result<PortFactory<Ipc, T, ()>, ServiceError> {
+    let name = session.service(stream);
+    let open_err = |reason: String| ServiceError::Open {
+        service: name.clone(),
+        reason,
+    };
+    let service_name = ServiceName::new(&name).map_err(|e| open_err(format!("{e:?}")))?;
+    node.service_builder(&service_name)
+        .publish_subscribe::<T>()
+        .max_publishers(2)
+        .max_subscribers(8)
+        .history_size(1)
+        .subscriber_max_buffer_size(buffer)
+        .enable_safe_overflow(true)
+        .open_or_create_with_attributes(&verifier(&name)?)
+        .map_err(|e| {
+            let reason = format!("{e:?}");
+            if reason.contains("IncompatibleTypes") || reason.contains("IncompatibleAttributes") {
+                ServiceError::Version {
+                    service: name.clone(),
+                    reason,
+                }
+            } else {
+                open_err(reason)
+            }
+        })
+}
+
+/// The force stream (sim -> daemon): a small buffer, newest kept on overflow.
+pub fn force_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, ForceMsg, ()>, ServiceError> {
+    open(node, session, stream::FORCE, 4)
+}
+
+/// The pose stream (daemon -> sim): latest value, so a buffer of one.
+pub fn pose_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, PoseMsg, ()>, ServiceError> {
+    open(node, session, stream::POSE, 1)
+}
+
+/// The telemetry stream (daemon -> recorders): every batch matters, deep buffer.
+pub fn telemetry_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, TelemetryBatch, ()>, ServiceError> {
+    open(node, session, stream::TELEMETRY, 64)
+}
+
+/// A publisher on `factory`.
+pub fn publisher<T: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, T, ()>,
+) -> Result<Publisher<Ipc, T, ()>, ServiceError> {
+    factory
+        .publisher_builder()
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// A subscriber on `factory`.
+pub fn subscriber<T: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, T, ()>,
+) -> Result<Subscriber<Ipc, T, ()>, ServiceError> {
+    factory
+        .subscriber_builder()
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::{MAX_TOOLS, ToolForce, check_version};
+
+    fn unique_session(tag: &str) -> SessionName {
+        SessionName::new(&format!("t{}-{tag}", std::process::id())).unwrap()
+    }
+
+    #[test]
+    fn a_force_message_goes_through_and_keeps_every_field() {
+        let session = unique_session("force");
+        let sim = node("test-sim").unwrap();
+        let daemon = node("test-daemon").unwrap();
+        let publisher = publisher(&force_service(&sim, &session).unwrap()).unwrap();
+        let subscriber = subscriber(&force_service(&daemon, &session).unwrap()).unwrap();
+        let mut msg = ForceMsg {
+            version: PROTOCOL_VERSION,
+            tool_count: 1,
+            seq: 7,
+            t_ns: crate::monotonic_ns(),
+            sim_time_ns: 123,
+            step_period_ns: 1_000_000,
+            tools: [ToolForce::default(); MAX_TOOLS],
+        };
+        msg.tools[0].force_n = [0.0, 0.0, 1.5];
+        msg.tools[0].stiffness_n_per_m[2][2] = 200.0;
+        publisher.send_copy(msg).unwrap();
+        let got = subscriber.receive().unwrap().expect("a sample");
+        assert_eq!(*got, msg);
+        check_version("force", got.version).unwrap();
+    }
+
+    #[test]
+    fn sessions_do_not_meet() {
+        let (a, b) = (unique_session("a"), unique_session("b"));
+        let n = node("test-sessions").unwrap();
+        let publisher = publisher(&force_service(&n, &a).unwrap()).unwrap();
+        let other = subscriber(&force_service(&n, &b).unwrap()).unwrap();
+        publisher.send_copy(ForceMsg::default()).unwrap();
+        assert!(other.receive().unwrap().is_none());
+    }
+}
