@@ -3,7 +3,7 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use haptic_daemon::daemon::{RtLoop, Shared};
-use haptic_daemon::device::{Device, HandModel, Path, Replay, Simulated, Trajectory};
+use haptic_daemon::device::{Device, HandModel, Path, Plugin, Replay, Simulated, Trajectory};
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::io::{Stats, run_io};
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
@@ -35,8 +35,8 @@ enum Command {
 #[derive(clap::Args)]
 struct RunArgs {
     /// simulated (a hand poking along z), simulated:FILE.csv (a hand following a
-    /// trajectory), replay:FILE.csv (open-loop positions). haply and plugin
-    /// devices come with a later release.
+    /// trajectory), replay:FILE.csv (open-loop positions), plugin:LIB.so[:ARGS]
+    /// (a C-ABI device, see include/hapsim_device.h).
     #[arg(long, default_value = "simulated")]
     device: String,
     /// Loop rate (Hz), 100 to 10000.
@@ -127,10 +127,20 @@ fn make_device(spec: &str, max_force_n: f64) -> Result<DeviceChoice> {
             let t = Trajectory::read(std::path::Path::new(file))?;
             Ok(DeviceChoice::Replay(Replay::new(t, max_force_n)))
         }
-        ("haply" | "plugin", _) => bail!(
-            "device {kind:?} is not available in this release; use simulated or replay:FILE.csv"
+        ("plugin", Some(rest)) => {
+            // plugin:PATH[:ARGS]
+            let (lib, plugin_args) = rest.split_once(':').unwrap_or((rest, ""));
+            Ok(DeviceChoice::Plugin(Plugin::load(
+                std::path::Path::new(lib),
+                plugin_args,
+            )?))
+        }
+        ("haply", _) => bail!(
+            "device \"haply\" is not available in this release; use simulated, replay:FILE.csv or plugin:LIB.so"
         ),
-        _ => bail!("unknown device {spec:?}: use simulated, simulated:FILE.csv or replay:FILE.csv"),
+        _ => bail!(
+            "unknown device {spec:?}: use simulated, simulated:FILE.csv, replay:FILE.csv or plugin:LIB.so[:ARGS]"
+        ),
     }
 }
 
@@ -138,6 +148,17 @@ fn make_device(spec: &str, max_force_n: f64) -> Result<DeviceChoice> {
 enum DeviceChoice {
     Simulated(Simulated),
     Replay(Replay),
+    Plugin(Plugin),
+}
+
+impl DeviceChoice {
+    fn max_force_n(&self) -> f64 {
+        match self {
+            DeviceChoice::Simulated(d) => d.specs().max_force_n,
+            DeviceChoice::Replay(d) => d.specs().max_force_n,
+            DeviceChoice::Plugin(d) => d.specs().max_force_n,
+        }
+    }
 }
 
 /// The device's own limit for the simulated and replayed devices (N).
@@ -157,7 +178,9 @@ fn main() -> Result<()> {
             Method::ALL.map(|m| m.name()).join(", ")
         )
     })?;
-    let device_max = SIMULATED_DEVICE_MAX_FORCE_N;
+    let session = SessionName::new(&args.session)?;
+    let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N)?;
+    let device_max = device.max_force_n();
     let limit = match args.max_force {
         Some(f) if !(f.is_finite() && f > 0.0) => {
             bail!("--max-force must be a positive number of newtons")
@@ -168,8 +191,6 @@ fn main() -> Result<()> {
         Some(f) => f,
         None => device_max,
     };
-    let session = SessionName::new(&args.session)?;
-    let device = make_device(&args.device, device_max)?;
     let safety = SafetyConfig::new(limit)?;
     let shared = Arc::new(Shared::new(1 << 16));
     let stop_signal = Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -214,6 +235,9 @@ fn main() -> Result<()> {
                         run_loop(d, method, safety, sub, shared.clone(), period_ns)
                     }
                     DeviceChoice::Replay(d) => {
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns)
+                    }
+                    DeviceChoice::Plugin(d) => {
                         run_loop(d, method, safety, sub, shared.clone(), period_ns)
                     }
                 };

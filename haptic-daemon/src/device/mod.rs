@@ -5,10 +5,12 @@
 //! `write_force` must not allocate, lock, or block; any I/O a device needs
 //! happens on its own thread or in non-blocking calls.
 
+mod plugin;
 mod replay;
 mod simulated;
 mod trajectory;
 
+pub use plugin::{ABI_VERSION, Plugin, PluginError};
 pub use replay::Replay;
 pub use simulated::{HandModel, Path, Simulated};
 pub use trajectory::{Trajectory, TrajectoryError};

@@ -1,0 +1,60 @@
+/* A fake haptic device behind the hapsim plugin ABI, built by the tests.
+ * args: "" = a handle circling slowly in the xy plane; "nan" = the same, but
+ * reads return NaN after the first 500; "fail-open" = open fails. */
+#include "../../haptic-daemon/include/hapsim_device.h"
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+    int nan_mode;
+    long reads;
+    int enabled;
+    double last_force[3];
+} fake;
+
+uint32_t hapsim_device_abi_version(void) { return HAPSIM_DEVICE_ABI_VERSION; }
+
+int hapsim_device_open(void **handle, const char *args) {
+    if (strcmp(args, "fail-open") == 0) return 7;
+    fake *f = calloc(1, sizeof(fake));
+    if (!f) return 1;
+    f->nan_mode = strcmp(args, "nan") == 0;
+    *handle = f;
+    return 0;
+}
+
+int hapsim_device_specs(void *handle, hapsim_specs *out) {
+    (void)handle;
+    out->max_force_n = 3.3;
+    out->max_stiffness_n_per_m = 1500.0;
+    for (int i = 0; i < 3; i++) { out->workspace_min_m[i] = -0.1; out->workspace_max_m[i] = 0.1; }
+    return 0;
+}
+
+int hapsim_device_enable(void *handle) { ((fake *)handle)->enabled = 1; return 0; }
+
+int hapsim_device_read(void *handle, hapsim_state *out) {
+    fake *f = handle;
+    double t = f->reads++ * 1e-3;
+    out->position_m[0] = 0.01 * cos(t);
+    out->position_m[1] = 0.01 * sin(t);
+    out->position_m[2] = 0.0;
+    out->velocity_m_s[0] = -0.01 * sin(t);
+    out->velocity_m_s[1] = 0.01 * cos(t);
+    out->velocity_m_s[2] = 0.0;
+    out->gripper = 1.0;
+    out->buttons = 0;
+    if (f->nan_mode && f->reads > 500) out->position_m[0] = NAN;
+    return 0;
+}
+
+int hapsim_device_write_force(void *handle, const double force_n[3]) {
+    fake *f = handle;
+    memcpy(f->last_force, force_n, sizeof f->last_force);
+    return 0;
+}
+
+void hapsim_device_disable(void *handle) { ((fake *)handle)->enabled = 0; }
+
+void hapsim_device_close(void *handle) { free(handle); }

@@ -1,0 +1,100 @@
+//! A C-ABI device plugin (include/hapsim_device.h) built here with the
+//! system C compiler drives the daemon: its specs set the force limit, a
+//! plugin that returns NaN never gets a NaN force, and a failing or missing
+//! plugin is refused with a clear message.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use system_tests::{binary, scratch_dir};
+
+fn build_plugin(dir: &Path) -> PathBuf {
+    let src = concat!(env!("CARGO_MANIFEST_DIR"), "/plugin/fake_device.c");
+    let lib = dir.join("libfake_device.so");
+    let out = Command::new("cc")
+        .args(["-shared", "-fPIC", "-O2", "-o"])
+        .arg(&lib)
+        .arg(src)
+        .arg("-lm")
+        .output()
+        .expect("the C compiler (cc) is needed to build the test plugin");
+    assert!(
+        out.status.success(),
+        "cc failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    lib
+}
+
+fn run(device: &str, json: &Path, session: &str) -> std::process::Output {
+    Command::new(binary("haptic-daemon"))
+        .args([
+            "run",
+            "--rt-priority",
+            "0",
+            "--quiet",
+            "--duration-s",
+            "1.5",
+            "--session",
+            session,
+        ])
+        .args(["--device", device])
+        .arg("--json")
+        .arg(json)
+        .output()
+        .expect("run haptic-daemon")
+}
+
+#[test]
+fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
+    let dir = scratch_dir("plugin");
+    let lib = build_plugin(&dir);
+    let session = format!("plug{}", std::process::id());
+
+    let json = dir.join("ok.json");
+    let out = run(&format!("plugin:{}", lib.display()), &json, &session);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(
+        v["device_max_force_n"].as_f64(),
+        Some(3.3),
+        "the plugin's specs set the limit"
+    );
+    assert!(v["ticks"].as_u64().unwrap() > 1000);
+
+    let json = dir.join("nan.json");
+    let out = run(&format!("plugin:{}:nan", lib.display()), &json, &session);
+    assert!(
+        out.status.success(),
+        "a NaN device must not crash the daemon: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let f = v["max_force_n"].as_f64().unwrap();
+    assert!(f.is_finite() && f <= 3.3);
+
+    let out = run(
+        &format!("plugin:{}:fail-open", lib.display()),
+        &dir.join("x.json"),
+        &session,
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("hapsim_device_open failed") && err.contains("returned 7"),
+        "{err}"
+    );
+
+    let out = run(
+        "plugin:/no/such/libdevice.so",
+        &dir.join("y.json"),
+        &session,
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/libdevice.so"));
+}
