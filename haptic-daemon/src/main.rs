@@ -66,6 +66,10 @@ struct RunArgs {
     /// Pin the loop to this CPU.
     #[arg(long)]
     cpu: Option<usize>,
+    /// Wake this many microseconds early and spin to the deadline (lower
+    /// lateness, more CPU; at most half a period).
+    #[arg(long, default_value_t = 0)]
+    spin_us: u64,
     /// No live status line.
     #[arg(long)]
     quiet: bool,
@@ -210,6 +214,7 @@ fn main() -> Result<()> {
             .spawn(move || run_io(shared, session, record, stats))?
     };
     let period_ns = (1e9 / args.rate).round() as u64;
+    let spin_ns = args.spin_us.saturating_mul(1000);
     let (report_tx, report_rx) = std::sync::mpsc::channel::<RtReport>();
     let rt = {
         let shared = shared.clone();
@@ -217,6 +222,7 @@ fn main() -> Result<()> {
         let (priority, cpu) = (args.rt_priority, args.cpu);
         std::thread::Builder::new().name("haptic-rt".into()).spawn(
             move || -> Result<(u64, u64)> {
+                let _ = haptic_daemon::rt::minimal_timer_slack();
                 let mut report = RtReport {
                     mlockall: Some(lock_memory()),
                     ..RtReport::default()
@@ -232,13 +238,13 @@ fn main() -> Result<()> {
                 let sub = services::subscriber(&services::force_service(&node, &session)?)?;
                 let result = match device {
                     DeviceChoice::Simulated(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns)
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
                     }
                     DeviceChoice::Replay(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns)
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
                     }
                     DeviceChoice::Plugin(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns)
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
                     }
                 };
                 shared.flags.rt_done.store(true, Ordering::Release);
@@ -367,11 +373,12 @@ fn run_loop<D: Device>(
     sub: iceoryx2::port::subscriber::Subscriber<services::Ipc, shared::protocol::ForceMsg, ()>,
     shared: Arc<Shared>,
     period_ns: u64,
+    spin_ns: u64,
 ) -> Result<(u64, u64)> {
     let mut rt = RtLoop::new(device, method, safety, Some(sub), shared.clone());
     let start = monotonic_ns();
     rt.enable(start)?;
-    let mut pacer = Pacer::new(period_ns, start);
+    let mut pacer = Pacer::new(period_ns, start).with_spin(spin_ns);
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut stopping = false;
         loop {
