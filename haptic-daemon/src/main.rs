@@ -3,7 +3,9 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use haptic_daemon::daemon::{RtLoop, Shared};
-use haptic_daemon::device::{Device, HandModel, Path, Plugin, Replay, Simulated, Trajectory};
+use haptic_daemon::device::{
+    Device, HandModel, Haply, Path, Plugin, Replay, Simulated, Trajectory,
+};
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::io::{Stats, run_io};
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
@@ -36,7 +38,9 @@ enum Command {
 struct RunArgs {
     /// simulated (a hand poking along z), simulated:FILE.csv (a hand following a
     /// trajectory), replay:FILE.csv (open-loop positions), plugin:LIB.so[:ARGS]
-    /// (a C-ABI device, see include/hapsim_device.h).
+    /// (a C-ABI device, see include/hapsim_device.h), haply[:ws://HOST:PORT]
+    /// (Haply Inverse3 through the Haply Inverse Service, default
+    /// ws://localhost:10001).
     #[arg(long, default_value = "simulated")]
     device: String,
     /// Loop rate (Hz), 100 to 10000.
@@ -139,9 +143,9 @@ fn make_device(spec: &str, max_force_n: f64) -> Result<DeviceChoice> {
                 plugin_args,
             )?))
         }
-        ("haply", _) => bail!(
-            "device \"haply\" is not available in this release; use simulated, replay:FILE.csv or plugin:LIB.so"
-        ),
+        ("haply", url) => Ok(DeviceChoice::Haply(Haply::connect(
+            url.unwrap_or("ws://localhost:10001"),
+        )?)),
         _ => bail!(
             "unknown device {spec:?}: use simulated, simulated:FILE.csv, replay:FILE.csv or plugin:LIB.so[:ARGS]"
         ),
@@ -153,6 +157,7 @@ enum DeviceChoice {
     Simulated(Simulated),
     Replay(Replay),
     Plugin(Plugin),
+    Haply(Haply),
 }
 
 impl DeviceChoice {
@@ -161,6 +166,7 @@ impl DeviceChoice {
             DeviceChoice::Simulated(d) => d.specs().max_force_n,
             DeviceChoice::Replay(d) => d.specs().max_force_n,
             DeviceChoice::Plugin(d) => d.specs().max_force_n,
+            DeviceChoice::Haply(d) => d.specs().max_force_n,
         }
     }
 }
@@ -244,6 +250,9 @@ fn main() -> Result<()> {
                         run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
                     }
                     DeviceChoice::Plugin(d) => {
+                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
+                    }
+                    DeviceChoice::Haply(d) => {
                         run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
                     }
                 };

@@ -5,11 +5,13 @@
 //! `write_force` must not allocate, lock, or block; any I/O a device needs
 //! happens on its own thread or in non-blocking calls.
 
+mod haply;
 mod plugin;
 mod replay;
 mod simulated;
 mod trajectory;
 
+pub use haply::{Haply, HaplyError, INVERSE3_MAX_FORCE_N, force_command, parse_state};
 pub use plugin::{ABI_VERSION, Plugin, PluginError};
 pub use replay::Replay;
 pub use simulated::{HandModel, Path, Simulated};
