@@ -57,6 +57,12 @@ pub struct Haply {
     device_id: String,
 }
 
+fn store3(to: &[AtomicU64; 3], v: V3) {
+    for (a, x) in to.iter().zip(v) {
+        a.store(x.to_bits(), Ordering::Relaxed);
+    }
+}
+
 fn vec3(v: &Value) -> Option<V3> {
     Some([
         v.get("x")?.as_f64()?,
@@ -115,9 +121,7 @@ impl Haply {
             stop: AtomicBool::new(false),
         });
         link.state.write(0, p, 1.0, 0);
-        for d in 0..3 {
-            link.velocity[d].store(vel[d].to_bits(), Ordering::Relaxed);
-        }
+        store3(&link.velocity, vel);
         let thread = {
             let link = link.clone();
             let id = device_id.clone();
@@ -139,9 +143,7 @@ impl Haply {
                             Ok(m) => {
                                 if let Some((_, p, vel)) = m.to_text().ok().and_then(parse_state) {
                                     link.state.write(0, p, 1.0, 0);
-                                    for d in 0..3 {
-                                        link.velocity[d].store(vel[d].to_bits(), Ordering::Relaxed);
-                                    }
+                                    store3(&link.velocity, vel);
                                 }
                             }
                             Err(_) => break,
@@ -183,9 +185,7 @@ impl Device for Haply {
     }
 
     fn disable(&mut self) {
-        for a in &self.link.force {
-            a.store(0f64.to_bits(), Ordering::Relaxed);
-        }
+        store3(&self.link.force, [0.0; 3]);
     }
 
     fn read(&mut self, _now_ns: u64) -> Result<DeviceState, DeviceError> {
@@ -206,9 +206,7 @@ impl Device for Haply {
     }
 
     fn write_force(&mut self, force_n: V3, _now_ns: u64) -> Result<(), DeviceError> {
-        for (a, f) in self.link.force.iter().zip(force_n) {
-            a.store(f.to_bits(), Ordering::Relaxed);
-        }
+        store3(&self.link.force, force_n);
         Ok(())
     }
 }
