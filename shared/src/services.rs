@@ -3,7 +3,9 @@
 //! version is refused when it opens a service, with a message saying so.
 
 use crate::SessionName;
-use crate::protocol::{ForceMsg, PROTOCOL_VERSION, PoseMsg, TelemetryBatch};
+use crate::protocol::{
+    ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, TelemetryBatch, TopologyHeader,
+};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -23,6 +25,10 @@ pub mod stream {
     pub const FORCE: &str = "force";
     /// Daemon -> recorder telemetry.
     pub const TELEMETRY: &str = "telemetry";
+    /// Sim -> viewer vertex positions.
+    pub const MESH: &str = "mesh";
+    /// Sim -> viewer surface triangles (on topology changes).
+    pub const TOPOLOGY: &str = "topology";
 }
 
 /// Why a service could not be used.
@@ -98,11 +104,8 @@ fn open<T: std::fmt::Debug + ZeroCopySend>(
     buffer: usize,
 ) -> Result<PortFactory<Ipc, T, ()>, ServiceError> {
     let name = session.service(stream);
-    let open_err = |reason: String| ServiceError::Open {
-        service: name.clone(),
-        reason,
-    };
-    let service_name = ServiceName::new(&name).map_err(|e| open_err(format!("{e:?}")))?;
+    let service_name =
+        ServiceName::new(&name).map_err(|e| version_or_open(&name, format!("{e:?}")))?;
     node.service_builder(&service_name)
         .publish_subscribe::<T>()
         .max_publishers(2)
@@ -111,17 +114,7 @@ fn open<T: std::fmt::Debug + ZeroCopySend>(
         .subscriber_max_buffer_size(buffer)
         .enable_safe_overflow(true)
         .open_or_create_with_attributes(&verifier(&name)?)
-        .map_err(|e| {
-            let reason = format!("{e:?}");
-            if reason.contains("IncompatibleTypes") || reason.contains("IncompatibleAttributes") {
-                ServiceError::Version {
-                    service: name.clone(),
-                    reason,
-                }
-            } else {
-                open_err(reason)
-            }
-        })
+        .map_err(|e| version_or_open(&name, format!("{e:?}")))
 }
 
 /// The force stream (sim -> daemon): a small buffer, newest kept on overflow.
@@ -146,6 +139,77 @@ pub fn telemetry_service(
     session: &SessionName,
 ) -> Result<PortFactory<Ipc, TelemetryBatch, ()>, ServiceError> {
     open(node, session, stream::TELEMETRY, 64)
+}
+
+fn version_or_open(service: &str, e: String) -> ServiceError {
+    if e.contains("IncompatibleTypes") || e.contains("IncompatibleAttributes") {
+        ServiceError::Version {
+            service: service.to_string(),
+            reason: e,
+        }
+    } else {
+        ServiceError::Open {
+            service: service.to_string(),
+            reason: e,
+        }
+    }
+}
+
+/// A slice service of `T` with user header `H` (history 1: a viewer that
+/// joins late still gets the latest frame or topology).
+fn open_slice<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(
+    node: &Node<Ipc>,
+    session: &SessionName,
+    stream: &str,
+) -> Result<PortFactory<Ipc, [T], H>, ServiceError> {
+    let name = session.service(stream);
+    let service_name =
+        ServiceName::new(&name).map_err(|e| version_or_open(&name, format!("{e:?}")))?;
+    node.service_builder(&service_name)
+        .publish_subscribe::<[T]>()
+        .user_header::<H>()
+        .max_publishers(2)
+        .max_subscribers(8)
+        .history_size(1)
+        .subscriber_max_buffer_size(2)
+        .enable_safe_overflow(true)
+        .open_or_create_with_attributes(&verifier(&name)?)
+        .map_err(|e| version_or_open(&name, format!("{e:?}")))
+}
+
+/// The mesh-state stream (sim -> viewer): positions as `[f32; 3]` (m) with a
+/// [`MeshHeader`], 30-60 Hz.
+pub fn mesh_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, [[f32; 3]], MeshHeader>, ServiceError> {
+    open_slice(node, session, stream::MESH)
+}
+
+/// The topology stream (sim -> viewer): outward surface triangles as
+/// `[u32; 3]` with a [`TopologyHeader`], sent when cuts change the surface.
+pub fn topology_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, [[u32; 3]], TopologyHeader>, ServiceError> {
+    open_slice(node, session, stream::TOPOLOGY)
+}
+
+/// A slice publisher able to loan `max_len` elements without reallocating
+/// (larger loans grow the pool by powers of two).
+pub fn slice_publisher<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, [T], H>,
+    max_len: usize,
+) -> Result<Publisher<Ipc, [T], H>, ServiceError> {
+    factory
+        .publisher_builder()
+        .initial_max_slice_len(max_len.max(1))
+        .allocation_strategy(AllocationStrategy::PowerOfTwo)
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
 }
 
 /// A publisher on `factory`.
@@ -205,6 +269,39 @@ mod tests {
         let got = subscriber.receive().unwrap().expect("a sample");
         assert_eq!(*got, msg);
         check_version("force", got.version).unwrap();
+    }
+
+    #[test]
+    fn a_mesh_frame_goes_through_with_its_header() {
+        let session = unique_session("mesh");
+        let sim = node("test-mesh-sim").unwrap();
+        let viewer = node("test-mesh-viewer").unwrap();
+        let publisher = slice_publisher(&mesh_service(&sim, &session).unwrap(), 4).unwrap();
+        let sub = mesh_service(&viewer, &session)
+            .unwrap()
+            .subscriber_builder()
+            .create()
+            .unwrap();
+        let positions = [
+            [0.0f32, 0.0, 0.0],
+            [0.1, 0.0, 0.0],
+            [0.0, 0.1, 0.0],
+            [0.0, 0.0, 0.1],
+        ];
+        let mut sample = publisher.loan_slice_uninit(positions.len()).unwrap();
+        *sample.user_header_mut() = MeshHeader {
+            version: PROTOCOL_VERSION,
+            vertex_count: 4,
+            frame_seq: 3,
+            topology_version: 1,
+            t_ns: 42,
+        };
+        sample.write_from_slice(&positions).send().unwrap();
+        let got = sub.receive().unwrap().expect("a frame");
+        assert_eq!(got.user_header().frame_seq, 3);
+        assert_eq!(got.payload(), &positions[..]);
+        let topo = topology_service(&viewer, &session).unwrap();
+        assert_eq!(topo.name().as_str(), session.service(stream::TOPOLOGY));
     }
 
     #[test]
