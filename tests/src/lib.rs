@@ -29,3 +29,18 @@ pub fn scratch_dir(tag: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("create scratch dir");
     dir
 }
+
+/// A force sample as a simulation would send it: tool 0 in contact with
+/// force `force_n`, stamped now.
+pub fn contact_sample(seq: u64, force_n: [f64; 3]) -> shared::protocol::ForceMsg {
+    let mut msg = shared::protocol::ForceMsg {
+        version: shared::protocol::PROTOCOL_VERSION,
+        tool_count: 1,
+        seq,
+        t_ns: shared::monotonic_ns(),
+        ..Default::default()
+    };
+    msg.tools[0].force_n = force_n;
+    msg.tools[0].flags = shared::protocol::CONTACT;
+    msg
+}

@@ -3,11 +3,10 @@
 //! ramps to zero within the sample-age watchdog plus the ramp, never exceeds
 //! the limit and is never NaN, and the daemon keeps running to its end.
 
-use shared::protocol::{CONTACT, ForceMsg, PROTOCOL_VERSION};
 use shared::{SessionName, monotonic_ns, services};
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, scratch_dir};
+use system_tests::{binary, contact_sample, scratch_dir};
 
 const CHILD_ENV: &str = "HAPSIM_TEST_PUBLISHER_SESSION";
 
@@ -24,16 +23,9 @@ fn publisher_child() {
         services::publisher(&services::force_service(&node, &session).unwrap()).unwrap();
     let mut seq = 0;
     loop {
-        let mut msg = ForceMsg {
-            version: PROTOCOL_VERSION,
-            tool_count: 1,
-            seq,
-            t_ns: monotonic_ns(),
-            ..ForceMsg::default()
-        };
-        msg.tools[0].force_n = [0.0, 0.0, 1.0];
-        msg.tools[0].flags = CONTACT;
-        publisher.send_copy(msg).unwrap();
+        publisher
+            .send_copy(contact_sample(seq, [0.0, 0.0, 1.0]))
+            .unwrap();
         seq += 1;
         std::thread::sleep(Duration::from_millis(2));
     }

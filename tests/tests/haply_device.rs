@@ -5,13 +5,12 @@
 
 use haptic_daemon::device::force_command;
 use serde_json::Value;
-use shared::protocol::{CONTACT, ForceMsg, PROTOCOL_VERSION};
-use shared::{SessionName, monotonic_ns, services};
+use shared::{SessionName, services};
 use std::net::TcpListener;
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use system_tests::{binary, scratch_dir};
+use system_tests::{binary, contact_sample, scratch_dir};
 
 #[test]
 fn the_daemon_drives_an_inverse3_through_the_service_protocol() {
@@ -84,16 +83,9 @@ fn the_daemon_drives_an_inverse3_through_the_service_protocol() {
     .unwrap();
     let mut seq = 0;
     while daemon.try_wait().unwrap().is_none() && seq < 3000 {
-        let mut msg = ForceMsg {
-            version: PROTOCOL_VERSION,
-            tool_count: 1,
-            seq,
-            t_ns: monotonic_ns(),
-            ..ForceMsg::default()
-        };
-        msg.tools[0].force_n = [0.0, 0.0, 1.0];
-        msg.tools[0].flags = CONTACT;
-        publisher.send_copy(msg).unwrap();
+        publisher
+            .send_copy(contact_sample(seq, [0.0, 0.0, 1.0]))
+            .unwrap();
         seq += 1;
         std::thread::sleep(Duration::from_millis(2));
     }

@@ -136,33 +136,11 @@ impl BoxSpec {
                 }
             }
         }
-        // Six paths from corner 000 to 111, one per ordering of the axes; each
-        // path's four corners form one tetrahedron.
-        const ORDERS: [[usize; 3]; 6] = [
-            [0, 1, 2],
-            [0, 2, 1],
-            [1, 0, 2],
-            [1, 2, 0],
-            [2, 0, 1],
-            [2, 1, 0],
-        ];
         let mut tets = Vec::with_capacity(6 * nx * ny * nz);
         for k in 0..nz {
             for j in 0..ny {
                 for i in 0..nx {
-                    for order in ORDERS {
-                        let mut c = [i, j, k];
-                        let mut tet = [index(i, j, k); 4];
-                        for (s, axis) in order.iter().enumerate() {
-                            c[*axis] += 1;
-                            tet[s + 1] = index(c[0], c[1], c[2]);
-                        }
-                        // Odd axis permutations give negative orientation.
-                        if matches!(order, [0, 2, 1] | [1, 0, 2] | [2, 1, 0]) {
-                            tet.swap(2, 3);
-                        }
-                        tets.push(tet);
-                    }
+                    tets.extend(kuhn_cube(i, j, k, index));
                 }
             }
         }
@@ -170,6 +148,39 @@ impl BoxSpec {
         debug_assert_eq!(mesh.reoriented(), 0);
         Ok(mesh)
     }
+}
+
+/// The six tetrahedra of grid cube (i, j, k) in the Kuhn split, positively
+/// oriented: one per path from corner 000 to 111 along the axes in some
+/// order. `corner` numbers the grid vertices. The split is the same in every
+/// cube, so neighbouring cubes share their face diagonals.
+pub(crate) fn kuhn_cube(
+    i: usize,
+    j: usize,
+    k: usize,
+    corner: impl Fn(usize, usize, usize) -> u32,
+) -> [[u32; 4]; 6] {
+    const ORDERS: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [0, 2, 1],
+        [1, 0, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [2, 1, 0],
+    ];
+    ORDERS.map(|order| {
+        let mut c = [i, j, k];
+        let mut tet = [corner(i, j, k); 4];
+        for (s, axis) in order.iter().enumerate() {
+            c[*axis] += 1;
+            tet[s + 1] = corner(c[0], c[1], c[2]);
+        }
+        // Odd axis permutations give negative orientation.
+        if matches!(order, [0, 2, 1] | [1, 0, 2] | [2, 1, 0]) {
+            tet.swap(2, 3);
+        }
+        tet
+    })
 }
 
 #[cfg(test)]

@@ -85,27 +85,11 @@ fn build_lattice(
     let mut tets = Vec::new();
     match kind {
         Lattice::Cubic => {
-            const ORDERS: [[usize; 3]; 6] = [
-                [0, 1, 2],
-                [0, 2, 1],
-                [1, 0, 2],
-                [1, 2, 0],
-                [2, 0, 1],
-                [2, 1, 0],
-            ];
             tets.reserve(6 * nx * ny * nz);
             for k in 0..nz {
                 for j in 0..ny {
                     for i in 0..nx {
-                        for order in ORDERS {
-                            let mut c = [i, j, k];
-                            let mut tet = [corner(i, j, k); 4];
-                            for (s, axis) in order.iter().enumerate() {
-                                c[*axis] += 1;
-                                tet[s + 1] = corner(c[0], c[1], c[2]);
-                            }
-                            tets.push(tet);
-                        }
+                        tets.extend(super::generate::kuhn_cube(i, j, k, corner));
                     }
                 }
             }
