@@ -34,6 +34,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod contact;
 pub mod ids;
 pub mod material;
 pub mod material_map;
