@@ -17,9 +17,11 @@
 //!   position) collides with the tip if it is closer than `radius_m` to the
 //!   tip segment, with the shaft likewise; the tip takes precedence. The
 //!   paper used OpenGL picking; here every surface vertex is tested against
-//!   the two segments (a few arithmetic operations each: for the paper's
-//!   8000-tetrahedron meshes, about 2000 surface vertices, this is a few
-//!   microseconds, so no spatial grid or collision library is used). The
+//!   the two segments (a few arithmetic operations each; update plus
+//!   reaction measured 7 us on a 726-vertex block, and the scan is linear in
+//!   the surface, so no spatial grid or collision library is used:
+//!   parry3d-f64 0.31 builds in 23 s on 2 cores, but a point-capsule
+//!   distance is all this needs and it would add no speed). The
 //!   surface vertex list is rebuilt from the live surface each update, into
 //!   reused buffers, so cuts by any tool are seen at once.
 //! - **Tip contact.** N = the mean (area-weighted) outward normal, at current
