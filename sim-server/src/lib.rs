@@ -42,6 +42,7 @@ pub mod math;
 pub mod membrane;
 pub mod mesh;
 pub mod scene;
+pub mod server;
 pub mod static_solve;
 pub mod tensor_mass;
 pub mod topology;

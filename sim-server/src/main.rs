@@ -43,6 +43,39 @@ enum Bound {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the simulation for the haptic daemon and the viewer: reads tool
+    /// poses, applies the contact models, steps in real time (or as fast as it
+    /// can with --headless), publishes force samples every step and the mesh
+    /// state at the viewer rate.
+    Run {
+        /// Scene file (default: the embedded liver scene).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Session shared with the daemon and the viewer.
+        #[arg(long, default_value = "default")]
+        session: String,
+        /// Backend (only tensor-mass in this release).
+        #[arg(long, default_value = "tensor-mass")]
+        backend: String,
+        /// Step as fast as possible instead of in real time.
+        #[arg(long)]
+        headless: bool,
+        /// Stop after this many steps.
+        #[arg(long)]
+        steps: Option<u64>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration_s: Option<f64>,
+        /// Mesh-state rate for viewers (Hz).
+        #[arg(long, default_value_t = 30.0)]
+        viewer_rate: f64,
+        /// Write the run summary as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// No status line.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Validate a scene (.toml) or a mesh (.msh, .vtk, .vtu, .mesh): counts,
     /// quality, materials per region, the stable time step, enabled models.
     /// Without FILE, checks the embedded default scene.
@@ -105,6 +138,27 @@ enum Command {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Run {
+            scene,
+            session,
+            backend,
+            headless,
+            steps,
+            duration_s,
+            viewer_rate,
+            json,
+            quiet,
+        } => cli::run::run(cli::run::RunArgs {
+            scene,
+            session,
+            backend,
+            headless,
+            steps,
+            duration_s,
+            viewer_rate,
+            json,
+            quiet,
+        })?,
         Command::Check { file, json } => cli::check::run(file.as_deref(), json.as_deref())?,
         Command::Solve { scene, out, json } => {
             cli::solve::run(scene.as_deref(), &out, json.as_deref())?

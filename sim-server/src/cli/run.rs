@@ -1,0 +1,69 @@
+//! `sim-server run`: the simulation process.
+
+use super::{load_scene, write_json};
+use anyhow::{Result, bail};
+use sim_server::server::{RunConfig, run as run_server};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// Parsed flags.
+pub struct RunArgs {
+    pub scene: Option<PathBuf>,
+    pub session: String,
+    pub backend: String,
+    pub headless: bool,
+    pub steps: Option<u64>,
+    pub duration_s: Option<f64>,
+    pub viewer_rate: f64,
+    pub json: Option<PathBuf>,
+    pub quiet: bool,
+}
+
+/// Runs until SIGINT/SIGTERM, the step count or the duration.
+pub fn run(args: RunArgs) -> Result<()> {
+    if args.backend != "tensor-mass" {
+        bail!(
+            "backend {:?} is not available in this release; use tensor-mass",
+            args.backend
+        );
+    }
+    if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {
+        bail!("--viewer-rate must be a positive number of Hz");
+    }
+    let (src, scene) = load_scene(args.scene.as_deref())?;
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    let cfg = RunConfig {
+        session: shared::SessionName::new(&args.session)?,
+        headless: args.headless,
+        max_steps: args.steps,
+        duration_s: args.duration_s,
+        viewer_rate_hz: args.viewer_rate,
+        status: !args.quiet,
+    };
+    let single = scene.settings.single_precision;
+    let summary = if single {
+        run_server::<f32>(scene, &cfg, stop)?
+    } else {
+        run_server::<f64>(scene, &cfg, stop)?
+    };
+    println!(
+        "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N",
+        src.name,
+        summary.steps,
+        summary.steps_per_s,
+        summary.sim_time_s,
+        summary.poses_received,
+        summary.samples_published,
+        summary.contact_steps,
+        summary.tets_removed,
+        summary.max_force_n
+    );
+    if let Some(path) = &args.json {
+        write_json(path, &summary)?;
+    }
+    Ok(())
+}

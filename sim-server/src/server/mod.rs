@@ -1,0 +1,330 @@
+//! The sim-server process loop (`sim-server run`): reads tool poses from the
+//! haptic daemon, applies the tool contact models, steps the tensor-mass
+//! simulation in real time (or as fast as it can, headless), publishes a
+//! force sample per step and the mesh state at the viewer rate, with the
+//! topology when cuts change it. It keeps running when the daemon or the
+//! viewer disappear and serves them again when they come back.
+
+use crate::contact::ToolContact;
+use crate::math::{Real, Vec3};
+use crate::scene::BuiltScene;
+use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
+use serde::Serialize;
+use shared::protocol::{
+    CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg,
+    TOOL_PRESENT, TopologyHeader,
+};
+use shared::services::{self, ServiceError};
+use shared::{SessionName, monotonic_ns};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use thiserror::Error;
+
+/// How to run.
+#[derive(Clone, Debug)]
+pub struct RunConfig {
+    /// Session shared with the daemon and the viewer.
+    pub session: SessionName,
+    /// Step as fast as possible instead of in real time.
+    pub headless: bool,
+    /// Stop after this many steps.
+    pub max_steps: Option<u64>,
+    /// Stop after this much wall-clock time (s).
+    pub duration_s: Option<Real>,
+    /// Mesh-state rate for viewers (Hz).
+    pub viewer_rate_hz: Real,
+    /// Print a status line every second.
+    pub status: bool,
+}
+
+/// What a run did (the JSON of `sim-server run --json`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RunSummary {
+    /// Steps taken.
+    pub steps: u64,
+    /// Steps per wall-clock second.
+    pub steps_per_s: Real,
+    /// Simulated time (s).
+    pub sim_time_s: Real,
+    /// Force samples published.
+    pub samples_published: u64,
+    /// Pose messages received.
+    pub poses_received: u64,
+    /// Steps with a tool in contact.
+    pub contact_steps: u64,
+    /// Tetrahedra removed by tools.
+    pub tets_removed: u64,
+    /// Largest |reaction force| on any tool (N).
+    pub max_force_n: Real,
+    /// Mesh frames published.
+    pub frames_published: u64,
+    /// Whether the displacements stayed finite (false = diverged, stopped).
+    pub finite: bool,
+}
+
+/// Why a run failed.
+#[derive(Debug, Error)]
+pub enum RunError {
+    /// Shared memory.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// The integrator refused the scene's step.
+    #[error(transparent)]
+    Explicit(#[from] crate::tensor_mass::ExplicitError),
+    /// A peer sent another protocol version.
+    #[error(transparent)]
+    Version(#[from] shared::protocol::VersionError),
+    /// The simulation diverged (non-finite displacements); forces were zeroed.
+    #[error(
+        "the simulation diverged at step {step} (non-finite displacements): the step is too large for this scene or a tool pushed too hard; forces were set to zero"
+    )]
+    Diverged {
+        /// The step.
+        step: u64,
+    },
+    /// A publish failed.
+    #[error("publishing {what} failed: {reason}")]
+    Publish {
+        /// What.
+        what: &'static str,
+        /// Why.
+        reason: String,
+    },
+}
+
+fn publish_err(what: &'static str) -> impl Fn(String) -> RunError {
+    move |reason| RunError::Publish { what, reason }
+}
+
+/// Runs `scene` until a stop condition or `stop` is set.
+pub fn run<S: Storage>(
+    scene: BuiltScene,
+    cfg: &RunConfig,
+    stop: Arc<AtomicBool>,
+) -> Result<RunSummary, RunError> {
+    let BuiltScene {
+        model,
+        fixed,
+        prescribed,
+        loads_n,
+        tools,
+        settings,
+        ..
+    } = scene;
+    let stable = crate::tensor_mass::element_bound(&model);
+    let dt_s = settings.dt_s.unwrap_or(0.9 * stable.dt_max_s);
+    let mut sim = Explicit::<S>::new(
+        model,
+        ExplicitConfig {
+            dt_s,
+            policy: settings.policy,
+            bound: settings.bound,
+            threads: settings.threads,
+        },
+    )?;
+    for v in &fixed {
+        sim.fix(*v);
+    }
+    for (v, d) in &prescribed {
+        sim.prescribe(*v, *d);
+    }
+    for (v, f) in loads_n.iter().enumerate() {
+        if *f != Vec3::ZERO {
+            sim.set_external_force(crate::ids::VertexId::from(v), *f);
+        }
+    }
+    let mut contacts: Vec<ToolContact> = tools
+        .iter()
+        .take(MAX_TOOLS)
+        .map(|decl| {
+            let mut c = ToolContact::new(decl, sim.model());
+            // A tool never takes over (or releases) a vertex the scene holds.
+            for v in fixed.iter().chain(prescribed.iter().map(|(v, _)| v)) {
+                c.exclude(*v);
+            }
+            c
+        })
+        .collect();
+    let node = services::node("sim-server")?;
+    let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
+    let force_pub = services::publisher(&services::force_service(&node, &cfg.session)?)?;
+    let n = sim.model().vertex_count();
+    let mesh_pub = services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?;
+    let max_tris = 4 * sim.model().mesh().tet_count();
+    let topo_pub =
+        services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?;
+    let mut tris: Vec<[u32; 3]> = Vec::with_capacity(max_tris);
+    let rest = sim.model().mesh().positions_m().to_vec();
+
+    let mut summary = RunSummary {
+        finite: true,
+        ..RunSummary::default()
+    };
+    let mut latest_pose: Option<PoseMsg> = None;
+    let mut topology_version = 1u64;
+    let mut published_topology = 0u64;
+    let start_ns = monotonic_ns();
+    let step_ns = (dt_s * 1e9) as u64;
+    let frame_every = ((1.0 / cfg.viewer_rate_hz.max(1.0)) / dt_s).max(1.0) as u64;
+    let mut last_status = start_ns;
+    let mut last_step_ns = start_ns;
+    let mut removed_total = 0u64;
+    loop {
+        if stop.load(Ordering::Relaxed)
+            || cfg.max_steps.is_some_and(|m| summary.steps >= m)
+            || cfg
+                .duration_s
+                .is_some_and(|d| (monotonic_ns() - start_ns) as Real * 1e-9 >= d)
+        {
+            break;
+        }
+        // Poses: newest wins.
+        while let Some(p) = pose_sub
+            .receive()
+            .map_err(|e| publish_err("pose receive")(format!("{e:?}")))?
+        {
+            shared::protocol::check_version("pose", p.version)?;
+            latest_pose = Some(*p);
+            summary.poses_received += 1;
+        }
+        // Contact: detect and impose before the step.
+        let mut flags = [0u32; MAX_TOOLS];
+        let mut any_contact = false;
+        for (i, c) in contacts.iter_mut().enumerate() {
+            let Some(pose) = latest_pose
+                .filter(|p| (i as u32) < p.tool_count && p.tools[i].flags & TOOL_PRESENT != 0)
+            else {
+                continue;
+            };
+            let tool = &pose.tools[i];
+            let report = c.update(&mut sim, Vec3::from_array(tool.tip_m), tool.jaw_opening);
+            if report.contact {
+                flags[i] |= CONTACT;
+                any_contact = true;
+            }
+            if report.gripping {
+                flags[i] |= GRIPPING;
+            }
+            if report.tets_removed > 0 {
+                flags[i] |= CUTTING;
+                removed_total += report.tets_removed as u64;
+                topology_version += 1;
+            }
+        }
+        sim.step();
+        summary.steps += 1;
+        if any_contact {
+            summary.contact_steps += 1;
+        }
+        if summary.steps.is_multiple_of(64)
+            && !sim.displacements().iter().flatten().all(|x| x.is_finite())
+        {
+            summary.finite = false;
+            let _ = force_pub.send_copy(ForceMsg {
+                version: PROTOCOL_VERSION,
+                seq: summary.samples_published,
+                t_ns: monotonic_ns(),
+                ..ForceMsg::default()
+            });
+            return Err(RunError::Diverged {
+                step: summary.steps,
+            });
+        }
+        // Force sample: every step.
+        let now = monotonic_ns();
+        let mut msg = ForceMsg {
+            version: PROTOCOL_VERSION,
+            tool_count: contacts.len() as u32,
+            seq: summary.samples_published,
+            t_ns: now,
+            sim_time_ns: (summary.steps as Real * dt_s * 1e9) as u64,
+            step_period_ns: now - last_step_ns,
+            ..ForceMsg::default()
+        };
+        last_step_ns = now;
+        for (i, c) in contacts.iter().enumerate() {
+            let r = c.reaction(&sim);
+            let f = r.force_n;
+            let out = &mut msg.tools[i];
+            out.force_n = f.to_array();
+            out.stiffness_n_per_m = r.stiffness_rows();
+            // The position this step used: the tool end after clamping to its length.
+            out.position_m = c.pose().map_or([0.0; 3], |p| p.end_m.to_array());
+            out.pose_seq = latest_pose.map_or(0, |p| p.seq);
+            out.flags = flags[i];
+            summary.max_force_n = summary.max_force_n.max(f.length());
+        }
+        force_pub
+            .send_copy(msg)
+            .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
+        summary.samples_published += 1;
+        // Viewer: topology when it changed, positions at the viewer rate.
+        if summary.steps.is_multiple_of(frame_every) {
+            if published_topology != topology_version {
+                tris.clear();
+                tris.extend(
+                    sim.model()
+                        .topology()
+                        .surface_triangles(sim.model().mesh())
+                        .map(|t| t.map(|v| v.0)),
+                );
+                let mut s = topo_pub
+                    .loan_slice_uninit(tris.len())
+                    .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
+                *s.user_header_mut() = TopologyHeader {
+                    version: PROTOCOL_VERSION,
+                    triangle_count: tris.len() as u32,
+                    topology_version,
+                };
+                s.write_from_slice(&tris)
+                    .send()
+                    .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
+                published_topology = topology_version;
+            }
+            let u = sim.displacements();
+            let mut s = mesh_pub
+                .loan_slice_uninit(n)
+                .map_err(|e| publish_err("mesh state")(format!("{e:?}")))?;
+            *s.user_header_mut() = MeshHeader {
+                version: PROTOCOL_VERSION,
+                vertex_count: n as u32,
+                frame_seq: summary.frames_published,
+                topology_version,
+                t_ns: now,
+            };
+            s.write_from_fn(|i| {
+                let p = rest[i] + Vec3::from_array(u[i]);
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .send()
+            .map_err(|e| publish_err("mesh state")(format!("{e:?}")))?;
+            summary.frames_published += 1;
+        }
+        if cfg.status && now - last_status >= 1_000_000_000 {
+            let secs = (now - start_ns) as Real * 1e-9;
+            eprintln!(
+                "{:8.0} steps/s | sim time {:.2} s | poses {} | contact {} | removed {} tets | max force {:.3} N",
+                summary.steps as Real / secs,
+                summary.steps as Real * dt_s,
+                summary.poses_received,
+                if any_contact { "yes" } else { "no" },
+                removed_total,
+                summary.max_force_n
+            );
+            last_status = now;
+        }
+        // Real time: the next step starts when simulated time catches up.
+        if !cfg.headless {
+            let due = start_ns + summary.steps * step_ns;
+            let now = monotonic_ns();
+            if due > now {
+                std::thread::sleep(std::time::Duration::from_nanos(due - now));
+            }
+        }
+    }
+    let secs = ((monotonic_ns() - start_ns) as Real * 1e-9).max(1e-9);
+    summary.steps_per_s = summary.steps as Real / secs;
+    summary.sim_time_s = summary.steps as Real * dt_s;
+    summary.tets_removed = removed_total;
+    Ok(summary)
+}

@@ -1,0 +1,85 @@
+//! The two processes together: sim-server run on the embedded liver and
+//! haptic-daemon run with the simulated hand in one session. Poses reach the
+//! simulation, its force samples reach the daemon, the hand's poke touches
+//! the liver, and every rendered force is finite and within the limit.
+
+use std::process::{Command, Stdio};
+use std::time::Duration;
+use system_tests::{binary, scratch_dir};
+
+#[test]
+fn simulation_and_daemon_talk_and_forces_stay_safe() {
+    let session = format!("stack{}", std::process::id());
+    let dir = scratch_dir("stack");
+    let (sim_json, daemon_json, record) = (
+        dir.join("sim.json"),
+        dir.join("daemon.json"),
+        dir.join("rec.csv"),
+    );
+    let mut sim = Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--duration-s", "4", "--session", &session])
+        .arg("--json")
+        .arg(&sim_json)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server");
+    std::thread::sleep(Duration::from_millis(300));
+    let daemon = Command::new(binary("haptic-daemon"))
+        .args([
+            "run",
+            "--quiet",
+            "--rt-priority",
+            "0",
+            "--duration-s",
+            "3",
+            "--session",
+            &session,
+        ])
+        .args(["--extrapolation", "local-model", "--max-force", "4"])
+        .arg("--json")
+        .arg(&daemon_json)
+        .arg("--record")
+        .arg(&record)
+        .output()
+        .expect("run haptic-daemon");
+    assert!(
+        daemon.status.success(),
+        "daemon: {}",
+        String::from_utf8_lossy(&daemon.stderr)
+    );
+    let mut waited = 0;
+    while sim.try_wait().unwrap().is_none() {
+        waited += 1;
+        if waited > 200 {
+            let _ = sim.kill();
+            panic!("sim-server did not stop after its duration");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = sim.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "sim-server: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&sim_json).unwrap()).unwrap();
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&daemon_json).unwrap()).unwrap();
+    assert!(s["poses_received"].as_u64().unwrap() > 100, "{s}");
+    assert!(d["samples_received"].as_u64().unwrap() > 100, "{d}");
+    assert!(s["finite"].as_bool().unwrap());
+    let max = d["max_force_n"].as_f64().unwrap();
+    assert!(max.is_finite() && max <= 4.0 + 1e-12, "{d}");
+    let rec = std::fs::read_to_string(&record).unwrap();
+    for line in rec.lines().skip(1) {
+        let f: Vec<f64> = line
+            .split(',')
+            .skip(5)
+            .take(3)
+            .map(|x| x.parse().unwrap())
+            .collect();
+        assert!(f.iter().all(|x| x.is_finite()));
+    }
+}
