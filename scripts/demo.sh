@@ -10,7 +10,7 @@ scripts/setup.sh
 cargo build --release --locked -p sim-server -p haptic-daemon
 secs=${DURATION_S:-10}
 session="demo$$"
-./target/release/sim-server check | head -3
+./target/release/sim-server check
 ./target/release/sim-server run --session "$session" --duration-s "$((secs + 1))" &
 sim=$!
 trap 'kill $sim 2>/dev/null || true' EXIT

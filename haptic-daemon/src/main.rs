@@ -17,6 +17,23 @@ use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+/// Prints to stderr, ignoring failures: a closed pipe must never panic the
+/// process while the real-time thread is commanding a device.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// Prints to stdout, ignoring failures (see `say!`).
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 #[derive(Parser)]
 #[command(
     name = "haptic-daemon",
@@ -263,7 +280,7 @@ fn main() -> Result<()> {
     };
     let warnings: Vec<String> = report_rx.recv().map(|r| r.warnings()).unwrap_or_default();
     for w in &warnings {
-        eprintln!("warning: {w}");
+        say!("warning: {w}");
     }
     let start = Instant::now();
     let mut last_status = Instant::now();
@@ -291,7 +308,7 @@ fn main() -> Result<()> {
                 format!("{:.1} ms", s.last_age_ns as f64 / 1e6)
             };
             let f = s.last_force_n;
-            eprintln!(
+            say!(
                 "{rate:7.0} Hz | lateness p50 {:.0} us p99 {:.0} us max {:.0} us | sample age {age} | force {:+.3} {:+.3} {:+.3} N | {}",
                 s.lateness.quantile_us(0.5),
                 s.lateness.quantile_us(0.99),
@@ -349,7 +366,7 @@ fn main() -> Result<()> {
         recorded_rows: s.recorded,
         warnings,
     };
-    println!(
+    out!(
         "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples",
         summary.ticks,
         summary.rate_hz,
@@ -363,7 +380,7 @@ fn main() -> Result<()> {
         summary.samples_received
     );
     for w in &summary.warnings {
-        eprintln!("warning: {w}");
+        say!("warning: {w}");
     }
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&summary)? + "\n")

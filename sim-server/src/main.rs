@@ -136,6 +136,12 @@ enum Command {
 }
 
 fn main() -> Result<()> {
+    // Behave like a Unix tool when the reader of stdout goes away
+    // (`sim-server check | head`): end quietly instead of panicking on EPIPE.
+    // SAFETY: setting a signal disposition at start, before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     match cli.command {
         Command::Run {
