@@ -76,6 +76,20 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// The whole stack on the embedded liver: sim-server and haptic-daemon with
+    /// the simulated device running a scripted hepatectomy (the grasper grips
+    /// and pulls the left lobe, the cavitron removes right-lobe parenchyma).
+    Demo {
+        /// No live status lines (the summary and JSON still come).
+        #[arg(long)]
+        headless: bool,
+        /// Seconds to run.
+        #[arg(long, default_value_t = 10.0)]
+        duration_s: f64,
+        /// Write the summary as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Validate a scene (.toml) or a mesh (.msh, .vtk, .vtu, .mesh): counts,
     /// quality, materials per region, the stable time step, enabled models.
     /// Without FILE, checks the embedded default scene.
@@ -164,6 +178,15 @@ fn main() -> Result<()> {
             viewer_rate,
             json,
             quiet,
+        })?,
+        Command::Demo {
+            headless,
+            duration_s,
+            json,
+        } => cli::demo::run(cli::demo::DemoArgs {
+            headless,
+            duration_s,
+            json,
         })?,
         Command::Check { file, json } => cli::check::run(file.as_deref(), json.as_deref())?,
         Command::Solve { scene, out, json } => {

@@ -83,3 +83,42 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
         assert!(f.iter().all(|x| x.is_finite()));
     }
 }
+
+#[test]
+fn the_headless_demo_cuts_touches_and_stays_within_the_device_limit() {
+    let dir = scratch_dir("demo");
+    let json = dir.join("demo.json");
+    let out = Command::new(binary("sim-server"))
+        .args(["demo", "--headless", "--duration-s", "7"])
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run sim-server demo");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for key in [
+        "sim_steps_per_s",
+        "haptic_ticks_per_s",
+        "tets_removed",
+        "contact_steps",
+        "max_force_n",
+        "device_max_force_n",
+    ] {
+        assert!(v[key].is_number(), "missing {key} in {v}");
+    }
+    assert!(
+        v["tets_removed"].as_u64().unwrap() > 0,
+        "the cavitron removed nothing: {v}"
+    );
+    assert!(v["contact_steps"].as_u64().unwrap() > 0, "{v}");
+    let (max, limit) = (
+        v["max_force_n"].as_f64().unwrap(),
+        v["device_max_force_n"].as_f64().unwrap(),
+    );
+    assert!(max.is_finite() && max <= limit, "{v}");
+}

@@ -2,6 +2,7 @@
 //! definitions are in main.rs).
 
 pub mod check;
+pub mod demo;
 pub mod run;
 pub mod solve;
 

@@ -43,6 +43,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         duration_s: args.duration_s,
         viewer_rate_hz: args.viewer_rate,
         status: !args.quiet,
+        scripts: Vec::new(),
     };
     let single = scene.settings.single_precision;
     let summary = if single {

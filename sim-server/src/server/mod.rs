@@ -35,6 +35,36 @@ pub struct RunConfig {
     pub viewer_rate_hz: Real,
     /// Print a status line every second.
     pub status: bool,
+    /// Tools driven by a script instead of the daemon (e.g. the demo's cavitron).
+    pub scripts: Vec<ToolScript>,
+}
+
+/// A scripted tool: tip position and jaw opening against simulated time,
+/// linearly interpolated, held after the last point.
+#[derive(Clone, Debug)]
+pub struct ToolScript {
+    /// Index of the scene's `[[tool]]`.
+    pub tool: usize,
+    /// (time s, tip m, jaw opening), times increasing.
+    pub points: Vec<(Real, Vec3, Real)>,
+}
+
+impl ToolScript {
+    /// The tip and jaw at simulated time `t_s`.
+    pub fn at(&self, t_s: Real) -> (Vec3, Real) {
+        let p = &self.points;
+        let k = p.partition_point(|x| x.0 <= t_s);
+        if k == 0 {
+            return (p[0].1, p[0].2);
+        }
+        if k >= p.len() {
+            let last = p[p.len() - 1];
+            return (last.1, last.2);
+        }
+        let (a, b) = (p[k - 1], p[k]);
+        let w = (t_s - a.0) / (b.0 - a.0);
+        (a.1 + (b.1 - a.1) * w, a.2 + (b.2 - a.2) * w)
+    }
 }
 
 /// What a run did (the JSON of `sim-server run --json`).
@@ -190,14 +220,22 @@ pub fn run<S: Storage>(
         // Contact: detect and impose before the step.
         let mut flags = [0u32; MAX_TOOLS];
         let mut any_contact = false;
+        let sim_t_s = summary.steps as Real * dt_s;
         for (i, c) in contacts.iter_mut().enumerate() {
-            let Some(pose) = latest_pose
-                .filter(|p| (i as u32) < p.tool_count && p.tools[i].flags & TOOL_PRESENT != 0)
-            else {
-                continue;
+            let (tip, jaw) = if let Some(script) = cfg.scripts.iter().find(|s| s.tool == i) {
+                script.at(sim_t_s)
+            } else {
+                let Some(pose) = latest_pose
+                    .filter(|p| (i as u32) < p.tool_count && p.tools[i].flags & TOOL_PRESENT != 0)
+                else {
+                    continue;
+                };
+                (
+                    Vec3::from_array(pose.tools[i].tip_m),
+                    pose.tools[i].jaw_opening,
+                )
             };
-            let tool = &pose.tools[i];
-            let report = c.update(&mut sim, Vec3::from_array(tool.tip_m), tool.jaw_opening);
+            let report = c.update(&mut sim, tip, jaw);
             if report.contact {
                 flags[i] |= CONTACT;
                 any_contact = true;

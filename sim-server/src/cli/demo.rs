@@ -1,0 +1,155 @@
+//! `sim-server demo`: the whole stack on the embedded liver with a simulated
+//! device running a scripted hepatectomy: the daemon's simulated hand holds
+//! the grasper, which grips the left lobe and pulls it while the cavitron
+//! (scripted in the simulation) removes right-lobe parenchyma.
+
+use super::{load_scene, write_json};
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+use sim_server::math::Vec3;
+use sim_server::server::{RunConfig, ToolScript, run as run_server};
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// The grasper's scripted hand (a trajectory for the daemon's simulated device).
+const GRASPER_CSV: &str = include_str!("../../scenes/hepatectomy-grasper.csv");
+
+/// Parsed flags.
+pub struct DemoArgs {
+    pub headless: bool,
+    pub duration_s: f64,
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct DemoJson {
+    sim_steps_per_s: f64,
+    haptic_ticks_per_s: f64,
+    tets_removed: u64,
+    contact_steps: u64,
+    max_force_n: f64,
+    device_max_force_n: f64,
+    poses_received: u64,
+    samples_received_by_daemon: u64,
+    duration_s: f64,
+}
+
+/// The cavitron: from outside the anterior face of the right lobe, slowly in.
+fn cavitron_script() -> ToolScript {
+    ToolScript {
+        tool: 1,
+        points: vec![
+            (0.0, Vec3::new(-0.04, 0.12, 0.0), 1.0),
+            (2.0, Vec3::new(-0.04, 0.08, 0.0), 1.0),
+            (8.0, Vec3::new(-0.04, 0.03, 0.0), 1.0),
+            (10.0, Vec3::new(-0.04, 0.12, 0.0), 1.0),
+        ],
+    }
+}
+
+/// Runs the demo.
+pub fn run(args: DemoArgs) -> Result<()> {
+    if !(args.duration_s.is_finite() && args.duration_s > 0.0) {
+        bail!("--duration-s must be positive");
+    }
+    let (src, scene) = load_scene(None)?;
+    if scene.tools.len() < 2 {
+        bail!("the demo scene needs two tools");
+    }
+    let exe = std::env::current_exe()?;
+    let daemon_bin = exe.with_file_name("haptic-daemon");
+    if !daemon_bin.exists() {
+        bail!(
+            "{} not found: build it with `cargo build --release -p haptic-daemon`",
+            daemon_bin.display()
+        );
+    }
+    let pid = std::process::id();
+    let session = format!("demo{pid}");
+    let dir = std::env::temp_dir();
+    let traj = dir.join(format!("hapsim-demo-{pid}.csv"));
+    let daemon_json = dir.join(format!("hapsim-demo-{pid}-daemon.json"));
+    std::fs::write(&traj, GRASPER_CSV)
+        .with_context(|| format!("cannot write {}", traj.display()))?;
+    let mut daemon_cmd = Command::new(&daemon_bin);
+    daemon_cmd
+        .args([
+            "run",
+            "--session",
+            &session,
+            "--extrapolation",
+            "local-model",
+        ])
+        .arg("--device")
+        .arg(format!("simulated:{}", traj.display()))
+        .arg("--duration-s")
+        .arg(format!("{}", args.duration_s))
+        .arg("--json")
+        .arg(&daemon_json)
+        .stdout(Stdio::null());
+    if args.headless {
+        daemon_cmd.arg("--quiet");
+    }
+    let mut daemon = daemon_cmd
+        .spawn()
+        .with_context(|| format!("cannot start {}", daemon_bin.display()))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    let cfg = RunConfig {
+        session: shared::SessionName::new(&session)?,
+        headless: false,
+        max_steps: None,
+        duration_s: Some(args.duration_s + 0.3),
+        viewer_rate_hz: 30.0,
+        status: !args.headless,
+        scripts: vec![cavitron_script()],
+    };
+    let result = if scene.settings.single_precision {
+        run_server::<f32>(scene, &cfg, stop)
+    } else {
+        run_server::<f64>(scene, &cfg, stop)
+    };
+    let summary = match result {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = daemon.kill();
+            return Err(e.into());
+        }
+    };
+    let status = daemon.wait()?;
+    let _ = std::fs::remove_file(&traj);
+    if !status.success() {
+        bail!("haptic-daemon failed ({status})");
+    }
+    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&daemon_json)?)?;
+    let _ = std::fs::remove_file(&daemon_json);
+    let out = DemoJson {
+        sim_steps_per_s: summary.steps_per_s,
+        haptic_ticks_per_s: d["rate_hz"].as_f64().unwrap_or(0.0),
+        tets_removed: summary.tets_removed,
+        contact_steps: summary.contact_steps,
+        max_force_n: d["max_force_n"].as_f64().unwrap_or(f64::NAN),
+        device_max_force_n: d["device_max_force_n"].as_f64().unwrap_or(f64::NAN),
+        poses_received: summary.poses_received,
+        samples_received_by_daemon: d["samples_received"].as_u64().unwrap_or(0),
+        duration_s: args.duration_s,
+    };
+    println!(
+        "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed | max rendered force {:.3} N (device limit {} N)",
+        src.name,
+        out.sim_steps_per_s,
+        out.haptic_ticks_per_s,
+        out.contact_steps,
+        out.tets_removed,
+        out.max_force_n,
+        out.device_max_force_n
+    );
+    if let Some(path) = &args.json {
+        write_json(path, &out)?;
+    }
+    Ok(())
+}
