@@ -34,6 +34,7 @@ struct DemoJson {
     poses_received: u64,
     samples_received_by_daemon: u64,
     duration_s: f64,
+    contact_fraction: f64,
 }
 
 /// The cavitron: from outside the anterior face of the right lobe, slowly in.
@@ -137,14 +138,16 @@ pub fn run(args: DemoArgs) -> Result<()> {
         poses_received: summary.poses_received,
         samples_received_by_daemon: d["samples_received"].as_u64().unwrap_or(0),
         duration_s: args.duration_s,
+        contact_fraction: summary.contact_fraction,
     };
     println!(
-        "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed | max rendered force {:.3} N (device limit {} N)",
+        "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed, tools {:.1}% of the step | max rendered force {:.3} N (device limit {} N)",
         src.name,
         out.sim_steps_per_s,
         out.haptic_ticks_per_s,
         out.contact_steps,
         out.tets_removed,
+        100.0 * out.contact_fraction,
         out.max_force_n,
         out.device_max_force_n
     );

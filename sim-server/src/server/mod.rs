@@ -90,6 +90,12 @@ pub struct RunSummary {
     pub frames_published: u64,
     /// Whether the displacements stayed finite (false = diverged, stopped).
     pub finite: bool,
+    /// Wall-clock time in contact detection, response and reaction (s).
+    pub contact_s: Real,
+    /// Wall-clock time in the simulation steps (s).
+    pub step_s: Real,
+    /// contact_s / (contact_s + step_s): what the tools cost per step.
+    pub contact_fraction: Real,
 }
 
 /// Why a run failed.
@@ -220,6 +226,7 @@ pub fn run<S: Storage>(
         // Contact: detect and impose before the step.
         let mut flags = [0u32; MAX_TOOLS];
         let mut any_contact = false;
+        let contact_t0 = monotonic_ns();
         let sim_t_s = summary.steps as Real * dt_s;
         for (i, c) in contacts.iter_mut().enumerate() {
             let (tip, jaw) = if let Some(script) = cfg.scripts.iter().find(|s| s.tool == i) {
@@ -249,7 +256,11 @@ pub fn run<S: Storage>(
                 topology_version += 1;
             }
         }
+        let step_t0 = monotonic_ns();
+        summary.contact_s += (step_t0 - contact_t0) as Real * 1e-9;
         sim.step();
+        let step_t1 = monotonic_ns();
+        summary.step_s += (step_t1 - step_t0) as Real * 1e-9;
         summary.steps += 1;
         if any_contact {
             summary.contact_steps += 1;
@@ -280,6 +291,7 @@ pub fn run<S: Storage>(
             ..ForceMsg::default()
         };
         last_step_ns = now;
+        let reaction_t0 = monotonic_ns();
         for (i, c) in contacts.iter().enumerate() {
             let r = c.reaction(&sim);
             let f = r.force_n;
@@ -292,6 +304,7 @@ pub fn run<S: Storage>(
             out.flags = flags[i];
             summary.max_force_n = summary.max_force_n.max(f.length());
         }
+        summary.contact_s += (monotonic_ns() - reaction_t0) as Real * 1e-9;
         force_pub
             .send_copy(msg)
             .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
@@ -364,5 +377,6 @@ pub fn run<S: Storage>(
     summary.steps_per_s = summary.steps as Real / secs;
     summary.sim_time_s = summary.steps as Real * dt_s;
     summary.tets_removed = removed_total;
+    summary.contact_fraction = summary.contact_s / (summary.contact_s + summary.step_s).max(1e-12);
     Ok(summary)
 }
