@@ -305,6 +305,39 @@ mod tests {
     }
 
     #[test]
+    fn a_peer_of_another_protocol_version_is_refused_with_a_clear_error() {
+        let session = unique_session("version");
+        let other = node("test-old-peer").unwrap();
+        // A peer built from another release created the service with version 999.
+        let name = ServiceName::new(&session.service(stream::FORCE)).unwrap();
+        let key = AttributeKey::new(VERSION_KEY.as_bytes()).unwrap();
+        let value = AttributeValue::new(b"999").unwrap();
+        let _old = other
+            .service_builder(&name)
+            .publish_subscribe::<ForceMsg>()
+            .max_publishers(2)
+            .max_subscribers(8)
+            .history_size(1)
+            .subscriber_max_buffer_size(4)
+            .enable_safe_overflow(true)
+            .create_with_attributes(
+                &iceoryx2::service::attribute::AttributeSpecifier::new()
+                    .define(&key, &value)
+                    .unwrap(),
+            )
+            .unwrap();
+        let me = node("test-new-peer").unwrap();
+        let err = force_service(&me, &session)
+            .err()
+            .expect("a version mismatch must be refused");
+        assert!(matches!(err, ServiceError::Version { .. }), "{err}");
+        assert!(
+            err.to_string().contains("another protocol version"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn sessions_do_not_meet() {
         let (a, b) = (unique_session("a"), unique_session("b"));
         let n = node("test-sessions").unwrap();
