@@ -327,9 +327,9 @@ mod tests {
             )
             .unwrap();
         let me = node("test-new-peer").unwrap();
-        let err = force_service(&me, &session)
-            .err()
-            .expect("a version mismatch must be refused");
+        let Err(err) = force_service(&me, &session) else {
+            panic!("a version mismatch must be refused");
+        };
         assert!(matches!(err, ServiceError::Version { .. }), "{err}");
         assert!(
             err.to_string().contains("another protocol version"),
