@@ -18,7 +18,17 @@ pub struct Segment {
 }
 
 impl Segment {
-    /// Distance (m) from `x_m` to the segment.
+    /// A cheap rejection before [`Segment::distance_m`]: false when `x_m`
+    /// is outside the segment's bounding box grown by `r_m` (then it is
+    /// certainly farther than `r_m`).
+    #[inline]
+    pub fn might_touch(&self, x_m: Vec3, r_m: Real) -> bool {
+        let lo = self.a_m.min(self.b_m) - Vec3::splat(r_m);
+        let hi = self.a_m.max(self.b_m) + Vec3::splat(r_m);
+        x_m.cmpge(lo).all() && x_m.cmple(hi).all()
+    }
+
+    /// Distance from `x_m` to the segment (m).
     pub fn distance_m(&self, x_m: Vec3) -> Real {
         let d = self.b_m - self.a_m;
         let len2 = d.length_squared();

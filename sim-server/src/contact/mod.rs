@@ -159,6 +159,8 @@ pub struct ToolContact {
     previous: Vec<Constraint>,
     surface: Vec<VertexId>,
     on_surface: Vec<bool>,
+    /// `ElasticModel::topology_changes` when `surface` was built.
+    surface_seen: Option<u64>,
     near: Vec<bool>,
     hits: Vec<VertexId>,
     kept: Vec<VertexId>,
@@ -206,6 +208,7 @@ impl ToolContact {
             previous: Vec::new(),
             surface: Vec::new(),
             on_surface: vec![false; n],
+            surface_seen: None,
             near: vec![false; n],
             hits: Vec::new(),
             kept: Vec::new(),
@@ -265,7 +268,12 @@ impl ToolContact {
             ToolKind::Cavitron => removed += self.burn(sim, &pose),
             ToolKind::Hook => {}
         }
-        self.refresh_surface(sim.model());
+        // The surface vertex set changes only with cuts (by any tool).
+        let changes = sim.model().topology_changes();
+        if self.surface_seen != Some(changes) {
+            self.refresh_surface(sim.model());
+            self.surface_seen = Some(changes);
+        }
         let offset = pose.end_m - self.grip_end_m;
         for i in 0..self.gripped.len() {
             let (v, p) = self.gripped[i];
@@ -375,7 +383,7 @@ impl ToolContact {
                 continue;
             }
             let x = sim.position(v);
-            if segment.distance_m(x) < r {
+            if segment.might_touch(x, r) && segment.distance_m(x) < r {
                 self.hits.push(v);
             } else if self.role[v.idx()] == role {
                 self.kept.push(v);
@@ -474,7 +482,10 @@ impl ToolContact {
         let topo = sim.model().topology();
         for v in 0..sim.model().vertex_count() {
             let v = VertexId::from(v);
-            if topo.vertex_tet_count(v) > 0 && pose.tip.distance_m(sim.position(v)) < pose.radius_m
+            let x = sim.position(v);
+            if topo.vertex_tet_count(v) > 0
+                && pose.tip.might_touch(x, pose.radius_m)
+                && pose.tip.distance_m(x) < pose.radius_m
             {
                 let range =
                     self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;

@@ -69,6 +69,7 @@ pub struct ElasticModel {
     damping_kg_s: Vec<Real>,
     membrane: Option<Membrane>,
     orphans: Orphans,
+    topology_changes: u64,
 }
 
 impl ElasticModel {
@@ -94,6 +95,7 @@ impl ElasticModel {
             topo,
             membrane: None,
             orphans: Orphans::default(),
+            topology_changes: 0,
         };
         for t in 0..model.mesh.tet_count() {
             model.accumulate(TetId::from(t), 1.0);
@@ -127,6 +129,13 @@ impl ElasticModel {
         }
         self.membrane = Some(membrane);
         Ok(self)
+    }
+
+    /// Counts removals and restorations: a reader that cached something
+    /// derived from the topology (the surface vertex set) rebuilds it only
+    /// when this changes.
+    pub fn topology_changes(&self) -> u64 {
+        self.topology_changes
     }
 
     /// The membrane, if the model has one.
@@ -225,6 +234,7 @@ impl ElasticModel {
             self.damping_kg_s[v.idx()] = 0.0;
         }
         self.orphans = orphans;
+        self.topology_changes += 1;
         Ok(self.change(t))
     }
 
@@ -237,6 +247,7 @@ impl ElasticModel {
         self.topo.revive(t, self.mesh.tets()[t.idx()]);
         self.accumulate(t, 1.0);
         self.accumulate_membrane(t, 1.0);
+        self.topology_changes += 1;
         Ok(self.change(t))
     }
 
