@@ -42,6 +42,18 @@ pub struct Stats {
     pub last_t_ns: u64,
 }
 
+impl Stats {
+    /// Ticks per second over the ticks seen (0 before two ticks).
+    pub fn rate_hz(&self) -> f64 {
+        let span_s = self.last_t_ns.saturating_sub(self.first_t_ns) as f64 * 1e-9;
+        if span_s > 0.0 {
+            self.ticks.saturating_sub(1) as f64 / span_s
+        } else {
+            0.0
+        }
+    }
+}
+
 /// I/O thread failures.
 #[derive(Debug, Error)]
 pub enum IoError {

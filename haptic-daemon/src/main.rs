@@ -296,12 +296,7 @@ fn main() -> Result<()> {
         if !args.quiet && last_status.elapsed() >= Duration::from_secs(1) {
             last_status = Instant::now();
             let s = stats.lock().expect("stats");
-            let span = (s.last_t_ns.saturating_sub(s.first_t_ns)) as f64 * 1e-9;
-            let rate = if span > 0.0 {
-                (s.ticks.saturating_sub(1)) as f64 / span
-            } else {
-                0.0
-            };
+            let rate = s.rate_hz();
             let age = if s.last_age_ns == u64::MAX {
                 "none".to_string()
             } else {
@@ -333,7 +328,6 @@ fn main() -> Result<()> {
     let (ticks, overruns) = rt_result?;
     io_result?;
     let s = stats.lock().expect("stats");
-    let span = (s.last_t_ns.saturating_sub(s.first_t_ns)) as f64 * 1e-9;
     let mut warnings = warnings;
     if shared.flags.version_mismatch.load(Ordering::Relaxed) {
         warnings.push(format!(
@@ -343,11 +337,7 @@ fn main() -> Result<()> {
     }
     let summary = Summary {
         ticks,
-        rate_hz: if span > 0.0 {
-            (s.ticks.saturating_sub(1)) as f64 / span
-        } else {
-            0.0
-        },
+        rate_hz: s.rate_hz(),
         target_rate_hz: args.rate,
         lateness_us: Lateness {
             p50: s.lateness.quantile_us(0.5),

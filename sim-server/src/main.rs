@@ -47,49 +47,11 @@ enum Command {
     /// poses, applies the contact models, steps in real time (or as fast as it
     /// can with --headless), publishes force samples every step and the mesh
     /// state at the viewer rate.
-    Run {
-        /// Scene file (default: the embedded liver scene).
-        #[arg(long)]
-        scene: Option<PathBuf>,
-        /// Session shared with the daemon and the viewer.
-        #[arg(long, default_value = "default")]
-        session: String,
-        /// Backend (only tensor-mass in this release).
-        #[arg(long, default_value = "tensor-mass")]
-        backend: String,
-        /// Step as fast as possible instead of in real time.
-        #[arg(long)]
-        headless: bool,
-        /// Stop after this many steps.
-        #[arg(long)]
-        steps: Option<u64>,
-        /// Stop after this many seconds.
-        #[arg(long)]
-        duration_s: Option<f64>,
-        /// Mesh-state rate for viewers (Hz).
-        #[arg(long, default_value_t = 30.0)]
-        viewer_rate: f64,
-        /// Write the run summary as JSON here.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// No status line.
-        #[arg(long)]
-        quiet: bool,
-    },
+    Run(cli::run::RunArgs),
     /// The whole stack on the embedded liver: sim-server and haptic-daemon with
     /// the simulated device running a scripted hepatectomy (the grasper grips
     /// and pulls the left lobe, the cavitron removes right-lobe parenchyma).
-    Demo {
-        /// No live status lines (the summary and JSON still come).
-        #[arg(long)]
-        headless: bool,
-        /// Seconds to run.
-        #[arg(long, default_value_t = 10.0)]
-        duration_s: f64,
-        /// Write the summary as JSON here.
-        #[arg(long)]
-        json: Option<PathBuf>,
-    },
+    Demo(cli::demo::DemoArgs),
     /// Validate a scene (.toml) or a mesh (.msh, .vtk, .vtu, .mesh): counts,
     /// quality, materials per region, the stable time step, enabled models.
     /// Without FILE, checks the embedded default scene.
@@ -158,36 +120,8 @@ fn main() -> Result<()> {
     }
     let cli = Cli::parse();
     match cli.command {
-        Command::Run {
-            scene,
-            session,
-            backend,
-            headless,
-            steps,
-            duration_s,
-            viewer_rate,
-            json,
-            quiet,
-        } => cli::run::run(cli::run::RunArgs {
-            scene,
-            session,
-            backend,
-            headless,
-            steps,
-            duration_s,
-            viewer_rate,
-            json,
-            quiet,
-        })?,
-        Command::Demo {
-            headless,
-            duration_s,
-            json,
-        } => cli::demo::run(cli::demo::DemoArgs {
-            headless,
-            duration_s,
-            json,
-        })?,
+        Command::Run(args) => cli::run::run(args)?,
+        Command::Demo(args) => cli::demo::run(args)?,
         Command::Check { file, json } => cli::check::run(file.as_deref(), json.as_deref())?,
         Command::Solve { scene, out, json } => {
             cli::solve::run(scene.as_deref(), &out, json.as_deref())?

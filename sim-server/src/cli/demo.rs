@@ -16,10 +16,17 @@ use std::sync::atomic::AtomicBool;
 /// The grasper's scripted hand (a trajectory for the daemon's simulated device).
 const GRASPER_CSV: &str = include_str!("../../scenes/hepatectomy-grasper.csv");
 
-/// Parsed flags.
+/// Flags of `sim-server demo`.
+#[derive(clap::Args)]
 pub struct DemoArgs {
+    /// No live status lines (the summary and JSON still come).
+    #[arg(long)]
     pub headless: bool,
+    /// Seconds to run.
+    #[arg(long, default_value_t = 10.0)]
     pub duration_s: f64,
+    /// Write the summary as JSON here.
+    #[arg(long)]
     pub json: Option<PathBuf>,
 }
 

@@ -7,16 +7,35 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-/// Parsed flags.
+/// Flags of `sim-server run`.
+#[derive(clap::Args)]
 pub struct RunArgs {
+    /// Scene file (default: the embedded liver scene).
+    #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Session shared with the daemon and the viewer.
+    #[arg(long, default_value = "default")]
     pub session: String,
+    /// Backend (only tensor-mass in this release).
+    #[arg(long, default_value = "tensor-mass")]
     pub backend: String,
+    /// Step as fast as possible instead of in real time.
+    #[arg(long)]
     pub headless: bool,
+    /// Stop after this many steps.
+    #[arg(long)]
     pub steps: Option<u64>,
+    /// Stop after this many seconds.
+    #[arg(long)]
     pub duration_s: Option<f64>,
+    /// Mesh-state rate for viewers (Hz).
+    #[arg(long, default_value_t = 30.0)]
     pub viewer_rate: f64,
+    /// Write the run summary as JSON here.
+    #[arg(long)]
     pub json: Option<PathBuf>,
+    /// No status line.
+    #[arg(long)]
     pub quiet: bool,
 }
 
