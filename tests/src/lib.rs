@@ -44,3 +44,9 @@ pub fn contact_sample(seq: u64, force_n: [f64; 3]) -> shared::protocol::ForceMsg
     msg.tools[0].flags = shared::protocol::CONTACT;
     msg
 }
+
+/// Reads a JSON file a binary wrote (panics naming the file if it cannot).
+pub fn read_json(path: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}

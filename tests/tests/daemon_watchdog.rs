@@ -6,7 +6,7 @@
 use shared::{SessionName, monotonic_ns, services};
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, contact_sample, scratch_dir};
+use system_tests::{binary, contact_sample, read_json, scratch_dir};
 
 const CHILD_ENV: &str = "HAPSIM_TEST_PUBLISHER_SESSION";
 
@@ -131,8 +131,7 @@ fn forces_arrive_and_ramp_to_zero_when_the_simulation_is_killed() {
         after_max, 0.0,
         "force still {after_max} N after the watchdog and the ramp"
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value = read_json(&json);
     for key in ["ticks", "rate_hz", "max_force_n", "device_max_force_n"] {
         assert!(v[key].is_number(), "missing {key}");
     }

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use system_tests::{binary, scratch_dir};
+use system_tests::{binary, read_json, scratch_dir};
 
 fn build_plugin(dir: &Path) -> PathBuf {
     let src = concat!(env!("CARGO_MANIFEST_DIR"), "/plugin/fake_device.c");
@@ -57,8 +57,7 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value = read_json(&json);
     assert_eq!(
         v["device_max_force_n"].as_f64(),
         Some(3.3),
@@ -73,8 +72,7 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
         "a NaN device must not crash the daemon: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value = read_json(&json);
     let f = v["max_force_n"].as_f64().unwrap();
     assert!(f.is_finite() && f <= 3.3);
 

@@ -2,7 +2,7 @@
 //! JSON keys that scripts rely on, with values that make sense.
 
 use std::process::Command;
-use system_tests::{binary, scratch_dir};
+use system_tests::{binary, read_json, scratch_dir};
 
 #[test]
 fn bench_writes_the_documented_json_keys() {
@@ -31,8 +31,7 @@ fn bench_writes_the_documented_json_keys() {
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("steps/s"), "{stdout}");
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value = read_json(&json);
     for key in [
         "tets",
         "vertices",
@@ -151,8 +150,7 @@ force_n = [0.0, 0.0, -0.01]
     );
     let xml = std::fs::read_to_string(&vtu).unwrap();
     assert!(xml.contains("Name=\"displacement\"") && xml.contains("Name=\"force\""));
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value = read_json(&json);
     let load = v["total_load_n"][2].as_f64().unwrap();
     let reaction = v["total_reaction_n"][2].as_f64().unwrap();
     assert!(

@@ -5,7 +5,7 @@
 
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, scratch_dir};
+use system_tests::{binary, read_json, scratch_dir};
 
 #[test]
 fn simulation_and_daemon_talk_and_forces_stay_safe() {
@@ -63,10 +63,8 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
         "sim-server: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&sim_json).unwrap()).unwrap();
-    let d: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&daemon_json).unwrap()).unwrap();
+    let s: serde_json::Value = read_json(&sim_json);
+    let d: serde_json::Value = read_json(&daemon_json);
     assert!(s["poses_received"].as_u64().unwrap() > 100, "{s}");
     assert!(d["samples_received"].as_u64().unwrap() > 100, "{d}");
     assert!(s["finite"].as_bool().unwrap());
@@ -99,8 +97,7 @@ fn the_headless_demo_cuts_touches_and_stays_within_the_device_limit() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value = read_json(&json);
     for key in [
         "sim_steps_per_s",
         "haptic_ticks_per_s",
