@@ -206,6 +206,11 @@ impl Topology {
         self.surface.len()
     }
 
+    /// Whether face `k` (index into [`TET_FACES`]) of `t` is on the surface.
+    pub fn is_surface_face(&self, t: TetId, k: usize) -> bool {
+        self.surface_slot[t.idx()][k] != NONE
+    }
+
     /// The current surface faces as (tetrahedron, local face index into
     /// [`TET_FACES`]).
     pub fn surface_faces(&self) -> impl Iterator<Item = (TetId, usize)> + '_ {

@@ -5,7 +5,9 @@
 //! gripped tissue follows the tool, and cutting tools remove exactly what
 //! their rule names.
 
-use sim_server::contact::{ConstraintKind, Plane, ToolContact};
+use sim_server::contact::{
+    Constraint, ConstraintKind, ContactReport, Plane, Reaction, ToolInput, ToolPose, Tools,
+};
 use sim_server::prelude::*;
 use sim_server::scene::ToolDecl;
 use sim_server::scene::spec::ToolKind;
@@ -16,7 +18,42 @@ const HEIGHT_M: f64 = 0.02;
 const RADIUS_M: f64 = 0.005;
 const CENTRE: [f64; 2] = [0.02, 0.02];
 
-fn setup(kind: ToolKind) -> (Explicit<f64>, ToolContact) {
+/// One tool in a [`Tools`] set, driven like a lone instrument.
+struct Single(Tools);
+
+impl Single {
+    /// `decl` over `sim`, the fixed bottom reserved.
+    fn new(decl: &ToolDecl, sim: &Explicit<f64>) -> Self {
+        let mut tools = Tools::new(std::slice::from_ref(decl), sim.model());
+        for v in bottom(sim) {
+            tools.reserve(v);
+        }
+        Self(tools)
+    }
+
+    fn update(&mut self, sim: &mut Explicit<f64>, tip_m: Vec3, jaw_opening: f64) -> ContactReport {
+        self.0
+            .update(sim, &[Some(ToolInput { tip_m, jaw_opening })])[0]
+    }
+
+    fn constraints(&self) -> &[Constraint] {
+        self.0.tool(0).constraints()
+    }
+
+    fn reaction(&self, sim: &Explicit<f64>) -> Reaction {
+        self.0.reaction(0, sim)
+    }
+
+    fn pose(&self) -> Option<&ToolPose> {
+        self.0.tool(0).pose()
+    }
+
+    fn decl(&self) -> &ToolDecl {
+        self.0.tool(0).decl()
+    }
+}
+
+fn setup(kind: ToolKind) -> (Explicit<f64>, Single) {
     let mesh = BoxSpec::new(Vec3::new(0.04, 0.04, HEIGHT_M), CellSize::EdgeM(0.004))
         .generate()
         .unwrap();
@@ -32,11 +69,10 @@ fn setup(kind: ToolKind) -> (Explicit<f64>, ToolContact) {
         radius_m: RADIUS_M,
         tip_length_m: 0.01,
     };
-    let mut tool = ToolContact::new(&decl, sim.model());
     for v in bottom(&sim) {
         sim.fix(v);
-        tool.exclude(v);
     }
+    let tool = Single::new(&decl, &sim);
     (sim, tool)
 }
 
@@ -55,14 +91,7 @@ fn tip(depth_m: f64, x: f64, y: f64) -> Vec3 {
 }
 
 /// Moves the tip linearly from `a` to `b` over `steps` steps (update, step).
-fn travel(
-    sim: &mut Explicit<f64>,
-    tool: &mut ToolContact,
-    a: Vec3,
-    b: Vec3,
-    steps: usize,
-    jaw: f64,
-) {
+fn travel(sim: &mut Explicit<f64>, tool: &mut Single, a: Vec3, b: Vec3, steps: usize, jaw: f64) {
     for k in 1..=steps {
         let t = a.lerp(b, k as f64 / steps as f64);
         tool.update(sim, t, jaw);
@@ -70,7 +99,7 @@ fn travel(
     }
 }
 
-fn press(sim: &mut Explicit<f64>, tool: &mut ToolContact, depth_m: f64, hold: usize) -> Vec3 {
+fn press(sim: &mut Explicit<f64>, tool: &mut Single, depth_m: f64, hold: usize) -> Vec3 {
     let end = tip(depth_m, CENTRE[0], CENTRE[1]);
     travel(sim, tool, tip(-0.001, CENTRE[0], CENTRE[1]), end, 100, 1.0);
     travel(sim, tool, end, end, hold, 1.0);
@@ -84,7 +113,7 @@ fn surface_vertices(sim: &Explicit<f64>) -> BTreeSet<VertexId> {
 
 /// Every tip constraint is where it was put, on the plane tangent to the
 /// tip capsule, and no surface vertex is inside the tool by more than `slack_m`.
-fn check_plane_and_clearance(sim: &Explicit<f64>, tool: &ToolContact, slack_m: f64) {
+fn check_plane_and_clearance(sim: &Explicit<f64>, tool: &Single, slack_m: f64) {
     let pose = *tool.pose().unwrap();
     for c in tool.constraints() {
         let x = sim.position(c.vertex);
@@ -243,7 +272,7 @@ fn gripped_vertices_follow_the_tip_and_are_released_when_the_jaws_open() {
 }
 
 /// Live tetrahedra with a vertex within the radius of the tool's tip, by brute force.
-fn touching_tip(sim: &Explicit<f64>, tool: &ToolContact, tip_m: Vec3) -> BTreeSet<TetId> {
+fn touching_tip(sim: &Explicit<f64>, tool: &Single, tip_m: Vec3) -> BTreeSet<TetId> {
     let decl = tool.decl();
     let fulcrum = Vec3::from_array(decl.fulcrum_m);
     let t = (tip_m - fulcrum).normalize();
@@ -333,10 +362,7 @@ fn shaft_pressing_across_the_top_pushes_it_down_along_the_shaft_plane() {
         radius_m: RADIUS_M,
         tip_length_m: 0.01,
     };
-    let mut tool = ToolContact::new(&decl, sim.model());
-    for v in bottom(&sim) {
-        tool.exclude(v);
-    }
+    let mut tool = Single::new(&decl, &sim);
     let a = Vec3::new(0.1, 0.02, z + 0.003);
     let b = Vec3::new(0.1, 0.02, z);
     travel(&mut sim, &mut tool, a, b, 100, 1.0);
@@ -404,4 +430,139 @@ fn static_press_reaction_matches_the_static_solver() {
     let err = (dynamic - on_tool).length() / on_tool.length();
     println!("dynamic {dynamic} N, static {on_tool} N, relative difference {err:.2e}");
     assert!(err < 1e-6, "dynamic {dynamic} vs static {on_tool}");
+}
+
+/// Two vertical tools over the block: `kinds[i]` with its fulcrum above
+/// (x_i, centre y).
+fn two_tools(sim: &Explicit<f64>, kinds: [ToolKind; 2], x: [f64; 2]) -> Tools {
+    let decls: Vec<ToolDecl> = (0..2)
+        .map(|i| ToolDecl {
+            name: format!("tool{i}"),
+            kind: kinds[i],
+            fulcrum_m: [x[i], CENTRE[1], 0.12],
+            length_m: 0.3,
+            radius_m: RADIUS_M,
+            tip_length_m: 0.01,
+        })
+        .collect();
+    let mut tools = Tools::new(&decls, sim.model());
+    for v in bottom(sim) {
+        tools.reserve(v);
+    }
+    tools
+}
+
+/// Each constrained vertex belongs to exactly one tool, sits at its target
+/// after the step (no tool released what another holds), and the tools'
+/// reactions add up to the elastic force on the union of their vertices.
+fn check_exclusive(sim: &Explicit<f64>, tools: &Tools) {
+    let mut seen = BTreeSet::new();
+    for (i, t) in tools.iter().enumerate() {
+        for c in t.constraints() {
+            assert!(seen.insert(c.vertex), "{:?} held by two tools", c.vertex);
+            assert_eq!(tools.owner(c.vertex), Some(i));
+            let x = sim.position(c.vertex);
+            assert!((x - c.target_m).length() < 1e-12, "{:?} let go", c.vertex);
+        }
+    }
+    let u: Vec<Vec3> = sim
+        .displacements()
+        .iter()
+        .map(|a| Vec3::from_array(*a))
+        .collect();
+    let mut f = vec![Vec3::ZERO; u.len()];
+    sim.model().elastic_forces(&u, &mut f);
+    let union: Vec3 = seen.iter().map(|v| f[v.idx()]).sum();
+    let total: Vec3 = (0..tools.len())
+        .map(|i| tools.reaction(i, sim).force_n)
+        .sum();
+    assert!((union - total).length() <= 1e-12 * union.length().max(1e-30));
+}
+
+#[test]
+fn two_tools_pressing_the_same_spot_never_share_a_vertex() {
+    let (mut sim, _) = setup(ToolKind::Hook);
+    // Side by side, 6 mm apart with 5 mm radii: their footprints overlap.
+    let x = [CENTRE[0] - 0.003, CENTRE[0] + 0.003];
+    let mut tools = two_tools(&sim, [ToolKind::Hook, ToolKind::Hook], x);
+    let at = |i: usize, depth: f64| {
+        Some(ToolInput {
+            tip_m: tip(depth, x[i], CENTRE[1]),
+            jaw_opening: 1.0,
+        })
+    };
+    let mut both = [false; 2];
+    for k in 0..=300 {
+        let depth = 0.004 * (k.min(100) as f64 / 100.0) - 0.001;
+        let reports = tools
+            .update(&mut sim, &[at(0, depth), at(1, depth)])
+            .to_vec();
+        sim.step();
+        check_exclusive(&sim, &tools);
+        for i in 0..2 {
+            both[i] |= reports[i].contact;
+        }
+    }
+    assert_eq!(both, [true, true], "each tool touches the tissue");
+    // Withdraw the first tool: the second keeps (and takes over) the rest.
+    for _ in 0..200 {
+        tools.update(&mut sim, &[None, at(1, 0.003)]);
+        sim.step();
+        check_exclusive(&sim, &tools);
+        assert!(tools.tool(0).constraints().is_empty());
+    }
+    assert!(!tools.tool(1).constraints().is_empty());
+    assert!(sim.displacements().iter().flatten().all(|x| x.is_finite()));
+}
+
+#[test]
+fn gripped_tissue_stays_with_the_grasper_when_another_tool_presses_on_it() {
+    let (mut sim, _) = setup(ToolKind::Grasper);
+    let x = [CENTRE[0], CENTRE[0] + 0.002];
+    let mut tools = two_tools(&sim, [ToolKind::Hook, ToolKind::Grasper], x);
+    let grasper = |depth: f64, jaw: f64| {
+        Some(ToolInput {
+            tip_m: tip(depth, x[1], CENTRE[1]),
+            jaw_opening: jaw,
+        })
+    };
+    // The grasper (declared second) presses with its jaws open, then closes.
+    for k in 0..=100 {
+        tools.update(&mut sim, &[None, grasper(0.002 * k as f64 / 100.0, 1.0)]);
+        sim.step();
+    }
+    let reports = tools
+        .update(&mut sim, &[None, grasper(0.002, 0.3)])
+        .to_vec();
+    sim.step();
+    assert!(reports[1].gripping);
+    let held: BTreeSet<VertexId> = tools
+        .tool(1)
+        .constraints()
+        .iter()
+        .map(|c| c.vertex)
+        .collect();
+    // The hook (first in order) now comes down on the same spot.
+    let hook = |depth: f64| {
+        Some(ToolInput {
+            tip_m: tip(depth, x[0], CENTRE[1]),
+            jaw_opening: 1.0,
+        })
+    };
+    for k in 0..=150 {
+        let depth = 0.004 * (k.min(100) as f64 / 100.0) - 0.001;
+        let reports = tools
+            .update(&mut sim, &[hook(depth), grasper(0.002, 0.3)])
+            .to_vec();
+        sim.step();
+        assert!(reports[1].gripping);
+        check_exclusive(&sim, &tools);
+        for v in &held {
+            assert_eq!(tools.owner(*v), Some(1), "{v:?} taken from the grasper");
+        }
+    }
+    assert!(
+        !tools.tool(0).constraints().is_empty(),
+        "the hook touches around the grip"
+    );
 }

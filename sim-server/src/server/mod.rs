@@ -5,7 +5,7 @@
 //! topology when cuts change it. It keeps running when the daemon or the
 //! viewer disappear and serves them again when they come back.
 
-use crate::contact::ToolContact;
+use crate::contact::{ToolInput, Tools};
 use crate::math::{Real, Vec3};
 use crate::scene::BuiltScene;
 use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
@@ -169,18 +169,12 @@ pub fn run<S: Storage>(
             sim.set_external_force(crate::ids::VertexId::from(v), *f);
         }
     }
-    let mut contacts: Vec<ToolContact> = tools
-        .iter()
-        .take(MAX_TOOLS)
-        .map(|decl| {
-            let mut c = ToolContact::new(decl, sim.model());
-            // A tool never takes over (or releases) a vertex the scene holds.
-            for v in fixed.iter().chain(prescribed.iter().map(|(v, _)| v)) {
-                c.exclude(*v);
-            }
-            c
-        })
-        .collect();
+    let decls = &tools[..tools.len().min(MAX_TOOLS)];
+    let mut contacts = Tools::new(decls, sim.model());
+    // A tool never takes over (or releases) a vertex the scene holds.
+    for v in fixed.iter().chain(prescribed.iter().map(|(v, _)| v)) {
+        contacts.reserve(*v);
+    }
     let node = services::node("sim-server")?;
     let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
     let force_pub = services::publisher(&services::force_service(&node, &cfg.session)?)?;
@@ -228,21 +222,21 @@ pub fn run<S: Storage>(
         let mut any_contact = false;
         let contact_t0 = monotonic_ns();
         let sim_t_s = summary.steps as Real * dt_s;
-        for (i, c) in contacts.iter_mut().enumerate() {
-            let (tip, jaw) = if let Some(script) = cfg.scripts.iter().find(|s| s.tool == i) {
-                script.at(sim_t_s)
+        let mut inputs = [None; MAX_TOOLS];
+        for (i, input) in inputs.iter_mut().enumerate().take(contacts.len()) {
+            *input = if let Some(script) = cfg.scripts.iter().find(|s| s.tool == i) {
+                let (tip_m, jaw_opening) = script.at(sim_t_s);
+                Some(ToolInput { tip_m, jaw_opening })
             } else {
-                let Some(pose) = latest_pose
+                latest_pose
                     .filter(|p| (i as u32) < p.tool_count && p.tools[i].flags & TOOL_PRESENT != 0)
-                else {
-                    continue;
-                };
-                (
-                    Vec3::from_array(pose.tools[i].tip_m),
-                    pose.tools[i].jaw_opening,
-                )
+                    .map(|p| ToolInput {
+                        tip_m: Vec3::from_array(p.tools[i].tip_m),
+                        jaw_opening: p.tools[i].jaw_opening,
+                    })
             };
-            let report = c.update(&mut sim, tip, jaw);
+        }
+        for (i, report) in contacts.update(&mut sim, &inputs).iter().enumerate() {
             if report.contact {
                 flags[i] |= CONTACT;
                 any_contact = true;

@@ -1,0 +1,392 @@
+//! One tool's contact state, updated in the phases [`super::Tools`] runs
+//! for all tools in turn each step: cut, hold the gripped vertices, detect
+//! and project the sliding contacts, then commit to the simulation.
+
+use super::claims::Claims;
+use super::geometry::{Plane, Segment, ToolPose};
+use super::reaction::{Reaction, VertexEdges, along};
+use super::surface_index::SurfaceIndex;
+use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use crate::mesh::TET_FACES;
+use crate::scene::ToolDecl;
+use crate::scene::spec::ToolKind;
+use crate::tensor_mass::{ElasticModel, Explicit, Storage};
+
+/// How far (fraction of the radius) below the new plane a persisting
+/// contact vertex may be and still be re-projected.
+const KEEP_BELOW: Real = 0.05;
+/// |N_proj| below which the shaft plane is undefined (sin of ~6 degrees).
+const MIN_SHAFT_SIN: Real = 0.1;
+
+#[derive(Clone, Copy, PartialEq)]
+enum Part {
+    Tip,
+    Shaft,
+}
+
+/// One tool's contact with the tissue, its state kept between steps.
+pub struct ToolContact {
+    decl: ToolDecl,
+    slot: usize,
+    direction: Vec3,
+    pose: Option<ToolPose>,
+    constraints: Vec<Constraint>,
+    previous: Vec<Constraint>,
+    /// Per vertex: among this pass's hits or kept vertices.
+    mark: Vec<bool>,
+    candidates: Vec<VertexId>,
+    hits: Vec<VertexId>,
+    kept: Vec<VertexId>,
+    gripped: Vec<(VertexId, Vec3)>,
+    grip_end_m: Vec3,
+    gripping: bool,
+    armed: bool,
+    removed: usize,
+    vertex_edges: VertexEdges,
+    tet_offsets: Vec<u32>,
+    vertex_tets: Vec<TetId>,
+    doomed: Vec<TetId>,
+}
+
+impl ToolContact {
+    /// Tool number `slot` over `model`, touching nothing.
+    pub(super) fn new(decl: &ToolDecl, slot: usize, model: &ElasticModel) -> Self {
+        let n = model.vertex_count();
+        let tets = model.mesh().tets();
+        let mut tet_offsets = vec![0u32; n + 1];
+        for tet in tets {
+            for v in tet {
+                tet_offsets[v.idx() + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            tet_offsets[i + 1] += tet_offsets[i];
+        }
+        let mut fill = tet_offsets.clone();
+        let mut vertex_tets = vec![TetId(0); tet_offsets[n] as usize];
+        for (t, tet) in tets.iter().enumerate() {
+            for v in tet {
+                vertex_tets[fill[v.idx()] as usize] = TetId::from(t);
+                fill[v.idx()] += 1;
+            }
+        }
+        Self {
+            decl: decl.clone(),
+            slot,
+            // Used only while the tip sits on the fulcrum: point down.
+            direction: Vec3::NEG_Z,
+            pose: None,
+            constraints: Vec::new(),
+            previous: Vec::new(),
+            mark: vec![false; n],
+            candidates: Vec::new(),
+            hits: Vec::new(),
+            kept: Vec::new(),
+            gripped: Vec::new(),
+            grip_end_m: Vec3::ZERO,
+            gripping: false,
+            armed: false,
+            removed: 0,
+            vertex_edges: VertexEdges::new(model),
+            tet_offsets,
+            vertex_tets,
+            doomed: Vec::new(),
+        }
+    }
+
+    /// The tool as declared.
+    pub fn decl(&self) -> &ToolDecl {
+        &self.decl
+    }
+
+    /// The pose of the last update (None before the first, or withdrawn).
+    pub fn pose(&self) -> Option<&ToolPose> {
+        self.pose.as_ref()
+    }
+
+    /// The vertices imposed by the last update.
+    pub fn constraints(&self) -> &[Constraint] {
+        &self.constraints
+    }
+
+    /// Whether the jaws hold tissue.
+    pub fn gripping(&self) -> bool {
+        self.gripping
+    }
+
+    /// Phase 1: places the tool (`None`: withdrawn, it lets go of
+    /// everything) and cuts.
+    pub(super) fn begin<S: Storage>(&mut self, sim: &mut Explicit<S>, input: Option<(Vec3, Real)>) {
+        std::mem::swap(&mut self.constraints, &mut self.previous);
+        self.constraints.clear();
+        self.removed = 0;
+        let Some((tip_m, jaw)) = input else {
+            self.pose = None;
+            self.gripped.clear();
+            self.gripping = false;
+            self.armed = false;
+            return;
+        };
+        let pose = ToolPose::new(&self.decl, tip_m, self.direction);
+        self.direction = pose.direction;
+        self.pose = Some(pose);
+        self.removed = match self.decl.kind {
+            ToolKind::Grasper => self.grasp(sim, &pose, jaw),
+            ToolKind::Cavitron => self.burn(sim, &pose),
+            ToolKind::Hook => 0,
+        };
+    }
+
+    /// Phase 2: the gripped vertices follow the tool end's translation.
+    pub(super) fn hold<S: Storage>(&mut self, sim: &Explicit<S>, claims: &mut Claims) {
+        let Some(pose) = self.pose else { return };
+        let offset = pose.end_m - self.grip_end_m;
+        for i in 0..self.gripped.len() {
+            let (v, p) = self.gripped[i];
+            if sim.model().topology().vertex_tet_count(v) > 0 {
+                self.push(claims, v, ConstraintKind::Grip, p + offset);
+            }
+        }
+    }
+
+    /// Phase 3: sliding contact of the tip, then of the shaft.
+    pub(super) fn detect<S: Storage>(
+        &mut self,
+        sim: &Explicit<S>,
+        index: &SurfaceIndex,
+        claims: &mut Claims,
+    ) {
+        let Some(pose) = self.pose else { return };
+        if self.decl.kind != ToolKind::Cavitron {
+            self.plane_pass(sim, index, claims, &pose.tip, Part::Tip, &pose);
+        }
+        if let Some(shaft) = pose.shaft {
+            self.plane_pass(sim, index, claims, &shaft, Part::Shaft, &pose);
+        }
+    }
+
+    /// Phase 4 (after every tool's phases 1-3): lets go of what no tool
+    /// holds any more and imposes this tool's constraints.
+    pub(super) fn commit<S: Storage>(
+        &mut self,
+        sim: &mut Explicit<S>,
+        claims: &Claims,
+        jaw: Real,
+    ) -> ContactReport {
+        for c in &self.previous {
+            if claims.is_free(c.vertex) {
+                sim.release(c.vertex);
+            }
+        }
+        let mut touching = false;
+        for c in &self.constraints {
+            let rest_m = sim.model().mesh().positions_m()[c.vertex.idx()];
+            sim.prescribe(c.vertex, c.target_m - rest_m);
+            touching |= matches!(c.kind, ConstraintKind::Tip(_));
+        }
+        self.armed = touching && jaw > GRIP_BELOW;
+        ContactReport {
+            contact: !self.constraints.is_empty(),
+            gripping: self.gripping,
+            tets_removed: self.removed,
+            constrained_vertices: self.constraints.len(),
+        }
+    }
+
+    /// The force on the tool and the contact stiffness after the step, from
+    /// the vertices the last update imposed (see the module documentation).
+    pub fn reaction<S: Storage>(&self, sim: &Explicit<S>) -> Reaction {
+        let model = sim.model();
+        let mut out = Reaction::NONE;
+        for c in &self.constraints {
+            let v = c.vertex;
+            out.force_n += self
+                .vertex_edges
+                .elastic_force_n(model, v, |w| sim.displacement(w));
+            let k = &model.vertex_tensors()[v.idx()];
+            out.stiffness_n_per_m += match c.kind {
+                ConstraintKind::Tip(n) | ConstraintKind::Shaft(n) => along(k, n),
+                ConstraintKind::Grip => *k,
+            };
+        }
+        out
+    }
+
+    fn push(&mut self, claims: &mut Claims, v: VertexId, kind: ConstraintKind, target_m: Vec3) {
+        claims.take(v, self.slot);
+        self.constraints.push(Constraint {
+            vertex: v,
+            kind,
+            target_m,
+        });
+    }
+
+    /// Detects and projects the contact of one part (tip or shaft).
+    fn plane_pass<S: Storage>(
+        &mut self,
+        sim: &Explicit<S>,
+        index: &SurfaceIndex,
+        claims: &mut Claims,
+        segment: &Segment,
+        part: Part,
+        pose: &ToolPose,
+    ) {
+        let r = pose.radius_m;
+        self.candidates.clear();
+        index.candidates(segment, r, &mut self.candidates);
+        self.hits.clear();
+        for &v in &self.candidates {
+            if claims.is_free(v) && segment.distance_m(sim.position(v)) < r {
+                self.hits.push(v);
+                self.mark[v.idx()] = true;
+            }
+        }
+        // Persistence: what this part held at the previous update.
+        self.kept.clear();
+        for c in &self.previous {
+            let same = match c.kind {
+                ConstraintKind::Tip(_) => part == Part::Tip,
+                ConstraintKind::Shaft(_) => part == Part::Shaft,
+                ConstraintKind::Grip => false,
+            };
+            let v = c.vertex;
+            if same && !self.mark[v.idx()] && claims.is_free(v) && index.contains(v) {
+                self.kept.push(v);
+                self.mark[v.idx()] = true;
+            }
+        }
+        let normal = self.mean_normal(sim);
+        for v in self.hits.iter().chain(&self.kept) {
+            self.mark[v.idx()] = false;
+        }
+        if self.hits.is_empty() && self.kept.is_empty() {
+            return;
+        }
+        let n = normal.unwrap_or(-pose.direction);
+        let (n, kind): (Vec3, fn(Vec3) -> ConstraintKind) = match part {
+            Part::Tip => (n, ConstraintKind::Tip),
+            Part::Shaft => {
+                let t = pose.direction;
+                let proj = t.cross(n).cross(t);
+                if proj.length() < MIN_SHAFT_SIN {
+                    return;
+                }
+                (proj.normalize(), ConstraintKind::Shaft)
+            }
+        };
+        let plane = Plane::tangent(segment, r, n);
+        let model = sim.model();
+        for i in 0..self.hits.len() {
+            let v = self.hits[i];
+            let target = plane.project(sim.position(v));
+            self.push(claims, v, kind(n), target);
+        }
+        for i in 0..self.kept.len() {
+            let v = self.kept[i];
+            let x = sim.position(v);
+            let pushing = self
+                .vertex_edges
+                .elastic_force_n(model, v, |w| sim.displacement(w))
+                .dot(n)
+                > 0.0;
+            if pushing
+                && plane.footprint_distance_m(x, segment) <= r
+                && plane.height_m(x) >= -KEEP_BELOW * r
+            {
+                self.push(claims, v, kind(n), plane.project(x));
+            }
+        }
+    }
+
+    /// Mean outward normal (area-weighted, current positions) of the surface
+    /// triangles touching the marked vertices (this pass's hits and kept),
+    /// found through each vertex's tetrahedra, each triangle counted once.
+    fn mean_normal<S: Storage>(&self, sim: &Explicit<S>) -> Option<Vec3> {
+        let model = sim.model();
+        let topo = model.topology();
+        let tets = model.mesh().tets();
+        let mut sum = Vec3::ZERO;
+        for &v in self.hits.iter().chain(&self.kept) {
+            let range = self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;
+            for &t in &self.vertex_tets[range] {
+                if !topo.is_alive(t) {
+                    continue;
+                }
+                let tet = tets[t.idx()];
+                for (k, face) in TET_FACES.iter().enumerate() {
+                    let [a, b, c] = face.map(|l| tet[l]);
+                    // Face k leaves out local vertex k; count the face from
+                    // its lowest-numbered marked vertex only.
+                    let first = [a, b, c].into_iter().filter(|w| self.mark[w.idx()]).min();
+                    if tet[k] == v || first != Some(v) || !topo.is_surface_face(t, k) {
+                        continue;
+                    }
+                    let (pa, pb, pc) = (sim.position(a), sim.position(b), sim.position(c));
+                    sum += (pb - pa).cross(pc - pa);
+                }
+            }
+        }
+        sum.try_normalize()
+    }
+
+    /// The grasper's state: grip, let go, cut. Returns tetrahedra removed.
+    fn grasp<S: Storage>(&mut self, sim: &mut Explicit<S>, pose: &ToolPose, jaw: Real) -> usize {
+        if self.gripping && jaw > GRIP_BELOW {
+            self.gripped.clear();
+            self.gripping = false;
+        } else if !self.gripping && jaw < GRIP_BELOW && self.armed {
+            self.gripped.clear();
+            for c in &self.previous {
+                if matches!(c.kind, ConstraintKind::Tip(_)) {
+                    self.gripped.push((c.vertex, sim.position(c.vertex)));
+                }
+            }
+            self.gripping = !self.gripped.is_empty();
+            self.grip_end_m = pose.end_m;
+        }
+        if !(self.gripping && jaw < CUT_BELOW) {
+            return 0;
+        }
+        self.doomed.clear();
+        for &(v, _) in &self.gripped {
+            let range = self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;
+            self.doomed.extend_from_slice(&self.vertex_tets[range]);
+        }
+        self.gripped.clear();
+        self.gripping = false;
+        self.remove_doomed(sim)
+    }
+
+    /// The cavitron: removes the live tetrahedra with a vertex within the
+    /// radius of the tip. Returns how many.
+    fn burn<S: Storage>(&mut self, sim: &mut Explicit<S>, pose: &ToolPose) -> usize {
+        self.doomed.clear();
+        let topo = sim.model().topology();
+        for v in 0..sim.model().vertex_count() {
+            let v = VertexId::from(v);
+            let x = sim.position(v);
+            if topo.vertex_tet_count(v) > 0
+                && pose.tip.might_touch(x, pose.radius_m)
+                && pose.tip.distance_m(x) < pose.radius_m
+            {
+                let range =
+                    self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;
+                self.doomed.extend_from_slice(&self.vertex_tets[range]);
+            }
+        }
+        self.remove_doomed(sim)
+    }
+
+    fn remove_doomed<S: Storage>(&mut self, sim: &mut Explicit<S>) -> usize {
+        let mut removed = 0;
+        for &t in &self.doomed {
+            // A tetrahedron may be listed once per doomed vertex.
+            if sim.model().topology().is_alive(t) && sim.remove_tet(t).is_ok() {
+                removed += 1;
+            }
+        }
+        removed
+    }
+}
