@@ -1,0 +1,107 @@
+//! The simulation survives its peers disappearing and reappearing: a
+//! viewer (a mesh-stream subscriber in this process) leaves and joins again,
+//! a haptic daemon is SIGKILLed while driving its tool, and a second daemon
+//! then gets force samples from the same, still running, simulation.
+
+use shared::SessionName;
+use shared::protocol::PROTOCOL_VERSION;
+use shared::services;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+use system_tests::{binary, read_json, scratch_dir};
+
+/// Joins the session as a viewer would, waits for one mesh frame and
+/// returns its vertex count; the node leaves when this returns.
+fn view_one_frame(session: &SessionName) -> u32 {
+    let node = services::node("test-viewer").expect("viewer node");
+    let sub = services::mesh_service(&node, session)
+        .expect("mesh service")
+        .subscriber_builder()
+        .create()
+        .expect("mesh subscriber");
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(5) {
+        if let Some(frame) = sub.receive().expect("receive mesh") {
+            let h = frame.user_header();
+            assert_eq!(h.version, PROTOCOL_VERSION);
+            assert_eq!(h.vertex_count as usize, frame.payload().len());
+            return h.vertex_count;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    panic!("no mesh frame within 5 s");
+}
+
+fn daemon(session: &str, duration_s: &str) -> Command {
+    let mut c = Command::new(binary("haptic-daemon"));
+    c.args(["run", "--quiet", "--rt-priority", "0", "--max-force", "4"])
+        .args(["--duration-s", duration_s, "--session", session]);
+    c
+}
+
+#[test]
+fn simulation_outlives_its_viewer_and_daemon_leaving_and_coming_back() {
+    let name = format!("peers{}", std::process::id());
+    let session = SessionName::new(&name).unwrap();
+    let dir = scratch_dir("peers");
+    let (sim_json, daemon_json) = (dir.join("sim.json"), dir.join("daemon.json"));
+    let mut sim = Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--duration-s", "9", "--session", &name])
+        .arg("--json")
+        .arg(&sim_json)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server");
+    std::thread::sleep(Duration::from_millis(500));
+
+    let vertices = view_one_frame(&session);
+    assert!(vertices > 100);
+
+    let mut first = daemon(&name, "30")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the first daemon");
+    std::thread::sleep(Duration::from_millis(1500));
+    first.kill().expect("SIGKILL the first daemon");
+    first.wait().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+
+    // The viewer comes back after the daemon died.
+    assert_eq!(view_one_frame(&session), vertices);
+
+    let second = daemon(&name, "2")
+        .arg("--json")
+        .arg(&daemon_json)
+        .output()
+        .expect("run the second daemon");
+    assert!(
+        second.status.success(),
+        "second daemon: {}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    let d = read_json(&daemon_json);
+    assert!(d["samples_received"].as_u64().unwrap() > 100, "{d}");
+    let max = d["max_force_n"].as_f64().unwrap();
+    assert!(max.is_finite() && max <= 4.0 + 1e-12, "{d}");
+
+    let start = Instant::now();
+    while sim.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(15) {
+            let _ = sim.kill();
+            panic!("sim-server did not stop after its duration");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = sim.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "sim-server: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s = read_json(&sim_json);
+    assert!(s["finite"].as_bool().unwrap(), "{s}");
+    // Both daemons' poses arrived (the second one ran 2 s at 1 kHz).
+    assert!(s["poses_received"].as_u64().unwrap() > 1000, "{s}");
+}
