@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
 # Prepares a fresh Debian machine to build and test the project. Idempotent.
-# Today the build needs only a Rust toolchain (>= 1.95) and a C compiler;
-# later parts (the windowed viewer) add their system packages here.
+# The build needs a Rust toolchain (>= 1.95) and a C compiler; the viewer's
+# snapshots (and the tests that take them) need Mesa's EGL with its software
+# rasterizer (loaded at run time, no display needed).
 set -euo pipefail
 need_apt=()
 command -v cc >/dev/null 2>&1 || need_apt+=(gcc)
 command -v pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
+if ! { ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null; } | grep 'libEGL_mesa\.so\.0' >/dev/null; then
+  need_apt+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
+fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" -eq 0 ]; then apt-get update -qq && apt-get install -y -qq "${need_apt[@]}";
   else sudo apt-get update -qq && sudo apt-get install -y -qq "${need_apt[@]}"; fi

@@ -8,6 +8,9 @@ use crate::protocol::{
 };
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+/// Brings `update_connections` into scope: a publisher that sends rarely
+/// (the topology stream) delivers its history to late subscribers with it.
+pub use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue, AttributeVerifier};
 use iceoryx2::service::port_factory::PortFactory as _;

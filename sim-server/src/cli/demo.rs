@@ -28,6 +28,47 @@ pub struct DemoArgs {
     /// Write the summary as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Do not start the viewer (it starts when a display is available and
+    /// not --headless).
+    #[arg(long)]
+    pub no_viewer: bool,
+}
+
+/// Starts the viewer on `session` when it makes sense: not headless, a
+/// display to open a window on, and the binary built next to this one.
+fn start_viewer(args: &DemoArgs, session: &str) -> Option<std::process::Child> {
+    if args.headless || args.no_viewer {
+        return None;
+    }
+    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"]
+        .iter()
+        .any(|k| std::env::var_os(k).is_some_and(|v| !v.is_empty()));
+    let bin = std::env::current_exe().ok()?.with_file_name("viewer");
+    if !has_display {
+        eprintln!(
+            "demo: no display, so no viewer window; a picture of the session: {} --session {session} --snapshot liver.png",
+            bin.display()
+        );
+        return None;
+    }
+    if !bin.exists() {
+        eprintln!(
+            "demo: {} not built: cargo build --release -p viewer --features window",
+            bin.display()
+        );
+        return None;
+    }
+    match Command::new(&bin)
+        .args(["--session", session])
+        .stdout(Stdio::null())
+        .spawn()
+    {
+        Ok(child) => Some(child),
+        Err(e) => {
+            eprintln!("demo: cannot start {}: {e}", bin.display());
+            None
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -107,6 +148,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;
     }
+    let mut viewer = start_viewer(&args, &session);
     let cfg = RunConfig {
         session: shared::SessionName::new(&session)?,
         headless: false,
@@ -121,6 +163,12 @@ pub fn run(args: DemoArgs) -> Result<()> {
     } else {
         run_server::<f64>(scene, &cfg, stop)
     };
+    if let Some(v) = &mut viewer {
+        // SIGTERM: the window closes; nothing of the viewer's needs saving.
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(v.id() as libc::pid_t, libc::SIGTERM) };
+        let _ = v.wait();
+    }
     let summary = match result {
         Ok(s) => s,
         Err(e) => {

@@ -14,7 +14,7 @@ use shared::protocol::{
     CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg,
     TOOL_PRESENT, TopologyHeader,
 };
-use shared::services::{self, ServiceError};
+use shared::services::{self, ServiceError, UpdateConnections};
 use shared::{SessionName, monotonic_ns};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -325,6 +325,10 @@ pub fn run<S: Storage>(
                     .send()
                     .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
                 published_topology = topology_version;
+            } else {
+                // A viewer that joined since gets the kept topology (history
+                // is delivered when the publisher updates its connections).
+                let _ = topo_pub.update_connections();
             }
             let u = sim.displacements();
             let mut s = mesh_pub

@@ -1,0 +1,359 @@
+//! The viewer end to end. This process plays the simulation (it publishes
+//! the embedded liver's mesh state and surface by the protocol) so the
+//! pictures are predictable: a top-view snapshot covers exactly the organ's
+//! projected silhouette, and after a cut the picture changes and shows cut
+//! faces. With the real sim-server: a viewer started before the simulation
+//! and one started after it both get the mesh, and a viewer that drives a
+//! tool (no daemon) makes the simulation touch the liver.
+
+use shared::protocol::{MeshHeader, PROTOCOL_VERSION, TopologyHeader};
+use shared::{SessionName, monotonic_ns, services};
+use sim_server::ids::TetId;
+use sim_server::scene::{SceneSource, build_scene};
+use sim_server::tensor_mass::ElasticModel;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use system_tests::{binary, read_json, scratch_dir};
+
+fn liver() -> ElasticModel {
+    let src = SceneSource::embedded();
+    build_scene(&src, &src.parse().unwrap()).unwrap().model
+}
+
+fn surface(model: &ElasticModel) -> Vec<[u32; 3]> {
+    model
+        .topology()
+        .surface_triangles(model.mesh())
+        .map(|t| t.map(|v| v.0))
+        .collect()
+}
+
+fn rest(model: &ElasticModel) -> Vec<[f32; 3]> {
+    model
+        .mesh()
+        .positions_m()
+        .iter()
+        .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
+}
+
+/// Publishes `positions` with the current `triangles` (and its version) at
+/// about 60 Hz until `stop`.
+fn fake_simulation(
+    session: SessionName,
+    positions: Vec<[f32; 3]>,
+    triangles: Arc<Mutex<(u64, Vec<[u32; 3]>)>>,
+    stop: Arc<AtomicBool>,
+    frames: Arc<AtomicU64>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let node = services::node("fake-sim").unwrap();
+        let n = positions.len();
+        let mesh = services::slice_publisher(&services::mesh_service(&node, &session).unwrap(), n)
+            .unwrap();
+        let topo_service = services::topology_service(&node, &session).unwrap();
+        let topo = services::slice_publisher(&topo_service, 8 * n).unwrap();
+        let mut sent_version = 0;
+        let mut seq = 0;
+        while !stop.load(Ordering::Relaxed) {
+            let (version, tris) = triangles.lock().unwrap().clone();
+            if version != sent_version {
+                let s = topo.loan_slice_uninit(tris.len()).unwrap();
+                let mut s = s;
+                *s.user_header_mut() = TopologyHeader {
+                    version: PROTOCOL_VERSION,
+                    triangle_count: tris.len() as u32,
+                    topology_version: version,
+                };
+                s.write_from_slice(&tris).send().unwrap();
+                sent_version = version;
+            } else {
+                use shared::services::UpdateConnections;
+                topo.update_connections().unwrap();
+            }
+            let mut s = mesh.loan_slice_uninit(n).unwrap();
+            *s.user_header_mut() = MeshHeader {
+                version: PROTOCOL_VERSION,
+                vertex_count: n as u32,
+                frame_seq: seq,
+                topology_version: version,
+                t_ns: monotonic_ns(),
+            };
+            s.write_from_fn(|i| positions[i]).send().unwrap();
+            seq += 1;
+            frames.store(seq, Ordering::Relaxed);
+            std::thread::sleep(Duration::from_millis(16));
+        }
+    })
+}
+
+fn snapshot(session: &str, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let json = out.with_extension("json");
+    let run = Command::new(binary("viewer"))
+        .args(["--session", session, "--wait-s", "20", "--size", "320x240"])
+        .arg("--snapshot")
+        .arg(out)
+        .arg("--json")
+        .arg(&json)
+        .args(extra)
+        .output()
+        .expect("run viewer");
+    assert!(
+        run.status.success(),
+        "viewer --snapshot: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    read_json(&json)
+}
+
+/// RGB pixels, rows top to bottom.
+fn read_png(path: &Path) -> (usize, usize, Vec<[u8; 3]>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let px = buf[..info.buffer_size()]
+        .chunks(4)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    (info.width as usize, info.height as usize, px)
+}
+
+/// Which pixels the surface covers in the documented top view: orthographic
+/// down -z, +y up, the xy bounding box centred and filling TOP_FILL.
+fn expected_top_mask(pos: &[[f32; 3]], tris: &[[u32; 3]], w: usize, h: usize) -> Vec<bool> {
+    let lo = [0, 1].map(|k| pos.iter().map(|p| p[k]).fold(f32::INFINITY, f32::min));
+    let hi = [0, 1].map(|k| pos.iter().map(|p| p[k]).fold(f32::NEG_INFINITY, f32::max));
+    let aspect = w as f32 / h as f32;
+    let height_m = (hi[1] - lo[1]).max((hi[0] - lo[0]) / aspect) / viewer::camera::TOP_FILL;
+    let scale = h as f32 / height_m;
+    let c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let px = |p: [f32; 3]| {
+        [
+            w as f32 / 2.0 + (p[0] - c[0]) * scale,
+            h as f32 / 2.0 - (p[1] - c[1]) * scale,
+        ]
+    };
+    let mut mask = vec![false; w * h];
+    for t in tris {
+        let [a, b, d] = t.map(|v| px(pos[v as usize]));
+        let x0 = a[0].min(b[0]).min(d[0]).floor().max(0.0) as usize;
+        let x1 = (a[0].max(b[0]).max(d[0]).ceil() as usize).min(w - 1);
+        let y0 = a[1].min(b[1]).min(d[1]).floor().max(0.0) as usize;
+        let y1 = (a[1].max(b[1]).max(d[1]).ceil() as usize).min(h - 1);
+        let edge = |p: [f32; 2], q: [f32; 2], r: [f32; 2]| {
+            (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+        };
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let p = [x as f32 + 0.5, y as f32 + 0.5];
+                let (e0, e1, e2) = (edge(a, b, p), edge(b, d, p), edge(d, a, p));
+                if (e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0) || (e0 <= 0.0 && e1 <= 0.0 && e2 <= 0.0) {
+                    mask[y * w + x] = true;
+                }
+            }
+        }
+    }
+    mask
+}
+
+/// Pixels in the cut faces' colour (pale orange: green above half the red).
+fn cut_coloured(px: &[[u8; 3]]) -> usize {
+    px.iter()
+        .filter(|p| p[0] > 80 && p[0] > p[2] && p[1] as f32 > 0.55 * p[0] as f32)
+        .count()
+}
+
+#[test]
+fn snapshots_show_the_silhouette_and_change_after_a_cut() {
+    let name = format!("viewsnap{}", std::process::id());
+    let session = SessionName::new(&name).unwrap();
+    let dir = scratch_dir("viewer-snap");
+    let mut model = liver();
+    let positions = rest(&model);
+    let triangles = Arc::new(Mutex::new((1u64, surface(&model))));
+    let stop = Arc::new(AtomicBool::new(false));
+    let frames = Arc::new(AtomicU64::new(0));
+    let sim = fake_simulation(
+        session.clone(),
+        positions.clone(),
+        triangles.clone(),
+        stop.clone(),
+        frames.clone(),
+    );
+
+    // Silhouette: the top view covers what the projected surface covers.
+    let top = dir.join("top.png");
+    let report = snapshot(
+        &name,
+        &top,
+        &["--view", "top", "--no-overlay", "--no-forces"],
+    );
+    assert_eq!(report["cut_triangles"], 0, "{report}");
+    let (w, h, px) = read_png(&top);
+    let background = px[w * h - 1];
+    let drawn: Vec<bool> = px.iter().map(|p| *p != background).collect();
+    let expected = expected_top_mask(&positions, &triangles.lock().unwrap().1, w, h);
+    let both = drawn
+        .iter()
+        .zip(&expected)
+        .filter(|(a, b)| **a && **b)
+        .count();
+    let either = drawn
+        .iter()
+        .zip(&expected)
+        .filter(|(a, b)| **a || **b)
+        .count();
+    let iou = both as f64 / either as f64;
+    assert!(
+        iou > 0.97,
+        "silhouette IoU {iou} ({both} of {either} pixels)"
+    );
+    assert!(both > w * h / 4, "the organ fills a good part of the frame");
+
+    // A cut: remove every tetrahedron within 2 cm of the top-most vertex.
+    let before = dir.join("before.png");
+    snapshot(&name, &before, &["--no-overlay"]);
+    let top_vertex = (0..positions.len())
+        .max_by(|&a, &b| positions[a][2].total_cmp(&positions[b][2]))
+        .unwrap();
+    let t = positions[top_vertex];
+    let near = |v: usize| {
+        let p = positions[v];
+        ((p[0] - t[0]).powi(2) + (p[1] - t[1]).powi(2) + (p[2] - t[2]).powi(2)).sqrt() < 0.02
+    };
+    let doomed: Vec<TetId> = (0..model.mesh().tet_count())
+        .map(TetId::from)
+        .filter(|t| model.mesh().tets()[t.idx()].iter().any(|v| near(v.idx())))
+        .collect();
+    assert!(doomed.len() > 10);
+    for t in doomed {
+        model.remove_tet(t).unwrap();
+    }
+    *triangles.lock().unwrap() = (2, surface(&model));
+    let after = dir.join("after.png");
+    let report = snapshot(&name, &after, &["--no-overlay"]);
+    stop.store(true, Ordering::Relaxed);
+    sim.join().unwrap();
+    assert_eq!(report["topology_version"], 2, "{report}");
+    assert!(report["cut_triangles"].as_u64().unwrap() > 10, "{report}");
+    let (_, _, a) = read_png(&before);
+    let (_, _, b) = read_png(&after);
+    let differ = a.iter().zip(&b).filter(|(p, q)| p != q).count();
+    assert!(differ > 200, "only {differ} pixels changed after the cut");
+    let (cut_a, cut_b) = (cut_coloured(&a), cut_coloured(&b));
+    assert!(
+        cut_a < 20 && cut_b > 200,
+        "cut-coloured pixels {cut_a} -> {cut_b}"
+    );
+    assert!(frames.load(Ordering::Relaxed) > 2);
+}
+
+fn sim_server(session: &str, seconds: &str, json: &Path) -> std::process::Child {
+    Command::new(binary("sim-server"))
+        .args([
+            "run",
+            "--quiet",
+            "--duration-s",
+            seconds,
+            "--session",
+            session,
+        ])
+        .arg("--json")
+        .arg(json)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server")
+}
+
+fn finish(mut sim: std::process::Child) {
+    let start = std::time::Instant::now();
+    while sim.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(20) {
+            let _ = sim.kill();
+            panic!("sim-server did not stop after its duration");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = sim.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "sim-server: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn a_viewer_started_before_or_after_the_simulation_shows_the_mesh() {
+    let name = format!("vieworder{}", std::process::id());
+    let dir = scratch_dir("viewer-order");
+    let early_png = dir.join("early.png");
+    let early = Command::new(binary("viewer"))
+        .args(["--session", &name, "--wait-s", "30", "--size", "160x120"])
+        .arg("--snapshot")
+        .arg(&early_png)
+        .arg("--json")
+        .arg(early_png.with_extension("json"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the early viewer");
+    std::thread::sleep(Duration::from_millis(1500));
+    let sim = sim_server(&name, "8", &dir.join("sim.json"));
+    let early = early.wait_with_output().unwrap();
+    assert!(
+        early.status.success(),
+        "{}",
+        String::from_utf8_lossy(&early.stderr)
+    );
+    let late = snapshot(&name, &dir.join("late.png"), &[]);
+    let early = read_json(&early_png.with_extension("json"));
+    for r in [&early, &late] {
+        assert!(r["triangles"].as_u64().unwrap() > 1000, "{r}");
+        assert!(r["covered_pixels"].as_u64().unwrap() > 1000, "{r}");
+    }
+    finish(sim);
+}
+
+#[test]
+fn without_a_daemon_the_viewer_drives_a_tool_into_the_liver() {
+    use viewer::drive::Driver;
+    use viewer::session::Session;
+    let name = format!("viewdrive{}", std::process::id());
+    let dir = scratch_dir("viewer-drive");
+    let sim_json = dir.join("sim.json");
+    let sim = sim_server(&name, "5", &sim_json);
+    let session_name = SessionName::new(&name).unwrap();
+    let mut session = Session::join(&session_name).unwrap();
+    let pos = rest(&liver());
+    let top = pos
+        .iter()
+        .copied()
+        .max_by(|a, b| a[2].total_cmp(&b[2]))
+        .unwrap();
+    let mut driver = Driver::new(2, [top[0] as f64, top[1] as f64, top[2] as f64 + 0.01]);
+    let start = std::time::Instant::now();
+    while start.elapsed() < Duration::from_secs(3) {
+        session.poll(monotonic_ns());
+        // Lower the tip from 1 cm above the top to 6 mm into it.
+        let k = (start.elapsed().as_secs_f64() / 1.5).min(1.0);
+        driver.tip_m[2] = top[2] as f64 + 0.01 - 0.016 * k;
+        driver.update(&session);
+        assert!(driver.active(), "no other pose source: the viewer drives");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    // A daemon (another pose publisher) appears: the viewer lets go.
+    let node = services::node("pretend-daemon").unwrap();
+    let _daemon =
+        services::publisher(&services::pose_service(&node, &session_name).unwrap()).unwrap();
+    driver.update(&session);
+    assert!(!driver.active());
+    finish(sim);
+    let s = read_json(&sim_json);
+    assert!(s["poses_received"].as_u64().unwrap() > 100, "{s}");
+    assert!(s["contact_steps"].as_u64().unwrap() > 100, "{s}");
+}

@@ -1,0 +1,96 @@
+//! Where the camera looks from: framing the organ's bounding box for a
+//! named view. The `top` view is orthographic with a documented mapping, so
+//! tests can predict where each vertex lands in a snapshot.
+
+use three_d::{Camera, Vec3, Viewport, degrees, vec3};
+
+/// A named view of the scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum View {
+    /// Perspective from above, in front and to the side (z up).
+    Iso,
+    /// Orthographic looking down -z, +y up: the bounding box's centre at the
+    /// image centre and its xy extent filling [`TOP_FILL`] of the image.
+    Top,
+    /// Perspective from -y looking along +y (z up).
+    Front,
+}
+
+/// Share of the image the top view's bounding box fills (the larger of
+/// width and height ratio).
+pub const TOP_FILL: f32 = 0.9;
+const FOV_DEG: f32 = 40.0;
+
+/// The axis-aligned bounds of `positions_m` (None when empty or not finite).
+pub fn bounds(positions_m: &[[f32; 3]]) -> Option<(Vec3, Vec3)> {
+    let mut lo = vec3(f32::INFINITY, f32::INFINITY, f32::INFINITY);
+    let mut hi = -lo;
+    for p in positions_m {
+        if !p.iter().all(|x| x.is_finite()) {
+            continue;
+        }
+        lo = vec3(lo.x.min(p[0]), lo.y.min(p[1]), lo.z.min(p[2]));
+        hi = vec3(hi.x.max(p[0]), hi.y.max(p[1]), hi.z.max(p[2]));
+    }
+    (lo.x <= hi.x).then_some((lo, hi))
+}
+
+/// World height (m) the top view shows for bounds `lo..hi` in `viewport`.
+pub fn top_view_height_m(viewport: Viewport, lo: Vec3, hi: Vec3) -> f32 {
+    let aspect = viewport.width as f32 / viewport.height as f32;
+    let ext = hi - lo;
+    (ext.y.max(ext.x / aspect) / TOP_FILL).max(1e-6)
+}
+
+/// A camera framing `lo..hi` from `view`.
+pub fn framing(viewport: Viewport, lo: Vec3, hi: Vec3, view: View) -> Camera {
+    let centre = (lo + hi) * 0.5;
+    let radius = ((hi - lo).x.hypot((hi - lo).y).hypot((hi - lo).z) * 0.5).max(1e-4);
+    let up = vec3(0.0, 0.0, 1.0);
+    match view {
+        // three-d scales an orthographic height by the eye-target distance.
+        View::Top => Camera::new_orthographic(
+            viewport,
+            centre + vec3(0.0, 0.0, 4.0 * radius),
+            centre,
+            vec3(0.0, 1.0, 0.0),
+            top_view_height_m(viewport, lo, hi) / (4.0 * radius),
+            0.01 * radius,
+            10.0 * radius,
+        ),
+        View::Iso | View::Front => {
+            let dir: Vec3 = if view == View::Iso {
+                vec3(0.55, -1.0, 0.75)
+            } else {
+                vec3(0.0, -1.0, 0.0)
+            };
+            let len = (dir.x * dir.x + dir.y * dir.y + dir.z * dir.z).sqrt();
+            let distance = radius / (FOV_DEG.to_radians() * 0.5).sin() * 1.05;
+            Camera::new_perspective(
+                viewport,
+                centre + dir * (distance / len),
+                centre,
+                up,
+                degrees(FOV_DEG),
+                0.01 * distance,
+                10.0 * distance,
+            )
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounds_skip_non_finite_points_and_top_height_fits_both_axes() {
+        let p = [[0.0, 0.0, 0.0], [2.0, 1.0, 3.0], [f32::NAN, 0.0, 0.0]];
+        let (lo, hi) = bounds(&p).unwrap();
+        assert_eq!((lo, hi), (vec3(0.0, 0.0, 0.0), vec3(2.0, 1.0, 3.0)));
+        assert!(bounds(&[]).is_none());
+        // 2:1 box in a 4:3 image: the width limits, 2 / (4/3) / 0.9.
+        let h = top_view_height_m(Viewport::new_at_origo(400, 300), lo, hi);
+        assert!((h - 2.0 / (4.0 / 3.0) / TOP_FILL).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,122 @@
+//! `viewer`: live view of a session, or one PNG snapshot without a display.
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use std::path::PathBuf;
+use viewer::camera::View;
+use viewer::render::Layers;
+use viewer::scene_info::SceneInfo;
+use viewer::session::Session;
+
+/// Live 3D view of a hapsim session (organ, tools, forces, rates).
+#[derive(Parser)]
+#[command(version)]
+struct Args {
+    /// Session to join (shared with sim-server and haptic-daemon).
+    #[arg(long, default_value = "default")]
+    session: String,
+    /// The scene the simulation runs (tools' geometry, original surface,
+    /// fibres); default: the embedded liver.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Render one frame into this PNG without any display, then exit.
+    #[arg(long)]
+    snapshot: Option<PathBuf>,
+    /// Snapshot size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1024x768", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Snapshot view.
+    #[arg(long, value_enum, default_value = "iso")]
+    view: View,
+    /// How long a snapshot waits for the simulation (s).
+    #[arg(long, default_value_t = 10.0)]
+    wait_s: f64,
+    /// Draw the fibre directions.
+    #[arg(long)]
+    fibres: bool,
+    /// No force vectors.
+    #[arg(long)]
+    no_forces: bool,
+    /// No text overlay.
+    #[arg(long)]
+    no_overlay: bool,
+    /// Write what the snapshot showed as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("{s:?} is not WIDTHxHEIGHT"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| (16..=8192).contains(&n))
+            .ok_or_else(|| format!("{v:?} is not a size between 16 and 8192 pixels"))
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    if !(args.wait_s.is_finite() && args.wait_s >= 0.0) {
+        bail!("--wait-s must be a non-negative number of seconds");
+    }
+    let name = shared::SessionName::new(&args.session)?;
+    let info = SceneInfo::load(args.scene.as_deref()).with_context(|| {
+        format!(
+            "cannot load the scene {}",
+            args.scene
+                .as_deref()
+                .map_or("<embedded liver>".into(), |p| p.display().to_string())
+        )
+    })?;
+    let mut session = Session::join(&name)?;
+    let layers = Layers {
+        fibres: args.fibres,
+        forces: !args.no_forces,
+        overlay: !args.no_overlay,
+    };
+    if let Some(out) = &args.snapshot {
+        let cfg = viewer::snapshot::SnapshotConfig {
+            session: args.session.clone(),
+            out: out.clone(),
+            size: args.size,
+            view: args.view,
+            layers,
+            wait_s: args.wait_s,
+        };
+        let report = viewer::snapshot::snapshot(&mut session, &info, &cfg)?;
+        println!(
+            "viewer: wrote {} ({}x{}, {} triangles, {} made by cuts, topology v{})",
+            out.display(),
+            report.width,
+            report.height,
+            report.triangles,
+            report.cut_triangles,
+            report.topology_version
+        );
+        if let Some(path) = &args.json {
+            let text = serde_json::to_string_pretty(&report)? + "\n";
+            std::fs::write(path, text)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        return Ok(());
+    }
+    run_window(session, info, layers)
+}
+
+#[cfg(feature = "window")]
+fn run_window(session: Session, info: SceneInfo, layers: Layers) -> Result<()> {
+    viewer::window::run(session, info, layers)
+}
+
+#[cfg(not(feature = "window"))]
+fn run_window(_: Session, _: SceneInfo, _: Layers) -> Result<()> {
+    bail!(
+        "this viewer was built without the window (cargo feature `window`); rebuild with \
+         `cargo build --release -p viewer --features window`, or use --snapshot FILE.png"
+    )
+}

@@ -1,0 +1,287 @@
+//! Drawing one frame with three-d, the same for the window and snapshots:
+//! the organ surface smooth-shaded (cut faces in a paler colour, as their
+//! own mesh so the crease between capsule and cut stays sharp), the tools
+//! (shaft, tip coloured by contact state), optional fibre directions and
+//! force vectors, and the text overlay.
+
+use crate::overlay::Image;
+use crate::scene_info::Fibre;
+use three_d::*;
+
+/// Background colour (linear RGBA).
+pub const BACKGROUND: [f32; 4] = [0.08, 0.09, 0.11, 1.0];
+/// The organ's capsule.
+pub const CAPSULE: Srgba = Srgba::new(160, 62, 52, 255);
+/// Faces made by cuts (exposed parenchyma).
+pub const CUT: Srgba = Srgba::new(236, 170, 120, 255);
+const SHAFT: Srgba = Srgba::new(170, 175, 185, 255);
+const TIP_FREE: Srgba = Srgba::new(120, 160, 220, 255);
+const TIP_CONTACT: Srgba = Srgba::new(240, 210, 60, 255);
+const TIP_GRIP: Srgba = Srgba::new(80, 210, 110, 255);
+const TIP_CUT: Srgba = Srgba::new(240, 60, 200, 255);
+const FORCE: Srgba = Srgba::new(60, 230, 230, 255);
+const FIBRE: Srgba = Srgba::new(250, 250, 250, 255);
+/// Force arrow length per newton (m/N).
+const FORCE_M_PER_N: f32 = 0.02;
+
+/// A tool as drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ToolShape {
+    /// Where the shaft enters (m).
+    pub fulcrum_m: Vec3,
+    /// The tool end (m).
+    pub end_m: Vec3,
+    /// Shaft radius (m).
+    pub radius_m: f32,
+    /// `CONTACT | GRIPPING | CUTTING` bits.
+    pub flags: u32,
+    /// Force of the tissue on the tool (N).
+    pub force_n: Vec3,
+}
+
+/// What to show.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Layers {
+    /// Fibre directions.
+    pub fibres: bool,
+    /// Force vectors at the tool ends.
+    pub forces: bool,
+    /// The text overlay.
+    pub overlay: bool,
+}
+
+impl Default for Layers {
+    fn default() -> Self {
+        Self {
+            fibres: false,
+            forces: true,
+            overlay: true,
+        }
+    }
+}
+
+type Solid = Gm<Mesh, PhysicalMaterial>;
+
+/// The GPU side of a frame; update what changed, then [`Renderer::draw`].
+pub struct Renderer {
+    context: Context,
+    capsule: Option<Solid>,
+    cut: Option<Solid>,
+    tools: Vec<Solid>,
+    fibres: Option<Solid>,
+    overlay: Option<Gm<Rectangle, ColorMaterial>>,
+    overlay_size: (f32, f32),
+    key: DirectionalLight,
+    fill: DirectionalLight,
+    ambient: AmbientLight,
+}
+
+fn solid(context: &Context, mesh: &CpuMesh, color: Srgba) -> Solid {
+    Gm::new(
+        Mesh::new(context, mesh),
+        PhysicalMaterial::new_opaque(
+            context,
+            &CpuMaterial {
+                albedo: color,
+                roughness: 0.55,
+                metallic: 0.0,
+                ..Default::default()
+            },
+        ),
+    )
+}
+
+/// A unit-radius cylinder along x from 0 to 1, placed from `a` to `b`.
+fn placed(mut mesh: CpuMesh, a: Vec3, b: Vec3, radius: f32) -> Option<CpuMesh> {
+    let d = b - a;
+    let len = d.magnitude();
+    if len.is_nan() || len <= 1e-9 {
+        return None;
+    }
+    let m = Mat4::from_translation(a)
+        * rotation_matrix_from_dir_to_dir(vec3(1.0, 0.0, 0.0), d / len)
+        * Mat4::from_nonuniform_scale(len, radius, radius);
+    mesh.transform(m).ok()?;
+    Some(mesh)
+}
+
+/// Concatenates meshes that have positions and indices only.
+fn merge(parts: impl IntoIterator<Item = CpuMesh>) -> CpuMesh {
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for part in parts {
+        let base = positions.len() as u32;
+        let p = part.positions.to_f32();
+        let count = p.len() as u32;
+        positions.extend(p);
+        match part.indices.into_u32() {
+            Some(ix) => indices.extend(ix.into_iter().map(|i| i + base)),
+            None => indices.extend(base..base + count),
+        }
+    }
+    let mut mesh = CpuMesh {
+        positions: Positions::F32(positions),
+        indices: Indices::U32(indices),
+        ..Default::default()
+    };
+    mesh.compute_normals();
+    mesh
+}
+
+impl Renderer {
+    /// A renderer on `context` with nothing to draw yet.
+    pub fn new(context: &Context) -> Self {
+        Self {
+            context: context.clone(),
+            capsule: None,
+            cut: None,
+            tools: Vec::new(),
+            fibres: None,
+            overlay: None,
+            overlay_size: (0.0, 0.0),
+            key: DirectionalLight::new(context, 2.2, Srgba::WHITE, vec3(-0.4, -0.5, -1.0)),
+            fill: DirectionalLight::new(context, 0.8, Srgba::WHITE, vec3(0.6, 0.4, 0.3)),
+            ambient: AmbientLight::new(context, 0.35, Srgba::WHITE),
+        }
+    }
+
+    /// The organ surface: `triangles` over `positions_m`, split by `is_cut`.
+    pub fn set_surface(
+        &mut self,
+        positions_m: &[[f32; 3]],
+        triangles: &[[u32; 3]],
+        is_cut: impl Fn([u32; 3]) -> bool,
+    ) {
+        let positions: Vec<Vec3> = positions_m.iter().map(|p| vec3(p[0], p[1], p[2])).collect();
+        let build = |want_cut: bool| -> Option<CpuMesh> {
+            let indices: Vec<u32> = triangles
+                .iter()
+                .filter(|t| is_cut(**t) == want_cut)
+                .flatten()
+                .copied()
+                .collect();
+            if indices.is_empty() {
+                return None;
+            }
+            let mut mesh = CpuMesh {
+                positions: Positions::F32(positions.clone()),
+                indices: Indices::U32(indices),
+                ..Default::default()
+            };
+            mesh.compute_normals();
+            Some(mesh)
+        };
+        self.capsule = build(false).map(|m| solid(&self.context, &m, CAPSULE));
+        self.cut = build(true).map(|m| solid(&self.context, &m, CUT));
+    }
+
+    /// The tools (and their force vectors when `forces`).
+    pub fn set_tools(&mut self, tools: &[ToolShape], forces: bool) {
+        self.tools.clear();
+        for t in tools {
+            let tip_len = (t.radius_m * 4.0).min((t.end_m - t.fulcrum_m).magnitude());
+            let dir = (t.end_m - t.fulcrum_m).normalize();
+            let tip_start = t.end_m - dir * tip_len;
+            if let Some(m) = placed(CpuMesh::cylinder(16), t.fulcrum_m, tip_start, t.radius_m) {
+                self.tools.push(solid(&self.context, &m, SHAFT));
+            }
+            let color = match t.flags {
+                f if f & shared::protocol::CUTTING != 0 => TIP_CUT,
+                f if f & shared::protocol::GRIPPING != 0 => TIP_GRIP,
+                f if f & shared::protocol::CONTACT != 0 => TIP_CONTACT,
+                _ => TIP_FREE,
+            };
+            let mut ball = CpuMesh::sphere(12);
+            if ball
+                .transform(Mat4::from_translation(t.end_m) * Mat4::from_scale(t.radius_m))
+                .is_ok()
+            {
+                let tip = placed(CpuMesh::cylinder(16), tip_start, t.end_m, t.radius_m);
+                self.tools.push(solid(
+                    &self.context,
+                    &merge(tip.into_iter().chain([ball])),
+                    color,
+                ));
+            }
+            let f = t.force_n * FORCE_M_PER_N;
+            if forces && f.magnitude() > t.radius_m {
+                let mut arrow = CpuMesh::arrow(0.75, 0.4, 12);
+                let len = f.magnitude();
+                let m = Mat4::from_translation(t.end_m)
+                    * rotation_matrix_from_dir_to_dir(vec3(1.0, 0.0, 0.0), f / len)
+                    * Mat4::from_nonuniform_scale(len, t.radius_m, t.radius_m);
+                if arrow.transform(m).is_ok() {
+                    self.tools.push(solid(&self.context, &arrow, FORCE));
+                }
+            }
+        }
+    }
+
+    /// Fibre directions as thin rods (built once per scene).
+    pub fn set_fibres(&mut self, fibres: &[Fibre], rod_radius_m: f32) {
+        let rods = fibres.iter().filter_map(|(c, d)| {
+            let (c, d) = (Vec3::from(*c), Vec3::from(*d));
+            placed(CpuMesh::cylinder(3), c - d * 0.5, c + d * 0.5, rod_radius_m)
+        });
+        let mesh = merge(rods);
+        self.fibres = (mesh.vertex_count() > 0).then(|| solid(&self.context, &mesh, FIBRE));
+    }
+
+    /// The overlay panel (drawn in the top-left corner).
+    pub fn set_overlay(&mut self, image: &Image) {
+        if image.pixels.is_empty() {
+            self.overlay = None;
+            return;
+        }
+        let texture = CpuTexture {
+            data: TextureData::RgbaU8(image.pixels.clone()),
+            width: image.width as u32,
+            height: image.height as u32,
+            min_filter: Interpolation::Nearest,
+            mag_filter: Interpolation::Nearest,
+            mipmap: None,
+            ..Default::default()
+        };
+        let material = ColorMaterial {
+            color: Srgba::WHITE,
+            texture: Some(Texture2DRef::from_cpu_texture(&self.context, &texture)),
+            is_transparent: true,
+            render_states: RenderStates {
+                blend: Blend::TRANSPARENCY,
+                depth_test: DepthTest::Always,
+                write_mask: WriteMask::COLOR,
+                ..Default::default()
+            },
+        };
+        let (w, h) = (image.width as f32, image.height as f32);
+        let rect = Rectangle::new(&self.context, vec2(w / 2.0, h / 2.0), degrees(0.0), w, h);
+        self.overlay = Some(Gm::new(rect, material));
+        self.overlay_size = (w, h);
+    }
+
+    /// Clears `target` and draws everything with `camera`.
+    pub fn draw(&mut self, target: &RenderTarget, camera: &Camera, layers: &Layers) {
+        let [r, g, b, a] = BACKGROUND;
+        target.clear(ClearState::color_and_depth(r, g, b, a, 1.0));
+        let mut objects: Vec<&dyn Object> = Vec::new();
+        objects.extend(self.capsule.iter().map(|o| o as &dyn Object));
+        objects.extend(self.cut.iter().map(|o| o as &dyn Object));
+        objects.extend(self.tools.iter().map(|o| o as &dyn Object));
+        if layers.fibres {
+            objects.extend(self.fibres.iter().map(|o| o as &dyn Object));
+        }
+        target.render(camera, objects, &[&self.key, &self.fill, &self.ambient]);
+        if layers.overlay
+            && let Some(panel) = &mut self.overlay
+        {
+            {
+                let vp = camera.viewport();
+                let (w, h) = self.overlay_size;
+                panel
+                    .geometry
+                    .set_center(vec2(w / 2.0 + 8.0, vp.height as f32 - h / 2.0 - 8.0));
+                target.render(Camera::new_2d(vp), [&*panel], &[]);
+            }
+        }
+    }
+}

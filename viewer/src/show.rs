@@ -1,0 +1,77 @@
+//! From what the session says to what is drawn: tool shapes and overlay text.
+
+use crate::render::ToolShape;
+use crate::scene_info::SceneInfo;
+use crate::session::Session;
+use three_d::vec3;
+
+/// One shape per declared tool that the simulation reports, plus the tool
+/// the viewer drives (`driven`: tool index and tip) before the simulation
+/// reports it.
+pub fn tool_shapes(
+    session: &Session,
+    info: &SceneInfo,
+    driven: Option<(usize, [f64; 3])>,
+) -> Vec<ToolShape> {
+    let mut out = Vec::new();
+    for (i, decl) in info.tools.iter().enumerate() {
+        let reported = session.tools.get(i).filter(|t| t.position_m != [0.0; 3]);
+        let (end, flags, force) = match (reported, driven) {
+            (Some(t), _) => (t.position_m, t.flags, t.force_n),
+            (None, Some((k, tip))) if k == i => (tip, 0, [0.0; 3]),
+            _ => continue,
+        };
+        let v = |a: [f64; 3]| vec3(a[0] as f32, a[1] as f32, a[2] as f32);
+        out.push(ToolShape {
+            fulcrum_m: v(decl.fulcrum_m),
+            end_m: v(end),
+            radius_m: decl.radius_m as f32,
+            flags,
+            force_n: v(force),
+        });
+    }
+    out
+}
+
+/// The overlay's lines.
+pub fn overlay_lines(
+    session: &Session,
+    info: &SceneInfo,
+    now_ns: u64,
+    driving: Option<usize>,
+) -> Vec<String> {
+    let s = &session.stats;
+    let mut lines = vec![format!("scene: {}", info.name)];
+    if session.sim_alive(now_ns) {
+        lines.push(format!(
+            "sim {:6.0} Hz  frames {}  topology v{}",
+            s.sim_hz, session.frames, session.topology_version
+        ));
+    } else {
+        lines.push("sim: waiting for a simulation".into());
+    }
+    if s.haptic_hz > 0.0 {
+        lines.push(format!("haptic {:6.0} Hz", s.haptic_hz));
+        lines.push(format!(
+            "sample age p50 {:.0} us  p99 {:.0} us",
+            s.sample_age_p50_us, s.sample_age_p99_us
+        ));
+        lines.push(format!(
+            "tick lateness p50 {:.0} us  p99 {:.0} us",
+            s.lateness_p50_us, s.lateness_p99_us
+        ));
+    } else {
+        lines.push("haptic: no daemon".into());
+    }
+    for (i, t) in session.tools.iter().enumerate() {
+        let f = (t.force_n[0].powi(2) + t.force_n[1].powi(2) + t.force_n[2].powi(2)).sqrt();
+        let name = info.tools.get(i).map_or("?", |d| d.name.as_str());
+        lines.push(format!("tool {i} {name}: {f:.2} N"));
+    }
+    if let Some(i) = driving {
+        lines.push(format!(
+            "mouse drives tool {i}: move, W/S depth, left grip, X cut, 1-4 tool"
+        ));
+    }
+    lines
+}

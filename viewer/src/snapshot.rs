@@ -1,0 +1,189 @@
+//! `viewer --snapshot FILE.png`: waits for the session's mesh, renders one
+//! frame into an offscreen framebuffer on a surfaceless EGL context (no
+//! display needed) and writes it as PNG.
+
+use crate::camera::{View, bounds, framing};
+use crate::egl::{Headless, HeadlessError};
+use crate::overlay;
+use crate::render::{Layers, Renderer};
+use crate::scene_info::SceneInfo;
+use crate::session::Session;
+use crate::show::{overlay_lines, tool_shapes};
+use shared::monotonic_ns;
+use std::path::{Path, PathBuf};
+
+use std::time::Duration;
+use three_d::{DepthTexture2D, Interpolation, RenderTarget, Texture2D, Viewport, Wrapping};
+
+/// Why a snapshot failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SnapshotError {
+    /// No headless OpenGL.
+    #[error(transparent)]
+    Headless(#[from] HeadlessError),
+    /// Nothing to draw in time.
+    #[error(
+        "no mesh state in session {session:?} within {wait_s} s: is `sim-server run --session {session}` running?"
+    )]
+    NoMesh {
+        /// The session.
+        session: String,
+        /// How long it waited.
+        wait_s: f64,
+    },
+    /// The PNG could not be written.
+    #[error("cannot write {path}: {reason}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// What a snapshot showed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SnapshotReport {
+    /// Image width (px).
+    pub width: u32,
+    /// Image height (px).
+    pub height: u32,
+    /// Vertices of the mesh state drawn.
+    pub vertices: usize,
+    /// Surface triangles drawn.
+    pub triangles: usize,
+    /// Of which made by cuts.
+    pub cut_triangles: usize,
+    /// The topology version drawn.
+    pub topology_version: u64,
+    /// Pixels not of the background colour.
+    pub covered_pixels: usize,
+}
+
+/// How to take a snapshot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SnapshotConfig {
+    /// The session's name (for messages).
+    pub session: String,
+    /// The PNG to write.
+    pub out: PathBuf,
+    /// Width and height (px).
+    pub size: (u32, u32),
+    /// Where the camera looks from.
+    pub view: View,
+    /// What to draw.
+    pub layers: Layers,
+    /// How long to wait for the simulation (s).
+    pub wait_s: f64,
+}
+
+/// Waits up to `cfg.wait_s` for drawable mesh state in `session`, then
+/// renders it into `cfg.out` (PNG).
+pub fn snapshot(
+    session: &mut Session,
+    info: &SceneInfo,
+    cfg: &SnapshotConfig,
+) -> Result<SnapshotReport, SnapshotError> {
+    let SnapshotConfig {
+        session: session_name,
+        out,
+        size: (width, height),
+        view,
+        layers,
+        wait_s,
+    } = cfg;
+    let (width, height, view, layers, wait_s) = (*width, *height, *view, *layers, *wait_s);
+    let start = monotonic_ns();
+    loop {
+        let now = monotonic_ns();
+        session.poll(now);
+        // Two frames: a topology that arrived with the first may be older
+        // than the state a running simulation is in.
+        if session.drawable() && session.frames >= 2 {
+            break;
+        }
+        if (now - start) as f64 * 1e-9 > wait_s {
+            if session.drawable() {
+                break;
+            }
+            return Err(SnapshotError::NoMesh {
+                session: session_name.to_string(),
+                wait_s,
+            });
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let headless = Headless::new()?;
+    let ctx = &headless.context;
+    let mut renderer = Renderer::new(ctx);
+    let is_cut = |t| info.vertex_count == session.positions_m.len() && info.is_cut_face(t);
+    renderer.set_surface(&session.positions_m, &session.triangles, is_cut);
+    renderer.set_tools(&tool_shapes(session, info, None), layers.forces);
+    let Some((lo, hi)) = bounds(&session.positions_m) else {
+        return Err(SnapshotError::NoMesh {
+            session: session_name.to_string(),
+            wait_s,
+        });
+    };
+    if layers.fibres {
+        renderer.set_fibres(&info.fibres, (hi - lo).x.max((hi - lo).y) * 0.0015);
+    }
+    renderer.set_overlay(&overlay::render(&overlay_lines(
+        session,
+        info,
+        monotonic_ns(),
+        None,
+    )));
+    let viewport = Viewport::new_at_origo(width, height);
+    let camera = framing(viewport, lo, hi, view);
+    let mut color = Texture2D::new_empty::<[u8; 4]>(
+        ctx,
+        width,
+        height,
+        Interpolation::Nearest,
+        Interpolation::Nearest,
+        None,
+        Wrapping::ClampToEdge,
+        Wrapping::ClampToEdge,
+    );
+    let mut depth = DepthTexture2D::new::<f32>(
+        ctx,
+        width,
+        height,
+        Wrapping::ClampToEdge,
+        Wrapping::ClampToEdge,
+    );
+    let target = RenderTarget::new(color.as_color_target(None), depth.as_depth_target());
+    renderer.draw(&target, &camera, &layers);
+    let pixels: Vec<[u8; 4]> = target.read_color();
+    // The bottom-right corner is background: framing leaves a margin there.
+    let background = pixels.last().map_or([0; 3], |p| [p[0], p[1], p[2]]);
+    let report = SnapshotReport {
+        width,
+        height,
+        vertices: session.positions_m.len(),
+        triangles: session.triangles.len(),
+        cut_triangles: session.triangles.iter().filter(|t| is_cut(**t)).count(),
+        topology_version: session.topology_version,
+        covered_pixels: pixels.iter().filter(|p| p[..3] != background).count(),
+    };
+    write_png(out, width, height, &pixels)?;
+    Ok(report)
+}
+
+fn write_png(path: &Path, w: u32, h: u32, pixels: &[[u8; 4]]) -> Result<(), SnapshotError> {
+    let err = |e: String| SnapshotError::Write {
+        path: path.to_path_buf(),
+        reason: e,
+    };
+    let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    enc.set_color(png::ColorType::Rgba);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut writer = enc.write_header().map_err(|e| err(e.to_string()))?;
+    let flat: Vec<u8> = pixels.iter().flatten().copied().collect();
+    writer
+        .write_image_data(&flat)
+        .map_err(|e| err(e.to_string()))?;
+    writer.finish().map_err(|e| err(e.to_string()))
+}

@@ -1,0 +1,147 @@
+//! The native window (cargo feature `window`): the live view, camera by
+//! mouse and keyboard, and, when no daemon is in the session, the mouse
+//! driving a tool.
+//!
+//! Controls: right drag orbits, wheel zooms, R resets the view, F toggles
+//! fibres, V force vectors, O the overlay. Driving (no daemon): the tool tip
+//! follows the cursor on the plane through the tip facing the camera, W/S
+//! push it in and pull it out, the left button closes the jaws (grip), X
+//! held closes them fully (cut), 1-4 pick the tool.
+
+use crate::camera::{View, bounds, framing};
+use crate::drive::{Driver, JAW_CUT, JAW_GRIP};
+use crate::overlay;
+use crate::render::{Layers, Renderer};
+use crate::scene_info::SceneInfo;
+use crate::session::Session;
+use crate::show::{overlay_lines, tool_shapes};
+use shared::monotonic_ns;
+use three_d::*;
+
+/// Opens the window and runs until it is closed.
+pub fn run(mut session: Session, info: SceneInfo, mut layers: Layers) -> anyhow::Result<()> {
+    let window = Window::new(WindowSettings {
+        title: format!("hapsim viewer - {}", info.name),
+        max_size: None,
+        ..Default::default()
+    })?;
+    let context = window.gl();
+    let mut renderer = Renderer::new(&context);
+    let (mut lo, mut hi) =
+        bounds(&info.rest_m).unwrap_or((vec3(-0.1, -0.1, -0.1), vec3(0.1, 0.1, 0.1)));
+    let mut camera = framing(window.viewport(), lo, hi, View::Iso);
+    let size = (hi - lo).magnitude();
+    renderer.set_fibres(&info.fibres, size * 0.001);
+    // Until the simulation sends a state, show the scene at rest.
+    renderer.set_surface(&info.rest_m, &info.surface, |_| false);
+    let centre = (lo + hi) * 0.5;
+    let mut driver = Driver::new(
+        info.tools.len(),
+        [centre.x as f64, centre.y as f64, hi.z as f64],
+    );
+    let mut cursor: Option<PhysicalPoint> = None;
+    let mut depth_m = 0.0f32;
+    let (mut gripping, mut cutting) = (false, false);
+    let mut shown_frames = u64::MAX;
+    window.render_loop(move |mut frame| {
+        let now = monotonic_ns();
+        camera.set_viewport(frame.viewport);
+        let changed = session.poll(now);
+        if changed && session.drawable() && session.frames != shown_frames {
+            shown_frames = session.frames;
+            let same_scene = info.vertex_count == session.positions_m.len();
+            renderer.set_surface(&session.positions_m, &session.triangles, |t| {
+                same_scene && info.is_cut_face(t)
+            });
+            if let Some(b) = bounds(&session.positions_m) {
+                (lo, hi) = b;
+            }
+        }
+        for event in frame.events.iter_mut() {
+            match event {
+                Event::MouseMotion {
+                    button,
+                    delta,
+                    position,
+                    ..
+                } => {
+                    cursor = Some(*position);
+                    if *button == Some(MouseButton::Right) {
+                        camera.rotate_around_with_fixed_up(
+                            (lo + hi) * 0.5,
+                            0.01 * delta.0,
+                            0.01 * delta.1,
+                        );
+                    }
+                }
+                Event::MouseWheel { delta, .. } => {
+                    let target = (lo + hi) * 0.5;
+                    let speed = 0.01 * target.distance(camera.position()) + 0.001;
+                    camera.zoom_towards(target, speed * delta.1, size * 0.05, size * 20.0);
+                }
+                Event::MousePress {
+                    button: MouseButton::Left,
+                    ..
+                } => gripping = true,
+                Event::MouseRelease {
+                    button: MouseButton::Left,
+                    ..
+                } => gripping = false,
+                Event::KeyPress { kind, .. } => match kind {
+                    Key::W => depth_m += size * 0.01,
+                    Key::S => depth_m -= size * 0.01,
+                    Key::X => cutting = true,
+                    Key::F => layers.fibres = !layers.fibres,
+                    Key::V => layers.forces = !layers.forces,
+                    Key::O => layers.overlay = !layers.overlay,
+                    Key::R => camera = framing(frame.viewport, lo, hi, View::Iso),
+                    Key::Num1 | Key::Num2 | Key::Num3 | Key::Num4 => {
+                        let k = match kind {
+                            Key::Num1 => 0,
+                            Key::Num2 => 1,
+                            Key::Num3 => 2,
+                            _ => 3,
+                        };
+                        if k < info.tools.len() {
+                            driver.tool = k;
+                        }
+                    }
+                    _ => {}
+                },
+                Event::KeyRelease { kind: Key::X, .. } => cutting = false,
+                _ => {}
+            }
+        }
+        // The tip: under the cursor, on the plane through the organ's centre
+        // facing the camera, moved along the view by W/S.
+        if let Some(p) = cursor {
+            let origin = camera.position_at_pixel(p);
+            let dir = camera.view_direction_at_pixel(p);
+            let centre = (lo + hi) * 0.5;
+            let n = camera.view_direction();
+            let denom = dir.dot(n);
+            if denom.abs() > 1e-6 {
+                let t = (centre - origin).dot(n) / denom;
+                let tip = origin + dir * t + n * depth_m;
+                driver.tip_m = [tip.x as f64, tip.y as f64, tip.z as f64];
+            }
+        }
+        driver.jaw_opening = if cutting {
+            JAW_CUT
+        } else if gripping {
+            JAW_GRIP
+        } else {
+            1.0
+        };
+        driver.update(&session);
+        let driving = driver.active().then_some(driver.tool);
+        let driven = driving.map(|k| (k, driver.tip_m));
+        renderer.set_tools(&tool_shapes(&session, &info, driven), layers.forces);
+        renderer.set_overlay(&overlay::render(&overlay_lines(
+            &session, &info, now, driving,
+        )));
+        renderer.draw(&frame.screen(), &camera, &layers);
+        FrameOutput::default()
+    });
+    Ok(())
+}
