@@ -357,3 +357,37 @@ fn without_a_daemon_the_viewer_drives_a_tool_into_the_liver() {
     assert!(s["poses_received"].as_u64().unwrap() > 100, "{s}");
     assert!(s["contact_steps"].as_u64().unwrap() > 100, "{s}");
 }
+
+#[test]
+fn the_viewer_session_follows_a_simulation_that_stops_and_restarts() {
+    use viewer::session::Session;
+    let name = format!("viewrestart{}", std::process::id());
+    let dir = scratch_dir("viewer-restart");
+    let mut session = Session::join(&SessionName::new(&name).unwrap()).unwrap();
+    let wait_drawable = |session: &mut Session, after_frames: u64| {
+        let start = std::time::Instant::now();
+        while start.elapsed() < Duration::from_secs(15) {
+            session.poll(monotonic_ns());
+            if session.drawable() && session.frames > after_frames {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        panic!("no drawable mesh state after {after_frames} frames");
+    };
+    let first = sim_server(&name, "2", &dir.join("a.json"));
+    wait_drawable(&mut session, 0);
+    let vertices = session.positions_m.len();
+    finish(first);
+    // The simulation is gone: after a second without frames the viewer says so.
+    std::thread::sleep(Duration::from_millis(1200));
+    session.poll(monotonic_ns());
+    assert!(!session.sim_alive(monotonic_ns()));
+    let frames = session.frames;
+    let second = sim_server(&name, "2", &dir.join("b.json"));
+    wait_drawable(&mut session, frames + 2);
+    assert!(session.sim_alive(monotonic_ns()));
+    assert_eq!(session.positions_m.len(), vertices);
+    assert_eq!(session.topology_version, 1, "the new simulation's surface");
+    finish(second);
+}

@@ -104,7 +104,21 @@ mod tests {
         // The same face listed in another order is still the original one.
         let [a, b, c] = info.surface[0];
         assert!(!info.is_cut_face([c, a, b]));
-        assert!(info.is_cut_face([0, 1, 2]) || info.surface.iter().any(|&t| key(t) == [0, 1, 2]));
+        // Faces inside the organ count as cut faces once exposed.
+        let src = SceneSource::embedded();
+        let built = build_scene(&src, &src.parse().unwrap()).unwrap();
+        let mesh = built.model.mesh();
+        let inner = mesh
+            .tets()
+            .iter()
+            .flat_map(|t| sim_server::mesh::TET_FACES.map(|f| f.map(|l| t[l].0)))
+            .find(|f| !info.surface.iter().any(|s| key(*s) == key(*f)))
+            .unwrap();
+        assert!(info.is_cut_face(inner));
         assert_eq!(info.rest_m.len(), info.vertex_count);
+        assert!(
+            !info.fibres.is_empty(),
+            "the liver's vessels are anisotropic"
+        );
     }
 }

@@ -66,7 +66,7 @@ pub struct Session {
     pub frame_topology_version: u64,
     /// Mesh frames received.
     pub frames: u64,
-    /// `CLOCK_MONOTONIC` (ns) of the last mesh frame received (0: none).
+    /// `CLOCK_MONOTONIC` (ns) stamp of the newest mesh frame (0: none).
     pub last_frame_ns: u64,
     /// Tools in the latest force sample.
     pub tools: Vec<ToolState>,
@@ -170,7 +170,9 @@ impl Session {
                 self.positions_m.extend_from_slice(s.payload());
                 self.frame_topology_version = h.topology_version;
                 self.frames += 1;
-                self.last_frame_ns = now_ns;
+                // The frame's own stamp (same monotonic clock): frames left in
+                // the buffer by a simulation that has gone do not look fresh.
+                self.last_frame_ns = h.t_ns.max(1);
                 changed = true;
             }
         }
