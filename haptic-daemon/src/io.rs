@@ -4,12 +4,11 @@
 
 use crate::daemon::Shared;
 use crate::rt::LatenessHistogram;
-use iceoryx2::prelude::*;
 use shared::SessionName;
 use shared::protocol::{
     PROTOCOL_VERSION, PoseMsg, TELEMETRY_BATCH, TOOL_PRESENT, TelemetryBatch, TelemetryTick,
 };
-use shared::services::{self, Ipc, ServiceError};
+use shared::services::{self, ServiceError};
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -73,7 +72,7 @@ pub enum IoError {
 /// The record CSV's header (columns listed in the architecture page, then extras).
 pub const RECORD_HEADER: &str = "t_ns,seq,pos_x_m,pos_y_m,pos_z_m,force_x_n,force_y_n,force_z_n,sample_age_ns,lateness_ns,method,safety_state";
 
-fn write_row(w: &mut impl Write, t: &TelemetryTick) -> std::io::Result<()> {
+pub(crate) fn write_row(w: &mut impl Write, t: &TelemetryTick) -> std::io::Result<()> {
     let age = if t.sample_age_ns == u64::MAX {
         String::new()
     } else {
@@ -189,13 +188,8 @@ pub fn run_io(
         if loops.is_multiple_of(20) {
             // Reap dead nodes so a crashed simulation's publisher disappears,
             // then see whether anyone publishes forces.
-            let _ = Node::<Ipc>::list(node.config(), |state| {
-                if let NodeState::Dead(view) = state {
-                    let _ = view.try_remove_stale_resources();
-                }
-                CallbackProgression::Continue
-            });
-            let alive = force_service.dynamic_config().number_of_publishers() > 0;
+            services::reap_dead_nodes(&node);
+            let alive = services::publisher_count(&force_service) > 0;
             shared.flags.peer_alive.store(alive, Ordering::Relaxed);
         }
         loops += 1;

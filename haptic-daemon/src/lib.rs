@@ -7,6 +7,7 @@ pub mod device;
 pub mod extrapolate;
 pub mod io;
 pub mod math;
+pub mod record;
 pub mod rt;
 pub mod safety;
 pub mod slots;

@@ -49,6 +49,66 @@ struct Cli {
 enum Command {
     /// Run the haptic loop.
     Run(RunArgs),
+    /// Record a session's force samples and telemetry losslessly, counting
+    /// sequence gaps (SIGINT/SIGTERM stop it after a flush).
+    Record(RecordArgs),
+}
+
+#[derive(clap::Args)]
+struct RecordArgs {
+    /// Session to record.
+    #[arg(long, default_value = "default")]
+    session: String,
+    /// Force samples CSV (one row per tool per simulation step).
+    #[arg(long)]
+    forces: Option<PathBuf>,
+    /// Telemetry CSV (one row per haptic tick, the `run --record` columns).
+    #[arg(long)]
+    telemetry: Option<PathBuf>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Write the counts (received, gaps, lost, restarts per stream) as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+fn record_main(args: RecordArgs) -> Result<()> {
+    if args.forces.is_none() && args.telemetry.is_none() && args.json.is_none() {
+        bail!("nothing to record: give --forces FILE, --telemetry FILE or --json FILE");
+    }
+    if let Some(d) = args.duration_s
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration-s must be a positive number of seconds");
+    }
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    let cfg = haptic_daemon::record::RecordConfig {
+        session: SessionName::new(&args.session)?,
+        forces: args.forces,
+        telemetry: args.telemetry,
+        duration_s: args.duration_s,
+    };
+    let s = haptic_daemon::record::record(&cfg, &stop)?;
+    eprintln!(
+        "recorded {} force samples ({} gaps, {} lost, {} restarts), {} ticks ({} gaps, {} lost, {} restarts)",
+        s.forces.received,
+        s.forces.gaps,
+        s.forces.lost,
+        s.forces.restarts,
+        s.telemetry.received,
+        s.telemetry.gaps,
+        s.telemetry.lost,
+        s.telemetry.restarts
+    );
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&s)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
 }
 
 #[derive(clap::Args)]
@@ -192,9 +252,10 @@ impl DeviceChoice {
 const SIMULATED_DEVICE_MAX_FORCE_N: f64 = 8.0;
 
 fn main() -> Result<()> {
-    let Cli {
-        command: Command::Run(args),
-    } = Cli::parse();
+    let args = match Cli::parse().command {
+        Command::Run(args) => args,
+        Command::Record(args) => return record_main(args),
+    };
     if !(100.0..=10_000.0).contains(&args.rate) {
         bail!("--rate must lie in 100..=10000 Hz, got {}", args.rate);
     }
@@ -258,7 +319,10 @@ fn main() -> Result<()> {
                 }
                 let _ = report_tx.send(report);
                 let node = services::node("haptic-daemon-rt")?;
-                let sub = services::subscriber(&services::force_service(&node, &session)?)?;
+                let sub = services::subscriber_with_buffer(
+                    &services::force_service(&node, &session)?,
+                    services::FORCE_BUFFER_LATEST,
+                )?;
                 let result = match device {
                     DeviceChoice::Simulated(d) => {
                         run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)

@@ -120,12 +120,19 @@ fn open<T: std::fmt::Debug + ZeroCopySend>(
         .map_err(|e| version_or_open(&name, format!("{e:?}")))
 }
 
-/// The force stream (sim -> daemon): a small buffer, newest kept on overflow.
+/// Force samples a subscriber may keep: a recorder asks for all of them
+/// (a second at 1 kHz), the daemon for [`FORCE_BUFFER_LATEST`].
+pub const FORCE_BUFFER_MAX: usize = 1024;
+/// The daemon's and viewer's force buffer: only the newest samples matter.
+pub const FORCE_BUFFER_LATEST: usize = 4;
+
+/// The force stream (sim -> daemon, recorder, viewer): newest kept on
+/// overflow, each subscriber choosing its buffer up to [`FORCE_BUFFER_MAX`].
 pub fn force_service(
     node: &Node<Ipc>,
     session: &SessionName,
 ) -> Result<PortFactory<Ipc, ForceMsg, ()>, ServiceError> {
-    open(node, session, stream::FORCE, 4)
+    open(node, session, stream::FORCE, FORCE_BUFFER_MAX)
 }
 
 /// The pose stream (daemon -> sim): latest value, so a buffer of one.
@@ -215,6 +222,24 @@ pub fn slice_publisher<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + Z
         })
 }
 
+/// Removes the ports and shared memory of processes that died without
+/// cleaning up (SIGKILL, crash), so a restarted peer starts clean.
+pub fn reap_dead_nodes(node: &Node<Ipc>) {
+    let _ = Node::<Ipc>::list(node.config(), |state| {
+        if let NodeState::Dead(view) = state {
+            let _ = view.try_remove_stale_resources();
+        }
+        CallbackProgression::Continue
+    });
+}
+
+/// Live publishers on `factory`'s service.
+pub fn publisher_count<T: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, T, ()>,
+) -> usize {
+    factory.dynamic_config().number_of_publishers()
+}
+
 /// A publisher on `factory`.
 pub fn publisher<T: std::fmt::Debug + ZeroCopySend>(
     factory: &PortFactory<Ipc, T, ()>,
@@ -228,7 +253,23 @@ pub fn publisher<T: std::fmt::Debug + ZeroCopySend>(
         })
 }
 
-/// A subscriber on `factory`.
+/// A subscriber on `factory` keeping at most `buffer` unread samples (the
+/// oldest dropped first).
+pub fn subscriber_with_buffer<T: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, T, ()>,
+    buffer: usize,
+) -> Result<Subscriber<Ipc, T, ()>, ServiceError> {
+    factory
+        .subscriber_builder()
+        .buffer_size(buffer)
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// A subscriber on `factory` with the service's largest buffer.
 pub fn subscriber<T: std::fmt::Debug + ZeroCopySend>(
     factory: &PortFactory<Ipc, T, ()>,
 ) -> Result<Subscriber<Ipc, T, ()>, ServiceError> {

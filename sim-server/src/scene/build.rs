@@ -550,6 +550,7 @@ fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneErr
     s.policy = match sim.dt_policy.unwrap_or(DtPolicyName::Substep) {
         DtPolicyName::Refuse => DtPolicy::Refuse,
         DtPolicyName::Substep => DtPolicy::Substep,
+        DtPolicyName::Unchecked => DtPolicy::Unchecked,
     };
     s.bound = match sim.bound.unwrap_or(BoundName::Element) {
         BoundName::Element => BoundMethod::Element,

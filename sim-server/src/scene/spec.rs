@@ -356,6 +356,9 @@ pub enum DtPolicyName {
     Refuse,
     /// Sub-step.
     Substep,
+    /// Use the step as given, even above the bound (stability experiments:
+    /// a divergence is detected and the forces zeroed).
+    Unchecked,
 }
 
 /// Bound names.

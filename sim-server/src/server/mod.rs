@@ -118,6 +118,14 @@ pub enum RunError {
         /// The step.
         step: u64,
     },
+    /// Another simulation already publishes in the session.
+    #[error(
+        "session {session:?} already has a running simulation (a force publisher); stop it or pick another --session"
+    )]
+    SessionBusy {
+        /// The session.
+        session: String,
+    },
     /// A publish failed.
     #[error("publishing {what} failed: {reason}")]
     Publish {
@@ -177,7 +185,16 @@ pub fn run<S: Storage>(
     }
     let node = services::node("sim-server")?;
     let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
-    let force_pub = services::publisher(&services::force_service(&node, &cfg.session)?)?;
+    let force_service = services::force_service(&node, &cfg.session)?;
+    // What a crashed simulation left behind goes first, so that only a live
+    // one makes this session busy.
+    services::reap_dead_nodes(&node);
+    if services::publisher_count(&force_service) > 0 {
+        return Err(RunError::SessionBusy {
+            session: cfg.session.as_str().to_string(),
+        });
+    }
+    let force_pub = services::publisher(&force_service)?;
     let n = sim.model().vertex_count();
     let mesh_pub = services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?;
     let max_tris = 4 * sim.model().mesh().tet_count();
