@@ -95,7 +95,10 @@ impl Session {
             .subscriber_builder()
             .create()
             .map_err(|e| open("topology", format!("{e:?}")))?;
-        let force = services::subscriber(&services::force_service(&node, session)?)?;
+        let force = services::subscriber_with_buffer(
+            &services::force_service(&node, session)?,
+            services::FORCE_BUFFER_LATEST,
+        )?;
         let telemetry = services::subscriber(&services::telemetry_service(&node, session)?)?;
         let pose_factory = services::pose_service(&node, session)?;
         Ok(Self {
