@@ -106,6 +106,10 @@ impl<D: Device> RtLoop<D> {
     pub fn tick(&mut self, now_ns: u64, lateness_ns: i64) {
         // 1. Device. A failed read keeps the last good state and poisons the
         // request, so the safety filter ramps the force down.
+        self.shared
+            .flags
+            .heartbeat_ns
+            .store(now_ns, Ordering::Relaxed);
         let read = self.device.read(now_ns);
         let mut poisoned = false;
         match read {

@@ -69,6 +69,13 @@ pub enum IoError {
     },
 }
 
+/// How long a device call may block before the daemon gives up (ns).
+pub const DEVICE_STALL_NS: u64 = 250_000_000;
+/// A gap in this thread's own wake-ups that restarts the stall watch (ns).
+const STALL_IO_GAP_NS: u64 = 50_000_000;
+/// The exit status after a blocked device.
+pub const DEVICE_STALL_EXIT_CODE: i32 = 3;
+
 /// The record CSV's header (columns listed in the architecture page, then extras).
 pub const RECORD_HEADER: &str = "t_ns,seq,pos_x_m,pos_y_m,pos_z_m,force_x_n,force_y_n,force_z_n,sample_age_ns,lateness_ns,method,safety_state";
 
@@ -133,6 +140,8 @@ pub fn run_io(
     let mut pose_msgs = 0u64;
     let mut next_seq = 0u64;
     let mut loops = 0u64;
+    let mut last_wake_ns = shared::monotonic_ns();
+    let mut watch_from_ns = last_wake_ns;
     loop {
         let done = shared.flags.rt_done.load(Ordering::Acquire);
         if let Some(p) = shared.pose.read()
@@ -184,6 +193,27 @@ pub fn run_io(
                     batch.count = 0;
                 }
             }
+        }
+        // A device call that never returns leaves the RT thread unable to
+        // command the device at all: report it and exit, so the driver's
+        // own disconnect handling zeroes the device. The stall only counts
+        // while this thread was itself running (a stopped process is not a
+        // blocked device).
+        let now = shared::monotonic_ns();
+        if now.saturating_sub(last_wake_ns) > STALL_IO_GAP_NS {
+            watch_from_ns = now;
+        }
+        last_wake_ns = now;
+        let beat = shared.flags.heartbeat_ns.load(Ordering::Relaxed);
+        if beat != 0 && !done && now.saturating_sub(beat.max(watch_from_ns)) > DEVICE_STALL_NS {
+            if let Some(w) = writer.as_mut() {
+                let _ = w.flush();
+            }
+            eprintln!(
+                "haptic-daemon: the device has not returned from a call for {} ms (a blocking plugin or driver): the loop cannot command it; exiting so that the driver zeroes it on disconnect",
+                now.saturating_sub(beat) / 1_000_000
+            );
+            std::process::exit(DEVICE_STALL_EXIT_CODE);
         }
         if loops.is_multiple_of(20) {
             // Reap dead nodes so a crashed simulation's publisher disappears,

@@ -91,6 +91,10 @@ pub struct Flags {
     pub peer_alive: AtomicBool,
     /// A force sample of another protocol version arrived (and was ignored).
     pub version_mismatch: AtomicBool,
+    /// `CLOCK_MONOTONIC` (ns) at which the RT thread last started a tick
+    /// (0 before the first): a value that stops moving means the device
+    /// call of that tick blocks.
+    pub heartbeat_ns: AtomicU64,
 }
 
 #[cfg(test)]

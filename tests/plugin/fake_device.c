@@ -1,13 +1,19 @@
 /* A fake haptic device behind the hapsim plugin ABI, built by the tests.
  * args: "" = a handle circling slowly in the xy plane; "nan" = the same, but
- * reads return NaN after the first 500; "fail-open" = open fails. */
+ * reads return NaN after the first 500; "garbage" = after 500 reads, every
+ * other read fails with an error code and the rest return infinities and a
+ * gripper of 1e300; "block" = the 500th read never returns; "fail-open" =
+ * open fails. */
 #include "../../haptic-daemon/include/hapsim_device.h"
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 typedef struct {
     int nan_mode;
+    int garbage_mode;
+    int block_mode;
     long reads;
     int enabled;
     double last_force[3];
@@ -20,6 +26,8 @@ int hapsim_device_open(void **handle, const char *args) {
     fake *f = calloc(1, sizeof(fake));
     if (!f) return 1;
     f->nan_mode = strcmp(args, "nan") == 0;
+    f->garbage_mode = strcmp(args, "garbage") == 0;
+    f->block_mode = strcmp(args, "block") == 0;
     *handle = f;
     return 0;
 }
@@ -46,6 +54,13 @@ int hapsim_device_read(void *handle, hapsim_state *out) {
     out->gripper = 1.0;
     out->buttons = 0;
     if (f->nan_mode && f->reads > 500) out->position_m[0] = NAN;
+    if (f->block_mode && f->reads > 500) for (;;) pause();
+    if (f->garbage_mode && f->reads > 500) {
+        if (f->reads % 2) return -42;
+        out->position_m[1] = INFINITY;
+        out->velocity_m_s[2] = -INFINITY;
+        out->gripper = 1e300;
+    }
     return 0;
 }
 

@@ -76,6 +76,46 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
     let f = v["max_force_n"].as_f64().unwrap();
     assert!(f.is_finite() && f <= 3.3);
 
+    let json = dir.join("garbage.json");
+    let out = run(
+        &format!("plugin:{}:garbage", lib.display()),
+        &json,
+        &session,
+    );
+    assert!(
+        out.status.success(),
+        "a device returning errors and garbage must not crash the daemon: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let f = read_json(&json)["max_force_n"].as_f64().unwrap();
+    assert!(f.is_finite() && f <= 3.3);
+
+    // A read that never returns: the daemon says so and exits within a
+    // bound instead of hanging with the device uncommanded.
+    let start = std::time::Instant::now();
+    let mut child = Command::new(binary("haptic-daemon"))
+        .args(["run", "--rt-priority", "0", "--quiet", "--duration-s", "30"])
+        .args(["--session", &session])
+        .arg("--device")
+        .arg(format!("plugin:{}:block", lib.display()))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > std::time::Duration::from_secs(10) {
+            let _ = child.kill();
+            panic!("the daemon hung on a blocking device");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let err = String::from_utf8_lossy(&child.wait_with_output().unwrap().stderr).to_string();
+    assert_eq!(status.code(), Some(3), "{err}");
+    assert!(err.contains("has not returned from a call"), "{err}");
+
     let out = run(
         &format!("plugin:{}:fail-open", lib.display()),
         &dir.join("x.json"),
