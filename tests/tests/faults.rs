@@ -287,3 +287,50 @@ dt_policy = "unchecked"
         "{err}"
     );
 }
+
+#[test]
+fn daemon_first_then_simulation_with_a_killed_viewer_in_the_session() {
+    let session = format!("order{}", std::process::id());
+    let dir = scratch_dir("order");
+    let (d_json, s_json) = (dir.join("d.json"), dir.join("s.json"));
+    let mut daemon = Command::new(binary("haptic-daemon"))
+        .args([
+            "run",
+            "--quiet",
+            "--rt-priority",
+            "0",
+            "--session",
+            &session,
+        ])
+        .args(["--duration-s", "5", "--max-force", "4"])
+        .arg("--json")
+        .arg(&d_json)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start haptic-daemon");
+    // A viewer joins, waiting for a simulation, and is SIGKILLed: its
+    // subscriber ports stay behind in the session.
+    let mut viewer = Command::new(binary("viewer"))
+        .args(["--session", &session, "--wait-s", "30", "--snapshot"])
+        .arg(dir.join("never.png"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start viewer");
+    std::thread::sleep(Duration::from_millis(1000));
+    signal(&viewer, libc::SIGKILL);
+    wait_bounded(&mut viewer, Duration::from_secs(5), "killed viewer");
+    let mut sim = sim_server(
+        &session,
+        &["--duration-s", "3", "--json", s_json.to_str().unwrap()],
+    );
+    let status = wait_bounded(&mut sim, Duration::from_secs(20), "sim-server");
+    assert!(status.success(), "the simulation after a dead viewer");
+    let status = wait_bounded(&mut daemon, Duration::from_secs(20), "haptic-daemon");
+    assert!(status.success());
+    let (d, s) = (read_json(&d_json), read_json(&s_json));
+    assert!(d["samples_received"].as_u64().unwrap() > 1000, "{d}");
+    assert!(s["poses_received"].as_u64().unwrap() > 1000, "{s}");
+    assert!(s["frames_published"].as_u64().unwrap() > 30, "{s}");
+}
