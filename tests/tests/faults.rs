@@ -334,3 +334,63 @@ fn daemon_first_then_simulation_with_a_killed_viewer_in_the_session() {
     assert!(s["poses_received"].as_u64().unwrap() > 1000, "{s}");
     assert!(s["frames_published"].as_u64().unwrap() > 30, "{s}");
 }
+
+#[test]
+fn sigterm_flushes_every_recorded_row() {
+    let session = format!("flush{}", std::process::id());
+    let dir = scratch_dir("flush");
+    let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let mut sim = sim_server(&session, &["--duration-s", "6"]);
+    let mut recorder = Command::new(binary("haptic-daemon"))
+        .args(["record", "--session", &session, "--forces", &p("f.csv")])
+        .args(["--telemetry", &p("t.csv"), "--json", &p("r.json")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut daemon = Command::new(binary("haptic-daemon"))
+        .args([
+            "run",
+            "--quiet",
+            "--rt-priority",
+            "0",
+            "--session",
+            &session,
+        ])
+        .args(["--record", &p("d.csv"), "--json", &p("d.json")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2500));
+    signal(&daemon, libc::SIGTERM);
+    assert!(wait_bounded(&mut daemon, Duration::from_secs(10), "daemon").success());
+    std::thread::sleep(Duration::from_millis(300));
+    signal(&recorder, libc::SIGTERM);
+    assert!(wait_bounded(&mut recorder, Duration::from_secs(10), "recorder").success());
+    signal(&sim, libc::SIGTERM);
+    assert!(wait_bounded(&mut sim, Duration::from_secs(10), "sim-server").success());
+    let rows = |f: &str| {
+        std::fs::read_to_string(dir.join(f))
+            .unwrap()
+            .lines()
+            .count() as u64
+            - 1
+    };
+    let (d, r) = (
+        read_json(&dir.join("d.json")),
+        read_json(&dir.join("r.json")),
+    );
+    let ticks = d["ticks"].as_u64().unwrap();
+    assert!(ticks > 1000, "{d}");
+    assert_eq!(rows("d.csv"), ticks, "the daemon's record after SIGTERM");
+    assert_eq!(rows("t.csv"), r["telemetry"]["received"].as_u64().unwrap());
+    assert_eq!(r["telemetry"]["received"].as_u64().unwrap(), ticks, "{r}");
+    // Two tools per force sample in the liver scene.
+    assert_eq!(
+        rows("f.csv"),
+        2 * r["forces"]["received"].as_u64().unwrap(),
+        "{r}"
+    );
+    assert_eq!(r["forces"]["gaps"], 0, "{r}");
+}
