@@ -159,3 +159,48 @@ force_n = [0.0, 0.0, -0.01]
     );
     assert!(v["max_displacement_m"].as_f64().unwrap() > 0.0);
 }
+
+#[test]
+fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
+    let dir = scratch_dir("hapbench-ex");
+    let run = |rate: &str| {
+        let json = dir.join(format!("ex{rate}.json"));
+        let out = std::process::Command::new(binary("hapbench"))
+            .args(["extrapolation", "--sim-rate", rate, "--haptic-rate", "1000"])
+            .arg("--json")
+            .arg(&json)
+            .arg("--plot")
+            .arg(&dir)
+            .output()
+            .expect("run hapbench");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        read_json(&json)
+    };
+    let (slow, fast) = (run("50"), run("500"));
+    assert!(
+        slow["truth_max_force_n"].as_f64().unwrap() > 0.05,
+        "the path touches the liver"
+    );
+    for m in [
+        "constant",
+        "linear-time",
+        "linear-position",
+        "linear-position-signed",
+        "local-model",
+    ] {
+        let (a, b) = (&slow["methods"][m], &fast["methods"][m]);
+        for key in ["rms_error_n", "max_error_n", "p99_jump_n", "net_energy_j"] {
+            assert!(a[key].as_f64().unwrap().is_finite(), "{m}.{key}: {a}");
+        }
+        let (ra, rb) = (
+            a["rms_error_n"].as_f64().unwrap(),
+            b["rms_error_n"].as_f64().unwrap(),
+        );
+        assert!(rb < ra, "{m}: rms error {ra} N at 50 Hz, {rb} N at 500 Hz");
+    }
+    assert!(dir.join("extrapolation.svg").exists());
+}

@@ -140,12 +140,24 @@ fn publish_err(what: &'static str) -> impl Fn(String) -> RunError {
     move |reason| RunError::Publish { what, reason }
 }
 
-/// Runs `scene` until a stop condition or `stop` is set.
-pub fn run<S: Storage>(
+/// A scene ready to step: the integrator with the scene's fixed vertices,
+/// prescribed displacements and loads applied, and its tools.
+pub struct Prepared<S: Storage> {
+    /// The explicit integrator.
+    pub sim: Explicit<S>,
+    /// The scene's tools (at most `MAX_TOOLS`), scene-held vertices reserved.
+    pub tools: Tools,
+    /// The step (s).
+    pub dt_s: Real,
+}
+
+/// Sets `scene` up for stepping with `dt_s` (default: the scene's, else 90%
+/// of the stable step; a larger one is sub-stepped or refused as the scene
+/// says).
+pub fn prepare<S: Storage>(
     scene: BuiltScene,
-    cfg: &RunConfig,
-    stop: Arc<AtomicBool>,
-) -> Result<RunSummary, RunError> {
+    dt_s: Option<Real>,
+) -> Result<Prepared<S>, crate::tensor_mass::ExplicitError> {
     let BuiltScene {
         model,
         fixed,
@@ -156,7 +168,7 @@ pub fn run<S: Storage>(
         ..
     } = scene;
     let stable = crate::tensor_mass::element_bound(&model);
-    let dt_s = settings.dt_s.unwrap_or(0.9 * stable.dt_max_s);
+    let dt_s = dt_s.or(settings.dt_s).unwrap_or(0.9 * stable.dt_max_s);
     let mut sim = Explicit::<S>::new(
         model,
         ExplicitConfig {
@@ -183,6 +195,24 @@ pub fn run<S: Storage>(
     for v in fixed.iter().chain(prescribed.iter().map(|(v, _)| v)) {
         contacts.reserve(*v);
     }
+    Ok(Prepared {
+        sim,
+        tools: contacts,
+        dt_s,
+    })
+}
+
+/// Runs `scene` until a stop condition or `stop` is set.
+pub fn run<S: Storage>(
+    scene: BuiltScene,
+    cfg: &RunConfig,
+    stop: Arc<AtomicBool>,
+) -> Result<RunSummary, RunError> {
+    let Prepared {
+        mut sim,
+        tools: mut contacts,
+        dt_s,
+    } = prepare::<S>(scene, None)?;
     let node = services::node("sim-server")?;
     let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
     let force_service = services::force_service(&node, &cfg.session)?;

@@ -1,0 +1,306 @@
+//! `hapbench extrapolation` (paper 5.2 with numbers): offline and
+//! deterministic. The hand follows a trajectory; the simulation runs at the
+//! simulation rate (a sample for the pose at t_j is delivered one period
+//! later, stamped then, as a real-time simulation would send it) while the
+//! haptic loop, at the haptic rate, renders each extrapolator from the
+//! samples it has. The ground truth is the same simulation stepped at the
+//! haptic rate with the pose of each tick, without delay.
+//!
+//! Per method: RMS and max force error against the truth, the 99th
+//! percentile of the per-tick force change (what the hand feels as
+//! roughness), and the net work the rendered force does on the hand
+//! (sum of F . dp; positive means the rendering injected energy: an active,
+//! potentially unstable device).
+
+use anyhow::{Context, Result};
+use haptic_daemon::device::Trajectory;
+use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use shared::protocol::MAX_TOOLS;
+use sim_server::contact::ToolInput;
+use sim_server::math::Vec3;
+use sim_server::scene::{SceneSource, build_scene};
+use sim_server::server::prepare;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::plot::{Series, chart};
+
+/// The default hand path (tool 0).
+const PRESS_SLIDE_CSV: &str = include_str!("../../../data/press-slide.csv");
+
+/// Flags of `hapbench extrapolation`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Scene (default: the embedded liver).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Hand path for tool 0, CSV `t_s,x_m,y_m,z_m[,jaw]` (default: press
+    /// and slide on the liver, tests/data/press-slide.csv).
+    #[arg(long)]
+    pub trajectory: Option<PathBuf>,
+    /// Simulation rate (Hz).
+    #[arg(long, default_value_t = 60.0)]
+    pub sim_rate: f64,
+    /// Haptic rate (Hz).
+    #[arg(long, default_value_t = 1000.0)]
+    pub haptic_rate: f64,
+    /// Write the results here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write SVG plots here.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// One method's figures.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct MethodResult {
+    /// RMS of |F - F_truth| over the ticks (N).
+    pub rms_error_n: f64,
+    /// Max of |F - F_truth| (N).
+    pub max_error_n: f64,
+    /// 99th percentile of |F(t) - F(t - tick)| (N).
+    pub p99_jump_n: f64,
+    /// Work of the rendered force on the hand, sum of F . dp (J).
+    pub net_energy_j: f64,
+}
+
+#[derive(Serialize)]
+struct Report {
+    scene: String,
+    trajectory: String,
+    sim_rate_hz: f64,
+    haptic_rate_hz: f64,
+    duration_s: f64,
+    ticks: usize,
+    truth: MethodResult,
+    truth_max_force_n: f64,
+    methods: BTreeMap<&'static str, MethodResult>,
+}
+
+fn scene_source(path: Option<&Path>) -> Result<SceneSource> {
+    Ok(match path {
+        Some(p) => SceneSource::read(p)?,
+        None => SceneSource::embedded(),
+    })
+}
+
+/// Tool 0's force, contact stiffness (rows) and contact flag after a step.
+type Sample = (Vec3, [[f64; 3]; 3], bool);
+
+/// Tool 0's force (and contact state) for each pose the loop gives, the
+/// simulation stepped `dt_s` after each.
+fn simulate(
+    src: &SceneSource,
+    dt_s: f64,
+    poses: impl Iterator<Item = ([f64; 3], f64)>,
+    steps: usize,
+    bar: &ProgressBar,
+) -> Result<Vec<Sample>> {
+    let scene = build_scene(src, &src.parse()?)?;
+    anyhow::ensure!(
+        !scene.tools.is_empty(),
+        "the scene {} has no [[tool]]",
+        src.name
+    );
+    let mut p = prepare::<f64>(scene, Some(dt_s))?;
+    let mut out = Vec::with_capacity(steps);
+    let mut inputs = [None; MAX_TOOLS];
+    for (tip, jaw) in poses.take(steps) {
+        inputs[0] = Some(ToolInput {
+            tip_m: Vec3::from_array(tip),
+            jaw_opening: jaw,
+        });
+        let contact = p.tools.update(&mut p.sim, &inputs)[0].contact;
+        p.sim.step();
+        let r = p.tools.reaction(0, &p.sim);
+        anyhow::ensure!(
+            r.force_n.is_finite(),
+            "the simulation diverged at step {}",
+            out.len()
+        );
+        out.push((r.force_n, r.stiffness_rows(), contact));
+        bar.inc(1);
+    }
+    Ok(out)
+}
+
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn figures(rendered: &[[f64; 3]], truth: &[[f64; 3]], hand: &[[f64; 3]]) -> MethodResult {
+    let n = rendered.len().max(1);
+    let err: Vec<f64> = rendered
+        .iter()
+        .zip(truth)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .collect();
+    let mut jumps: Vec<f64> = rendered.windows(2).map(|w| norm(sub(w[1], w[0]))).collect();
+    jumps.sort_by(f64::total_cmp);
+    let p99 = jumps
+        .get(((jumps.len() as f64 - 1.0) * 0.99).round().max(0.0) as usize)
+        .copied()
+        .unwrap_or(0.0);
+    let energy: f64 = rendered
+        .iter()
+        .zip(hand.windows(2))
+        .map(|(f, w)| {
+            let d = sub(w[1], w[0]);
+            f[0] * d[0] + f[1] * d[1] + f[2] * d[2]
+        })
+        .sum();
+    MethodResult {
+        rms_error_n: (err.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt(),
+        max_error_n: err.iter().copied().fold(0.0, f64::max),
+        p99_jump_n: p99,
+        net_energy_j: energy,
+    }
+}
+
+/// Runs the benchmark.
+pub fn run(args: &Args) -> Result<()> {
+    anyhow::ensure!(
+        args.sim_rate.is_finite() && args.sim_rate > 0.0,
+        "--sim-rate must be a positive number of Hz"
+    );
+    anyhow::ensure!(
+        args.haptic_rate.is_finite() && args.haptic_rate >= args.sim_rate,
+        "--haptic-rate must be at least the simulation rate"
+    );
+    let src = scene_source(args.scene.as_deref())?;
+    let (traj, traj_name) = match &args.trajectory {
+        Some(p) => (Trajectory::read(p)?, p.display().to_string()),
+        None => (
+            Trajectory::parse("press-slide.csv", PRESS_SLIDE_CSV)?,
+            "press-slide.csv (built in)".into(),
+        ),
+    };
+    let duration = traj.duration_s();
+    let (h, s) = (1.0 / args.haptic_rate, 1.0 / args.sim_rate);
+    let ticks = (duration / h).floor() as usize;
+    let sim_steps = (duration / s).ceil() as usize + 1;
+    let style = ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} {eta}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+    let bar = |len: usize, msg: &'static str| {
+        let b = ProgressBar::new(len as u64).with_style(style.clone());
+        b.set_message(msg);
+        b
+    };
+    let b = bar(ticks, "truth");
+    let truth = simulate(&src, h, (0..).map(|k| traj.sample(k as f64 * h)), ticks, &b)
+        .context("ground truth")?;
+    b.finish();
+    let b = bar(sim_steps, "simulation");
+    let samples = simulate(
+        &src,
+        s,
+        (0..).map(|j| traj.sample(j as f64 * s)),
+        sim_steps,
+        &b,
+    )
+    .context("simulation at the simulation rate")?;
+    b.finish();
+
+    let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
+    let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.0.to_array()).collect();
+    let ns = |t: f64| (t * 1e9).round() as u64;
+    let mut methods = BTreeMap::new();
+    let mut rendered_all = Vec::new();
+    for method in Method::ALL {
+        let mut ex = Extrapolator::new(method);
+        let mut next = 0;
+        let mut rendered = Vec::with_capacity(ticks);
+        for (k, p) in hand.iter().take(ticks).enumerate() {
+            let t = k as f64 * h;
+            // Sample j (pose at j s) is delivered one simulation period later.
+            while next < samples.len() && (next + 1) as f64 * s <= t + 1e-12 {
+                let (f, stiffness, contact) = samples[next];
+                ex.push(&ForceSample {
+                    t_ns: ns((next + 1) as f64 * s),
+                    seq: next as u64,
+                    position_m: traj.sample(next as f64 * s).0,
+                    force_n: f.to_array(),
+                    stiffness_n_per_m: stiffness,
+                    in_contact: contact,
+                });
+                next += 1;
+            }
+            rendered.push(ex.force(ns(t), *p));
+        }
+        methods.insert(method.name(), figures(&rendered, &truth_f, &hand));
+        rendered_all.push((method.name(), rendered));
+    }
+    let report = Report {
+        scene: src.name.clone(),
+        trajectory: traj_name,
+        sim_rate_hz: args.sim_rate,
+        haptic_rate_hz: args.haptic_rate,
+        duration_s: duration,
+        ticks,
+        truth: figures(&truth_f, &truth_f, &hand),
+        truth_max_force_n: truth_f.iter().map(|f| norm(*f)).fold(0.0, f64::max),
+        methods,
+    };
+    println!(
+        "{:<24} {:>12} {:>12} {:>12} {:>14}",
+        "method", "rms err N", "max err N", "p99 jump N", "net energy mJ"
+    );
+    for (name, m) in std::iter::once(("truth (haptic rate)", &report.truth))
+        .chain(report.methods.iter().map(|(k, v)| (*k, v)))
+    {
+        println!(
+            "{name:<24} {:>12.4} {:>12.4} {:>12.4} {:>14.3}",
+            m.rms_error_n,
+            m.max_error_n,
+            m.p99_jump_n,
+            m.net_energy_j * 1e3
+        );
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if let Some(dir) = &args.plot {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let colors = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728"];
+        let curve = |f: &[[f64; 3]]| -> Vec<(f64, f64)> {
+            f.iter()
+                .enumerate()
+                .map(|(k, v)| (k as f64 * h, norm(*v)))
+                .collect()
+        };
+        let mut series = vec![Series {
+            name: "truth",
+            color: "#000",
+            points: curve(&truth_f),
+        }];
+        for (i, (name, r)) in rendered_all.iter().enumerate() {
+            series.push(Series {
+                name,
+                color: colors[i % colors.len()],
+                points: curve(r),
+            });
+        }
+        let title = format!(
+            "|F| on tool 0: simulation {} Hz, haptic {} Hz",
+            args.sim_rate, args.haptic_rate
+        );
+        for (file, x0, x1) in [
+            ("extrapolation.svg", 0.0, duration),
+            ("extrapolation-zoom.svg", 1.0, 2.0),
+        ] {
+            let svg = chart(&title, "time (s)", "|F| (N)", x0, x1.min(duration), &series);
+            let path = dir.join(file);
+            std::fs::write(&path, svg)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+    }
+    Ok(())
+}
