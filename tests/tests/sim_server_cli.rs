@@ -204,3 +204,56 @@ fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
     }
     assert!(dir.join("extrapolation.svg").exists());
 }
+
+#[test]
+fn hapbench_stability_reports_every_extreme_and_never_a_nan() {
+    let dir = scratch_dir("hapbench-stab");
+    let json = dir.join("stab.json");
+    let out = std::process::Command::new(binary("hapbench"))
+        .args(["stability", "--duration-s", "0.2", "--json"])
+        .arg(&json)
+        .output()
+        .expect("run hapbench");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = read_json(&json);
+    let cases = v["cases"].as_array().unwrap();
+    assert!(cases.len() >= 20);
+    let find = |case: &str, value: f64| {
+        cases
+            .iter()
+            .find(|c| c["case"] == case && c["value"].as_f64() == Some(value))
+            .unwrap_or_else(|| panic!("no case {case} = {value}"))
+    };
+    for c in cases {
+        let outcome = c["outcome"].as_str().unwrap();
+        assert!(
+            ["stable", "refused", "diverged-detected"].contains(&outcome),
+            "{c}"
+        );
+        assert!(c["max_force_n"].as_f64().unwrap().is_finite(), "{c}");
+        if outcome != "stable" {
+            assert!(!c["message"].as_str().unwrap().is_empty(), "{c}");
+        }
+    }
+    // The time step: above the bound, unchecked diverges (and is caught),
+    // refuse refuses naming the bound, substep stays stable.
+    assert_eq!(
+        find("dt_over_bound_unchecked", 1.5)["outcome"],
+        "diverged-detected"
+    );
+    assert_eq!(find("dt_over_bound_unchecked", 0.9)["outcome"], "stable");
+    let refused = find("dt_over_bound_refuse", 1.1);
+    assert_eq!(refused["outcome"], "refused");
+    assert!(
+        refused["message"]
+            .as_str()
+            .unwrap()
+            .contains("exceeds the stable step")
+    );
+    assert_eq!(find("dt_over_bound_substep", 1.5)["outcome"], "stable");
+    assert_eq!(find("poisson", 0.499)["outcome"], "stable");
+}

@@ -4,12 +4,16 @@
 
 mod extrapolation;
 mod plot;
+mod stability;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(version, about = "hapsim benchmarks: extrapolation error, ...")]
+#[command(
+    version,
+    about = "hapsim benchmarks: force extrapolation error, stability at the extremes"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -20,10 +24,15 @@ enum Command {
     /// Force extrapolators against the haptic-rate ground truth (paper 5.2):
     /// RMS and max error, p99 per-tick jump, net energy into the hand.
     Extrapolation(extrapolation::Args),
+    /// The extremes (Poisson ratio, anisotropy, membrane stiffness, time
+    /// step, slivers, deep and fast tools), each stable, refused or
+    /// diverged-and-detected.
+    Stability(stability::Args),
 }
 
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Extrapolation(args) => extrapolation::run(&args),
+        Command::Stability(args) => stability::run(&args),
     }
 }
