@@ -3,6 +3,7 @@
 //! SVG plots to `--plot DIR`.
 
 mod extrapolation;
+mod latency;
 mod plot;
 mod stability;
 
@@ -12,7 +13,7 @@ use clap::{Parser, Subcommand};
 #[derive(Parser)]
 #[command(
     version,
-    about = "hapsim benchmarks: force extrapolation error, stability at the extremes"
+    about = "hapsim benchmarks: latency, force extrapolation error, stability at the extremes"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -28,11 +29,19 @@ enum Command {
     /// step, slivers, deep and fast tools), each stable, refused or
     /// diverged-and-detected.
     Stability(stability::Args),
+    /// Sim -> daemon, daemon -> sim and device -> force latency and the
+    /// daemon's tick lateness, beside bare iceoryx2 and bare sleep baselines.
+    Latency(latency::Args),
+    /// The latency baseline's publisher process (started by `latency`).
+    #[command(hide = true)]
+    Probe(latency::ProbeArgs),
 }
 
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Extrapolation(args) => extrapolation::run(&args),
         Command::Stability(args) => stability::run(&args),
+        Command::Latency(args) => latency::run(&args),
+        Command::Probe(args) => latency::probe(&args),
     }
 }

@@ -1,0 +1,335 @@
+//! `hapbench latency`: how late things arrive, beside their raw baselines
+//! measured in the same run.
+//!
+//! - Baselines: bare iceoryx2 one-way latency (a child process publishes a
+//!   time-stamped sample every millisecond, this process receives it) and
+//!   bare `clock_nanosleep` lateness (a 1 kHz absolute-deadline loop).
+//! - The system: `sim-server run` and `haptic-daemon run` (simulated hand)
+//!   in one session, observed by this process on the same streams:
+//!   sim -> daemon (force sample stamp to its receipt), daemon -> sim (pose
+//!   stamp, taken at the device read, to its receipt), device -> force (a
+//!   device read until the first force sample computed from that pose is
+//!   published, plus the sim -> daemon transport: when the daemon can render
+//!   it), and the daemon's tick lateness from its telemetry.
+//!
+//! Receipt is by a subscriber polled every 20 us, so the figures are the
+//! transport and the processes' own delays, not this observer's.
+
+use anyhow::{Context, Result};
+use haptic_daemon::rt::Pacer;
+use serde::Serialize;
+use shared::protocol::{ForceMsg, PROTOCOL_VERSION};
+use shared::{SessionName, monotonic_ns, services};
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use crate::plot::{Series, chart};
+
+/// Flags of `hapbench latency`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Seconds per measurement.
+    #[arg(long, default_value_t = 5.0)]
+    pub duration_s: f64,
+    /// Write the results here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write SVG plots here.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// Flags of the hidden probe publisher (the baseline's other process).
+#[derive(clap::Args)]
+pub struct ProbeArgs {
+    /// Session whose force stream the probe publishes on.
+    #[arg(long)]
+    pub session: String,
+    /// Seconds.
+    #[arg(long)]
+    pub duration_s: f64,
+}
+
+/// Percentiles of one latency (us).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Stats {
+    /// Samples.
+    pub count: usize,
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// 99.9th percentile.
+    pub p999: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+fn stats(v: &mut [f64]) -> Stats {
+    if v.is_empty() {
+        return Stats::default();
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    Stats {
+        count: v.len(),
+        p50: at(0.5),
+        p99: at(0.99),
+        p999: at(0.999),
+        max: v[v.len() - 1],
+    }
+}
+
+#[derive(Serialize)]
+struct Report {
+    duration_s: f64,
+    baseline_iceoryx2_us: Stats,
+    baseline_sleep_lateness_us: Stats,
+    sim_to_daemon_us: Stats,
+    daemon_to_sim_us: Stats,
+    device_to_force_us: Stats,
+    tick_lateness_us: Stats,
+}
+
+/// The baseline's publisher: a stamped sample every millisecond.
+pub fn probe(args: &ProbeArgs) -> Result<()> {
+    let session = SessionName::new(&args.session)?;
+    let node = services::node("hapbench-probe")?;
+    let publisher = services::publisher(&services::force_service(&node, &session)?)?;
+    let mut pacer = Pacer::new(1_000_000, monotonic_ns());
+    let end = monotonic_ns() + (args.duration_s * 1e9) as u64;
+    let mut seq = 0;
+    while monotonic_ns() < end {
+        pacer.wait();
+        let msg = ForceMsg {
+            version: PROTOCOL_VERSION,
+            seq,
+            t_ns: monotonic_ns(),
+            ..ForceMsg::default()
+        };
+        publisher.send_copy(msg).ok();
+        seq += 1;
+    }
+    Ok(())
+}
+
+fn spawn(args: &[&str], bin: PathBuf) -> Result<Child> {
+    Command::new(&bin)
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .with_context(|| format!("cannot start {}", bin.display()))
+}
+
+fn sibling(name: &str) -> Result<PathBuf> {
+    let bin = std::env::current_exe()?.with_file_name(name);
+    anyhow::ensure!(
+        bin.exists(),
+        "{} not found: build it with `cargo build --release --workspace`",
+        bin.display()
+    );
+    Ok(bin)
+}
+
+fn us(ns: i128) -> f64 {
+    ns as f64 * 1e-3
+}
+
+/// Runs the measurements.
+pub fn run(args: &Args) -> Result<()> {
+    anyhow::ensure!(
+        args.duration_s.is_finite() && args.duration_s >= 0.5,
+        "--duration-s must be at least 0.5"
+    );
+    let d = args.duration_s;
+    let pid = std::process::id();
+    // The daemon's timer slack (1 ns) for the observer's polling and the
+    // sleep baseline alike, so that only what is measured differs.
+    let _ = haptic_daemon::rt::minimal_timer_slack();
+    let node = services::node("hapbench-latency")?;
+
+    // Baseline 1: bare iceoryx2 between two processes.
+    let probe_session = format!("hapbench-probe{pid}");
+    let sub = services::subscriber(&services::force_service(
+        &node,
+        &SessionName::new(&probe_session)?,
+    )?)?;
+    let mut probe = spawn(
+        &[
+            "probe",
+            "--session",
+            &probe_session,
+            "--duration-s",
+            &d.to_string(),
+        ],
+        std::env::current_exe()?,
+    )?;
+    let mut bare = Vec::new();
+    let end = monotonic_ns() + ((d + 1.0) * 1e9) as u64;
+    while monotonic_ns() < end {
+        while let Ok(Some(s)) = sub.receive() {
+            bare.push(us(monotonic_ns() as i128 - s.t_ns as i128));
+        }
+        std::thread::sleep(Duration::from_micros(20));
+    }
+    let _ = probe.wait();
+    drop(sub);
+
+    // Baseline 2: bare clock_nanosleep at 1 kHz (timer slack as the daemon's).
+    let mut pacer = Pacer::new(1_000_000, monotonic_ns());
+    let mut sleep = Vec::new();
+    for _ in 0..(d * 1000.0) as usize {
+        let (_, late) = pacer.wait();
+        sleep.push(late as f64 * 1e-3);
+    }
+
+    // The system.
+    let session_name = format!("hapbench-lat{pid}");
+    let session = SessionName::new(&session_name)?;
+    let forces = services::subscriber(&services::force_service(&node, &session)?)?;
+    let poses = services::subscriber(&services::pose_service(&node, &session)?)?;
+    let telemetry = services::subscriber(&services::telemetry_service(&node, &session)?)?;
+    let run_s = (d + 2.0).to_string();
+    let mut sim = spawn(
+        &[
+            "run",
+            "--quiet",
+            "--session",
+            &session_name,
+            "--duration-s",
+            &run_s,
+        ],
+        sibling("sim-server")?,
+    )?;
+    std::thread::sleep(Duration::from_millis(500));
+    let mut daemon = spawn(
+        &[
+            "run",
+            "--quiet",
+            "--rt-priority",
+            "0",
+            "--session",
+            &session_name,
+            "--duration-s",
+            &(d + 0.5).to_string(),
+        ],
+        sibling("haptic-daemon")?,
+    )?;
+    // What queued while the processes started is not latency: drop it.
+    while let Ok(Some(_)) = forces.receive() {}
+    while let Ok(Some(_)) = poses.receive() {}
+    while let Ok(Some(_)) = telemetry.receive() {}
+    let (mut s2d, mut d2s, mut dev2f, mut ticks) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    // Recent poses by seq: (seq, device-read stamp).
+    let mut recent: VecDeque<(u64, u64)> = VecDeque::with_capacity(4096);
+    let mut last_used = None;
+    let end = monotonic_ns() + ((d + 1.0) * 1e9) as u64;
+    while monotonic_ns() < end {
+        while let Ok(Some(p)) = poses.receive() {
+            d2s.push(us(monotonic_ns() as i128 - p.t_ns as i128));
+            if recent.len() == recent.capacity() {
+                recent.pop_front();
+            }
+            recent.push_back((p.seq, p.t_ns));
+        }
+        while let Ok(Some(f)) = forces.receive() {
+            let now = monotonic_ns() as i128;
+            let transport = now - f.t_ns as i128;
+            s2d.push(us(transport));
+            // Only the first step that used a pose: later steps reuse it
+            // when no newer one came (e.g. after the daemon stopped).
+            let used = f.tools[0].pose_seq;
+            if last_used != Some(used)
+                && let Some(&(_, read_ns)) = recent.iter().find(|(s, _)| *s == used)
+            {
+                dev2f.push(us(f.t_ns as i128 - read_ns as i128 + transport));
+            }
+            last_used = Some(used);
+        }
+        while let Ok(Some(b)) = telemetry.receive() {
+            for t in &b.ticks[..(b.count as usize).min(b.ticks.len())] {
+                ticks.push(t.lateness_ns as f64 * 1e-3);
+            }
+        }
+        std::thread::sleep(Duration::from_micros(20));
+    }
+    let _ = daemon.wait();
+    let _ = sim.kill();
+    let _ = sim.wait();
+    anyhow::ensure!(
+        !s2d.is_empty() && !d2s.is_empty(),
+        "no traffic between sim-server and haptic-daemon"
+    );
+
+    let curves: Vec<(&str, &str, Vec<f64>)> = vec![
+        ("iceoryx2 bare", "#7f7f7f", bare.clone()),
+        ("sleep lateness bare", "#bcbd22", sleep.clone()),
+        ("sim -> daemon", "#1f77b4", s2d.clone()),
+        ("daemon -> sim", "#ff7f0e", d2s.clone()),
+        ("device -> force", "#d62728", dev2f.clone()),
+        ("tick lateness", "#2ca02c", ticks.clone()),
+    ];
+    let report = Report {
+        duration_s: d,
+        baseline_iceoryx2_us: stats(&mut bare),
+        baseline_sleep_lateness_us: stats(&mut sleep),
+        sim_to_daemon_us: stats(&mut s2d),
+        daemon_to_sim_us: stats(&mut d2s),
+        device_to_force_us: stats(&mut dev2f),
+        tick_lateness_us: stats(&mut ticks),
+    };
+    println!(
+        "{:<22} {:>8} {:>10} {:>10} {:>10} {:>10}",
+        "latency (us)", "count", "p50", "p99", "p99.9", "max"
+    );
+    for (name, s) in [
+        ("iceoryx2 (bare)", &report.baseline_iceoryx2_us),
+        ("sleep lateness (bare)", &report.baseline_sleep_lateness_us),
+        ("sim -> daemon", &report.sim_to_daemon_us),
+        ("daemon -> sim", &report.daemon_to_sim_us),
+        ("device -> force", &report.device_to_force_us),
+        ("tick lateness", &report.tick_lateness_us),
+    ] {
+        println!(
+            "{name:<22} {:>8} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
+            s.count, s.p50, s.p99, s.p999, s.max
+        );
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if let Some(dir) = &args.plot {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let series: Vec<Series> = curves
+            .into_iter()
+            .map(|(name, color, mut v)| {
+                v.sort_by(f64::total_cmp);
+                let n = v.len().max(1) as f64;
+                Series {
+                    name,
+                    color,
+                    points: v
+                        .iter()
+                        .enumerate()
+                        .map(|(i, x)| (100.0 * i as f64 / n, *x))
+                        .collect(),
+                }
+            })
+            .collect();
+        let svg = chart(
+            "Latency percentiles",
+            "percentile",
+            "us",
+            0.0,
+            99.0,
+            &series,
+        );
+        let path = dir.join("latency.svg");
+        std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,140 @@
+//! hapbench end to end: each subcommand runs, writes its JSON keys and
+//! plots, and its figures obey the laws they should (extrapolation errors
+//! fall as the simulation rate rises; the time-step extremes are refused,
+//! sub-stepped or caught; transport costs at least the bare transport).
+
+use std::path::Path;
+use system_tests::{binary, read_json, scratch_dir};
+
+/// Runs `hapbench ARGS --json JSON [--plot DIR]` and reads the JSON.
+fn hapbench(args: &[&str], json: &Path, plot: Option<&Path>) -> serde_json::Value {
+    let mut cmd = std::process::Command::new(binary("hapbench"));
+    cmd.args(args).arg("--json").arg(json);
+    if let Some(dir) = plot {
+        cmd.arg("--plot").arg(dir);
+    }
+    let out = cmd.output().expect("run hapbench");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    read_json(json)
+}
+
+#[test]
+fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
+    let dir = scratch_dir("hapbench-ex");
+    let run = |rate: &str| {
+        hapbench(
+            &["extrapolation", "--sim-rate", rate, "--haptic-rate", "1000"],
+            &dir.join(format!("ex{rate}.json")),
+            Some(&dir),
+        )
+    };
+    let (slow, fast) = (run("50"), run("500"));
+    assert!(
+        slow["truth_max_force_n"].as_f64().unwrap() > 0.05,
+        "the path touches the liver"
+    );
+    for m in [
+        "constant",
+        "linear-time",
+        "linear-position",
+        "linear-position-signed",
+        "local-model",
+    ] {
+        let (a, b) = (&slow["methods"][m], &fast["methods"][m]);
+        for key in ["rms_error_n", "max_error_n", "p99_jump_n", "net_energy_j"] {
+            assert!(a[key].as_f64().unwrap().is_finite(), "{m}.{key}: {a}");
+        }
+        let (ra, rb) = (
+            a["rms_error_n"].as_f64().unwrap(),
+            b["rms_error_n"].as_f64().unwrap(),
+        );
+        assert!(rb < ra, "{m}: rms error {ra} N at 50 Hz, {rb} N at 500 Hz");
+    }
+    assert!(dir.join("extrapolation.svg").exists());
+}
+
+#[test]
+fn hapbench_stability_reports_every_extreme_and_never_a_nan() {
+    let dir = scratch_dir("hapbench-stab");
+    let v = hapbench(
+        &["stability", "--duration-s", "0.2"],
+        &dir.join("stab.json"),
+        None,
+    );
+    let cases = v["cases"].as_array().unwrap();
+    assert!(cases.len() >= 20);
+    let find = |case: &str, value: f64| {
+        cases
+            .iter()
+            .find(|c| c["case"] == case && c["value"].as_f64() == Some(value))
+            .unwrap_or_else(|| panic!("no case {case} = {value}"))
+    };
+    for c in cases {
+        let outcome = c["outcome"].as_str().unwrap();
+        assert!(
+            ["stable", "refused", "diverged-detected"].contains(&outcome),
+            "{c}"
+        );
+        assert!(c["max_force_n"].as_f64().unwrap().is_finite(), "{c}");
+        if outcome != "stable" {
+            assert!(!c["message"].as_str().unwrap().is_empty(), "{c}");
+        }
+    }
+    // The time step: above the bound, unchecked diverges (and is caught),
+    // refuse refuses naming the bound, substep stays stable.
+    assert_eq!(
+        find("dt_over_bound_unchecked", 1.5)["outcome"],
+        "diverged-detected"
+    );
+    assert_eq!(find("dt_over_bound_unchecked", 0.9)["outcome"], "stable");
+    let refused = find("dt_over_bound_refuse", 1.1);
+    assert_eq!(refused["outcome"], "refused");
+    assert!(
+        refused["message"]
+            .as_str()
+            .unwrap()
+            .contains("exceeds the stable step")
+    );
+    assert_eq!(find("dt_over_bound_substep", 1.5)["outcome"], "stable");
+    assert_eq!(find("poisson", 0.499)["outcome"], "stable");
+}
+
+#[test]
+fn hapbench_latency_measures_the_system_beside_its_baselines() {
+    let dir = scratch_dir("hapbench-lat");
+    let v = hapbench(
+        &["latency", "--duration-s", "1"],
+        &dir.join("lat.json"),
+        Some(&dir),
+    );
+    for key in [
+        "baseline_iceoryx2_us",
+        "baseline_sleep_lateness_us",
+        "sim_to_daemon_us",
+        "daemon_to_sim_us",
+        "device_to_force_us",
+        "tick_lateness_us",
+    ] {
+        let s = &v[key];
+        assert!(s["count"].as_u64().unwrap() > 100, "{key}: {s}");
+        let q: Vec<f64> = ["p50", "p99", "p999", "max"]
+            .iter()
+            .map(|k| s[*k].as_f64().unwrap())
+            .collect();
+        assert!(
+            q.iter().all(|x| x.is_finite()) && q.windows(2).all(|w| w[0] <= w[1]),
+            "{key}: {s}"
+        );
+    }
+    // Transport can only add to what the bare transport costs.
+    assert!(
+        v["sim_to_daemon_us"]["p50"].as_f64().unwrap()
+            >= 0.5 * v["baseline_iceoryx2_us"]["p50"].as_f64().unwrap(),
+        "{v}"
+    );
+    assert!(dir.join("latency.svg").exists());
+}
