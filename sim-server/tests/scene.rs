@@ -319,7 +319,7 @@ fn each_kind_of_mistake_names_its_line() {
     fails_at(&format!("{BASE}{ok_tool}{ok_tool}"), 19, "unique");
     // Simulation: a backend that does not exist yet, zero threads, negative dt.
     fails_at(
-        &format!("{BASE}\n[simulation]\nbackend = \"implicit\"\n"),
+        &format!("{BASE}\n[simulation]\nbackend = \"hybrid\"\n"),
         11,
         "not available yet",
     );

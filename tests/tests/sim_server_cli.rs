@@ -159,3 +159,42 @@ force_n = [0.0, 0.0, -0.01]
     );
     assert!(v["max_displacement_m"].as_f64().unwrap() > 0.0);
 }
+
+#[test]
+fn run_takes_the_implicit_backend_and_refuses_unbuilt_ones() {
+    let dir = scratch_dir("run-backend");
+    let json = dir.join("implicit.json");
+    let session = format!("implicit{}", std::process::id());
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--backend", "implicit", "--headless", "--quiet"])
+        .args(["--steps", "200", "--session", &session])
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run sim-server");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = read_json(&json);
+    assert_eq!(v["steps"], 200);
+    assert!(v["finite"].as_bool().unwrap());
+    let out = Command::new(binary("sim-server"))
+        .args([
+            "run",
+            "--backend",
+            "precomputed",
+            "--headless",
+            "--steps",
+            "1",
+        ])
+        .output()
+        .expect("run sim-server");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("precomputed") && err.contains("implicit"),
+        "{err}"
+    );
+}

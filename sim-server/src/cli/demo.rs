@@ -7,7 +7,7 @@ use super::{load_scene, write_json};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use sim_server::math::Vec3;
-use sim_server::server::{RunConfig, ToolScript, run as run_server};
+use sim_server::server::{RunConfig, ToolScript};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -158,11 +158,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         status: !args.headless,
         scripts: vec![cavitron_script()],
     };
-    let result = if scene.settings.single_precision {
-        run_server::<f32>(scene, &cfg, stop)
-    } else {
-        run_server::<f64>(scene, &cfg, stop)
-    };
+    let result = super::run_scene(scene, None, &cfg, stop);
     if let Some(v) = &mut viewer {
         // SIGTERM: the window closes; nothing of the viewer's needs saving.
         // SAFETY: kill(2) on our own child's pid.

@@ -7,8 +7,37 @@ pub mod run;
 pub mod solve;
 
 use anyhow::{Context, Result};
+use sim_server::backend::{Implicit, ImplicitConfig};
+use sim_server::scene::spec::BackendName;
 use sim_server::scene::{BuiltScene, SceneSource, build_scene};
+use sim_server::server::{RunConfig, RunError, RunSummary, prepare, prepare_with, run};
 use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+/// Runs `scene` on `backend` (the scene's when `None`).
+pub fn run_scene(
+    scene: BuiltScene,
+    backend: Option<BackendName>,
+    cfg: &RunConfig,
+    stop: Arc<AtomicBool>,
+) -> Result<RunSummary, RunError> {
+    match backend.unwrap_or(scene.settings.backend) {
+        BackendName::Implicit => {
+            // Stable at any step: the real-time step, not the explicit bound.
+            let dt = scene
+                .settings
+                .dt_s
+                .unwrap_or(1.0 / scene.settings.rate_hz.unwrap_or(1000.0));
+            let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
+                Implicit::new(model, ImplicitConfig::new(dt_s))
+            })?;
+            run(prepared, cfg, stop)
+        }
+        _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop),
+        _ => run(prepare::<f64>(scene, None)?, cfg, stop),
+    }
+}
 
 /// Reads and builds a scene file, or the embedded scene when `path` is `None`.
 pub fn load_scene(path: Option<&Path>) -> Result<(SceneSource, BuiltScene)> {

@@ -2,7 +2,8 @@
 
 use super::{load_scene, write_json};
 use anyhow::{Result, bail};
-use sim_server::server::{RunConfig, run as run_server};
+use sim_server::scene::spec::BackendName;
+use sim_server::server::RunConfig;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -16,9 +17,10 @@ pub struct RunArgs {
     /// Session shared with the daemon and the viewer.
     #[arg(long, default_value = "default")]
     pub session: String,
-    /// Backend (only tensor-mass in this release).
-    #[arg(long, default_value = "tensor-mass")]
-    pub backend: String,
+    /// Backend: tensor-mass (explicit, the paper's) or implicit (backward
+    /// Euler); default: the scene's `[simulation] backend`, else tensor-mass.
+    #[arg(long)]
+    pub backend: Option<String>,
     /// Step as fast as possible instead of in real time.
     #[arg(long)]
     pub headless: bool,
@@ -41,12 +43,14 @@ pub struct RunArgs {
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
 pub fn run(args: RunArgs) -> Result<()> {
-    if args.backend != "tensor-mass" {
-        bail!(
-            "backend {:?} is not available in this release; use tensor-mass",
-            args.backend
-        );
-    }
+    let backend = match args.backend.as_deref() {
+        None => None,
+        Some("tensor-mass") => Some(BackendName::TensorMass),
+        Some("implicit") => Some(BackendName::Implicit),
+        Some(other) => {
+            bail!("backend {other:?} is not available in this release; use tensor-mass or implicit")
+        }
+    };
     if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {
         bail!("--viewer-rate must be a positive number of Hz");
     }
@@ -64,12 +68,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         status: !args.quiet,
         scripts: Vec::new(),
     };
-    let single = scene.settings.single_precision;
-    let summary = if single {
-        run_server::<f32>(scene, &cfg, stop)?
-    } else {
-        run_server::<f64>(scene, &cfg, stop)?
-    };
+    let summary = super::run_scene(scene, backend, &cfg, stop)?;
     println!(
         "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N",
         src.name,

@@ -20,9 +20,10 @@ use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy, BvhWorkspace};
 
 use super::geometry::Segment;
+use crate::backend::Backend;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
-use crate::tensor_mass::{ElasticModel, Explicit, Storage};
+use crate::tensor_mass::ElasticModel;
 
 fn pvec(v: Vec3) -> PVec {
     PVec::new(v.x, v.y, v.z)
@@ -79,7 +80,7 @@ impl SurfaceIndex {
 
     /// Brings the leaves up to the current positions (call once per step,
     /// before any query). Follows a cut first, if there was one.
-    pub fn refit<S: Storage>(&mut self, sim: &Explicit<S>) {
+    pub fn refit<B: Backend + ?Sized>(&mut self, sim: &B) {
         if self.sync(sim) {
             return;
         }
@@ -104,7 +105,7 @@ impl SurfaceIndex {
     /// Follows a change of the surface (a cut by any tool) at once, so a
     /// query later in the same step sees the new surface. Returns whether
     /// the membership changed.
-    pub fn sync<S: Storage>(&mut self, sim: &Explicit<S>) -> bool {
+    pub fn sync<B: Backend + ?Sized>(&mut self, sim: &B) -> bool {
         let model = sim.model();
         let changes = model.topology_changes();
         if self.seen == Some(changes) {

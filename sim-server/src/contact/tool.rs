@@ -7,12 +7,13 @@ use super::geometry::{Plane, Segment, ToolPose};
 use super::reaction::{Reaction, VertexEdges, along};
 use super::surface_index::SurfaceIndex;
 use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
+use crate::backend::Backend;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::mesh::TET_FACES;
 use crate::scene::ToolDecl;
 use crate::scene::spec::ToolKind;
-use crate::tensor_mass::{ElasticModel, Explicit, Storage};
+use crate::tensor_mass::ElasticModel;
 
 /// How far (fraction of the radius) below the new plane a persisting
 /// contact vertex may be and still be re-projected.
@@ -118,7 +119,7 @@ impl ToolContact {
 
     /// Phase 1: places the tool (`None`: withdrawn, it lets go of
     /// everything) and cuts.
-    pub(super) fn begin<S: Storage>(&mut self, sim: &mut Explicit<S>, input: Option<(Vec3, Real)>) {
+    pub(super) fn begin<B: Backend + ?Sized>(&mut self, sim: &mut B, input: Option<(Vec3, Real)>) {
         std::mem::swap(&mut self.constraints, &mut self.previous);
         self.constraints.clear();
         self.removed = 0;
@@ -140,7 +141,7 @@ impl ToolContact {
     }
 
     /// Phase 2: the gripped vertices follow the tool end's translation.
-    pub(super) fn hold<S: Storage>(&mut self, sim: &Explicit<S>, claims: &mut Claims) {
+    pub(super) fn hold<B: Backend + ?Sized>(&mut self, sim: &B, claims: &mut Claims) {
         let Some(pose) = self.pose else { return };
         let offset = pose.end_m - self.grip_end_m;
         for i in 0..self.gripped.len() {
@@ -152,9 +153,9 @@ impl ToolContact {
     }
 
     /// Phase 3: sliding contact of the tip, then of the shaft.
-    pub(super) fn detect<S: Storage>(
+    pub(super) fn detect<B: Backend + ?Sized>(
         &mut self,
-        sim: &Explicit<S>,
+        sim: &B,
         index: &SurfaceIndex,
         claims: &mut Claims,
     ) {
@@ -169,9 +170,9 @@ impl ToolContact {
 
     /// Phase 4 (after every tool's phases 1-3): lets go of what no tool
     /// holds any more and imposes this tool's constraints.
-    pub(super) fn commit<S: Storage>(
+    pub(super) fn commit<B: Backend + ?Sized>(
         &mut self,
-        sim: &mut Explicit<S>,
+        sim: &mut B,
         claims: &Claims,
         jaw: Real,
     ) -> ContactReport {
@@ -197,7 +198,7 @@ impl ToolContact {
 
     /// The force on the tool and the contact stiffness after the step, from
     /// the vertices the last update imposed (see the module documentation).
-    pub fn reaction<S: Storage>(&self, sim: &Explicit<S>) -> Reaction {
+    pub fn reaction<B: Backend + ?Sized>(&self, sim: &B) -> Reaction {
         let model = sim.model();
         let mut out = Reaction::NONE;
         for c in &self.constraints {
@@ -224,9 +225,9 @@ impl ToolContact {
     }
 
     /// Detects and projects the contact of one part (tip or shaft).
-    fn plane_pass<S: Storage>(
+    fn plane_pass<B: Backend + ?Sized>(
         &mut self,
-        sim: &Explicit<S>,
+        sim: &B,
         index: &SurfaceIndex,
         claims: &mut Claims,
         segment: &Segment,
@@ -303,7 +304,7 @@ impl ToolContact {
     /// Mean outward normal (area-weighted, current positions) of the surface
     /// triangles touching the marked vertices (this pass's hits and kept),
     /// found through each vertex's tetrahedra, each triangle counted once.
-    fn mean_normal<S: Storage>(&self, sim: &Explicit<S>) -> Option<Vec3> {
+    fn mean_normal<B: Backend + ?Sized>(&self, sim: &B) -> Option<Vec3> {
         let model = sim.model();
         let topo = model.topology();
         let tets = model.mesh().tets();
@@ -332,7 +333,7 @@ impl ToolContact {
     }
 
     /// The grasper's state: grip, let go, cut. Returns tetrahedra removed.
-    fn grasp<S: Storage>(&mut self, sim: &mut Explicit<S>, pose: &ToolPose, jaw: Real) -> usize {
+    fn grasp<B: Backend + ?Sized>(&mut self, sim: &mut B, pose: &ToolPose, jaw: Real) -> usize {
         if self.gripping && jaw > GRIP_BELOW {
             self.gripped.clear();
             self.gripping = false;
@@ -361,7 +362,7 @@ impl ToolContact {
 
     /// The cavitron: removes the live tetrahedra with a vertex within the
     /// radius of the tip. Returns how many.
-    fn burn<S: Storage>(&mut self, sim: &mut Explicit<S>, pose: &ToolPose) -> usize {
+    fn burn<B: Backend + ?Sized>(&mut self, sim: &mut B, pose: &ToolPose) -> usize {
         self.doomed.clear();
         let topo = sim.model().topology();
         for v in 0..sim.model().vertex_count() {
@@ -379,7 +380,7 @@ impl ToolContact {
         self.remove_doomed(sim)
     }
 
-    fn remove_doomed<S: Storage>(&mut self, sim: &mut Explicit<S>) -> usize {
+    fn remove_doomed<B: Backend + ?Sized>(&mut self, sim: &mut B) -> usize {
         let mut removed = 0;
         for &t in &self.doomed {
             // A tetrahedron may be listed once per doomed vertex.

@@ -5,10 +5,11 @@ use super::claims::Claims;
 use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
 use super::{ContactReport, Reaction};
+use crate::backend::Backend;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::scene::ToolDecl;
-use crate::tensor_mass::{ElasticModel, Explicit, Storage};
+use crate::tensor_mass::ElasticModel;
 
 /// Where a tool is this step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,9 +99,9 @@ impl Tools {
     /// coming step; `inputs[i]` places tool `i` (`None` or missing: the tool
     /// is withdrawn and lets go). Call once before each `sim.step()`.
     /// Returns one report per tool.
-    pub fn update<S: Storage>(
+    pub fn update<B: Backend + ?Sized>(
         &mut self,
-        sim: &mut Explicit<S>,
+        sim: &mut B,
         inputs: &[Option<ToolInput>],
     ) -> &[ContactReport] {
         if self.tools.is_empty() {
@@ -127,7 +128,7 @@ impl Tools {
     }
 
     /// The force on tool `i` and its contact stiffness after the step.
-    pub fn reaction<S: Storage>(&self, i: usize, sim: &Explicit<S>) -> Reaction {
+    pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
         self.tools[i].reaction(sim)
     }
 }

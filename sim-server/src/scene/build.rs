@@ -49,6 +49,8 @@ pub struct SimSettings {
     pub policy: DtPolicy,
     /// Which bound.
     pub bound: BoundMethod,
+    /// Which backend (default tensor-mass).
+    pub backend: BackendName,
 }
 
 /// What the scene made, for `check` and logs.
@@ -514,21 +516,24 @@ fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneErr
         single_precision: true,
         policy: DtPolicy::Substep,
         bound: BoundMethod::Element,
+        backend: BackendName::TensorMass,
     };
     let Some(sim) = &spec.simulation else {
         return Ok(s);
     };
     let sim = sim.get_ref();
-    if let Some(b) = &sim.backend
-        && *b.get_ref() != BackendName::TensorMass
-    {
-        return Err(src.error(
-            b.span(),
-            format!(
-                "backend {:?} is not available yet; use \"tensor-mass\"",
-                b.get_ref()
-            ),
-        ));
+    if let Some(b) = &sim.backend {
+        match b.get_ref() {
+            BackendName::TensorMass | BackendName::Implicit => s.backend = *b.get_ref(),
+            other => {
+                return Err(src.error(
+                    b.span(),
+                    format!(
+                        "backend {other:?} is not available yet; use \"tensor-mass\" or \"implicit\""
+                    ),
+                ));
+            }
+        }
     }
     s.dt_s = sim
         .dt_s

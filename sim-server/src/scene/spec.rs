@@ -334,7 +334,7 @@ pub enum BackendName {
     Precomputed,
     /// Hybrid: not built yet.
     Hybrid,
-    /// Implicit: not built yet.
+    /// Implicit backward Euler.
     Implicit,
 }
 

@@ -5,6 +5,7 @@
 //! topology when cuts change it. It keeps running when the daemon or the
 //! viewer disappear and serves them again when they come back.
 
+use crate::backend::Backend;
 use crate::contact::{ToolInput, Tools};
 use crate::math::{Real, Vec3};
 use crate::scene::BuiltScene;
@@ -107,6 +108,9 @@ pub enum RunError {
     /// The integrator refused the scene's step.
     #[error(transparent)]
     Explicit(#[from] crate::tensor_mass::ExplicitError),
+    /// The implicit backend refused the scene.
+    #[error(transparent)]
+    Implicit(#[from] crate::backend::ImplicitError),
     /// A peer sent another protocol version.
     #[error(transparent)]
     Version(#[from] shared::protocol::VersionError),
@@ -142,22 +146,47 @@ fn publish_err(what: &'static str) -> impl Fn(String) -> RunError {
 
 /// A scene ready to step: the integrator with the scene's fixed vertices,
 /// prescribed displacements and loads applied, and its tools.
-pub struct Prepared<S: Storage> {
-    /// The explicit integrator.
-    pub sim: Explicit<S>,
+pub struct Prepared<B: Backend> {
+    /// The backend.
+    pub sim: B,
     /// The scene's tools (at most `MAX_TOOLS`), scene-held vertices reserved.
     pub tools: Tools,
     /// The step (s).
     pub dt_s: Real,
 }
 
-/// Sets `scene` up for stepping with `dt_s` (default: the scene's, else 90%
-/// of the stable step; a larger one is sub-stepped or refused as the scene
-/// says).
+/// Sets `scene` up for stepping with the explicit tensor-mass integrator at
+/// `dt_s` (default: the scene's, else 90% of the stable step; a larger one
+/// is sub-stepped or refused as the scene says).
 pub fn prepare<S: Storage>(
     scene: BuiltScene,
     dt_s: Option<Real>,
-) -> Result<Prepared<S>, crate::tensor_mass::ExplicitError> {
+) -> Result<Prepared<Explicit<S>>, crate::tensor_mass::ExplicitError> {
+    prepare_with(scene, dt_s, |model, settings, dt_s| {
+        Explicit::<S>::new(
+            model,
+            ExplicitConfig {
+                dt_s,
+                policy: settings.policy,
+                bound: settings.bound,
+                threads: settings.threads,
+            },
+        )
+    })
+}
+
+/// Sets `scene` up on the backend `make` builds from the model, the
+/// scene's settings and the step (`dt_s`, else the scene's, else 90% of the
+/// explicit stable step).
+pub fn prepare_with<B: Backend, E>(
+    scene: BuiltScene,
+    dt_s: Option<Real>,
+    make: impl FnOnce(
+        crate::tensor_mass::ElasticModel,
+        &crate::scene::SimSettings,
+        Real,
+    ) -> Result<B, E>,
+) -> Result<Prepared<B>, E> {
     let BuiltScene {
         model,
         fixed,
@@ -169,15 +198,7 @@ pub fn prepare<S: Storage>(
     } = scene;
     let stable = crate::tensor_mass::element_bound(&model);
     let dt_s = dt_s.or(settings.dt_s).unwrap_or(0.9 * stable.dt_max_s);
-    let mut sim = Explicit::<S>::new(
-        model,
-        ExplicitConfig {
-            dt_s,
-            policy: settings.policy,
-            bound: settings.bound,
-            threads: settings.threads,
-        },
-    )?;
+    let mut sim = make(model, &settings, dt_s)?;
     for v in &fixed {
         sim.fix(*v);
     }
@@ -202,9 +223,9 @@ pub fn prepare<S: Storage>(
     })
 }
 
-/// Runs `scene` until a stop condition or `stop` is set.
-pub fn run<S: Storage>(
-    scene: BuiltScene,
+/// Runs a prepared scene until a stop condition or `stop` is set.
+pub fn run<B: Backend>(
+    prepared: Prepared<B>,
     cfg: &RunConfig,
     stop: Arc<AtomicBool>,
 ) -> Result<RunSummary, RunError> {
@@ -212,7 +233,7 @@ pub fn run<S: Storage>(
         mut sim,
         tools: mut contacts,
         dt_s,
-    } = prepare::<S>(scene, None)?;
+    } = prepared;
     let node = services::node("sim-server")?;
     let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
     let force_service = services::force_service(&node, &cfg.session)?;

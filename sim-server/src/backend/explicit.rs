@@ -1,0 +1,42 @@
+//! The tensor-mass explicit integrator as a [`Backend`].
+
+use super::Backend;
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use crate::tensor_mass::{CutChange, CutError, ElasticModel, Explicit, Storage};
+
+impl<S: Storage> Backend for Explicit<S> {
+    fn name(&self) -> &'static str {
+        "tensor-mass"
+    }
+    fn model(&self) -> &ElasticModel {
+        Explicit::model(self)
+    }
+    fn step(&mut self) {
+        Explicit::step(self);
+    }
+    fn dt_s(&self) -> Real {
+        Explicit::dt_s(self)
+    }
+    fn displacement(&self, v: VertexId) -> Vec3 {
+        Explicit::displacement(self, v)
+    }
+    fn displacements(&self) -> &[[Real; 3]] {
+        Explicit::displacements(self)
+    }
+    fn position(&self, v: VertexId) -> Vec3 {
+        Explicit::position(self, v)
+    }
+    fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        Explicit::prescribe(self, v, d_m);
+    }
+    fn release(&mut self, v: VertexId) {
+        Explicit::release(self, v);
+    }
+    fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
+        Explicit::set_external_force(self, v, f_n);
+    }
+    fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        Explicit::remove_tet(self, t)
+    }
+}

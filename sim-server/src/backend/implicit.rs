@@ -1,0 +1,283 @@
+//! Backward Euler on the same tensors (beyond the paper): unconditionally
+//! stable, for stiff materials (nu near 0.5, a stiff capsule) and steps far
+//! above the explicit bound, at the price of a linear solve per step.
+//!
+//! (M + h C + h^2 K) v' = M v + h (f - K u),  u' = u + h v'
+//!
+//! solved for the new velocities v' by Jacobi-preconditioned conjugate
+//! gradients, warm-started from the previous velocities. Fixed and
+//! prescribed vertices are Dirichlet rows: their v' = (target - u) / h, and
+//! the solve runs on the free ones. Contact changes the constrained set
+//! every step, so a factorization would be rebuilt every step; the CG only
+//! needs products with K (one pass over the tensors per iteration) and the
+//! buffers are reused, so a step allocates nothing.
+//!
+//! Cutting updates the same tensors as the explicit backend. A nonlinear
+//! membrane (eq 29) is not linear in u and is refused; the linear one is in K.
+
+use super::Backend;
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use crate::membrane::MembraneModel;
+use crate::tensor_mass::{CutChange, CutError, ElasticModel};
+
+/// Solver settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImplicitConfig {
+    /// The step (s).
+    pub dt_s: Real,
+    /// Relative residual at which the CG stops.
+    pub tolerance: Real,
+    /// CG iteration limit per step.
+    pub max_iterations: usize,
+}
+
+impl ImplicitConfig {
+    /// Step `dt_s`, residual 1e-9, at most 1000 iterations.
+    pub fn new(dt_s: Real) -> Self {
+        Self {
+            dt_s,
+            tolerance: 1e-9,
+            max_iterations: 1000,
+        }
+    }
+}
+
+/// Why the implicit backend cannot run a model.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ImplicitError {
+    /// The step is not a positive number.
+    #[error("the implicit backend's dt_s must be positive and finite, got {0}")]
+    BadDt(Real),
+    /// The nonlinear membrane is not linear in u.
+    #[error(
+        "the implicit backend supports the linear membrane only (its forces are in K); use model = \"linear\" or the tensor-mass backend"
+    )]
+    NonlinearMembrane,
+}
+
+const FREE: u8 = 0;
+const HELD: u8 = 1;
+
+/// The backward-Euler backend.
+pub struct Implicit {
+    model: ElasticModel,
+    cfg: ImplicitConfig,
+    u: Vec<[Real; 3]>,
+    v: Vec<Vec3>,
+    kind: Vec<u8>,
+    target: Vec<Vec3>,
+    fext: Vec<Vec3>,
+    // CG workspace, reused.
+    scratch: Vec<Vec3>,
+    force: Vec<Vec3>,
+    b: Vec<Vec3>,
+    r: Vec<Vec3>,
+    z: Vec<Vec3>,
+    p: Vec<Vec3>,
+    ap: Vec<Vec3>,
+    diag: Vec<Vec3>,
+    iterations: usize,
+    residual: Real,
+}
+
+impl Implicit {
+    /// A backend over `model` at rest.
+    pub fn new(model: ElasticModel, cfg: ImplicitConfig) -> Result<Self, ImplicitError> {
+        if !(cfg.dt_s.is_finite() && cfg.dt_s > 0.0) {
+            return Err(ImplicitError::BadDt(cfg.dt_s));
+        }
+        if model
+            .membrane()
+            .is_some_and(|m| m.model() == MembraneModel::Nonlinear)
+        {
+            return Err(ImplicitError::NonlinearMembrane);
+        }
+        let n = model.vertex_count();
+        let z = vec![Vec3::ZERO; n];
+        Ok(Self {
+            model,
+            cfg,
+            u: vec![[0.0; 3]; n],
+            v: z.clone(),
+            kind: vec![FREE; n],
+            target: z.clone(),
+            fext: z.clone(),
+            scratch: z.clone(),
+            force: z.clone(),
+            b: z.clone(),
+            r: z.clone(),
+            z: z.clone(),
+            p: z.clone(),
+            ap: z.clone(),
+            diag: z,
+            iterations: 0,
+            residual: 0.0,
+        })
+    }
+
+    /// CG iterations of the last step.
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+
+    /// Relative residual reached by the last step.
+    pub fn residual(&self) -> Real {
+        self.residual
+    }
+
+    /// Total kinetic plus elastic energy (J).
+    pub fn energy_j(&mut self) -> Real {
+        for (s, u) in self.scratch.iter_mut().zip(&self.u) {
+            *s = Vec3::from_array(*u);
+        }
+        self.model.elastic_forces(&self.scratch, &mut self.force);
+        let m = self.model.masses_kg();
+        let elastic: Real = self
+            .scratch
+            .iter()
+            .zip(&self.force)
+            .map(|(u, f)| -0.5 * u.dot(*f))
+            .sum();
+        let kinetic: Real = self
+            .v
+            .iter()
+            .zip(m)
+            .map(|(v, m)| 0.5 * m * v.length_squared())
+            .sum();
+        elastic + kinetic
+    }
+
+    /// ap = A p = (M + h C) p + h^2 K p on the free rows, 0 on held ones.
+    fn apply(&mut self) {
+        let h = self.cfg.dt_s;
+        let (x, out) = (&self.p, &mut self.ap);
+        self.model.elastic_forces(x, &mut self.force);
+        let (m, c) = (self.model.masses_kg(), self.model.damping_kg_s());
+        for i in 0..x.len() {
+            out[i] = if self.kind[i] == HELD {
+                Vec3::ZERO
+            } else {
+                (m[i] + h * c[i]) * x[i] - h * h * self.force[i]
+            };
+        }
+    }
+}
+
+fn dot(a: &[Vec3], b: &[Vec3]) -> Real {
+    a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
+}
+
+impl Backend for Implicit {
+    fn name(&self) -> &'static str {
+        "implicit"
+    }
+    fn model(&self) -> &ElasticModel {
+        &self.model
+    }
+    fn dt_s(&self) -> Real {
+        self.cfg.dt_s
+    }
+
+    fn step(&mut self) {
+        let h = self.cfg.dt_s;
+        let n = self.u.len();
+        let (m, c) = (self.model.masses_kg(), self.model.damping_kg_s());
+        // b = M v + h (f - K u); held rows carry their known velocity.
+        for (s, u) in self.scratch.iter_mut().zip(&self.u) {
+            *s = Vec3::from_array(*u);
+        }
+        self.model.elastic_forces(&self.scratch, &mut self.force);
+        let vk = self.model.vertex_tensors();
+        for i in 0..n {
+            self.diag[i] = Vec3::splat(m[i] + h * c[i])
+                + h * h * Vec3::new(vk[i].x_axis.x, vk[i].y_axis.y, vk[i].z_axis.z);
+            if self.kind[i] == HELD {
+                self.p[i] = (self.target[i] - self.scratch[i]) / h;
+            } else {
+                self.b[i] = m[i] * self.v[i] + h * (self.fext[i] + self.force[i]);
+                // Warm start from the previous velocity.
+                self.p[i] = self.v[i];
+            }
+        }
+        // The held rows' known velocities enter the free rows' right side:
+        // r = b - A x with x = (free: guess, held: known), A's full rows.
+        self.model.elastic_forces(&self.p, &mut self.force);
+        for i in 0..n {
+            self.v[i] = self.p[i];
+            self.r[i] = if self.kind[i] == HELD {
+                Vec3::ZERO
+            } else {
+                self.b[i] - ((m[i] + h * c[i]) * self.p[i] - h * h * self.force[i])
+            };
+        }
+        let norm_b = dot(&self.b, &self.b).sqrt().max(1e-300);
+        for i in 0..n {
+            self.z[i] = self.r[i] / self.diag[i];
+            self.p[i] = self.z[i];
+        }
+        let mut rz = dot(&self.r, &self.z);
+        let mut iterations = 0;
+        let mut residual = dot(&self.r, &self.r).sqrt() / norm_b;
+        while residual > self.cfg.tolerance && iterations < self.cfg.max_iterations {
+            self.apply();
+            let pap = dot(&self.p, &self.ap);
+            // A non-positive curvature means round-off has taken over.
+            if pap.is_nan() || pap <= 0.0 {
+                break;
+            }
+            let alpha = rz / pap;
+            for i in 0..n {
+                self.v[i] += alpha * self.p[i];
+                self.r[i] -= alpha * self.ap[i];
+                self.z[i] = self.r[i] / self.diag[i];
+            }
+            let rz_new = dot(&self.r, &self.z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            for i in 0..n {
+                self.p[i] = self.z[i] + beta * self.p[i];
+            }
+            iterations += 1;
+            residual = dot(&self.r, &self.r).sqrt() / norm_b;
+        }
+        self.iterations = iterations;
+        self.residual = residual;
+        for i in 0..n {
+            if self.kind[i] == HELD {
+                self.u[i] = self.target[i].to_array();
+            } else {
+                self.u[i] = (Vec3::from_array(self.u[i]) + h * self.v[i]).to_array();
+            }
+        }
+    }
+
+    fn displacement(&self, v: VertexId) -> Vec3 {
+        Vec3::from_array(self.u[v.idx()])
+    }
+    fn displacements(&self) -> &[[Real; 3]] {
+        &self.u
+    }
+    fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        self.kind[v.idx()] = HELD;
+        self.target[v.idx()] = d_m;
+    }
+    fn release(&mut self, v: VertexId) {
+        self.kind[v.idx()] = FREE;
+    }
+    fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
+        self.fext[v.idx()] = f_n;
+    }
+    fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        let change = self.model.remove_tet(t)?;
+        for v in change.vertices {
+            if self.model.topology().vertex_tet_count(v) == 0 {
+                // An orphan has no mass left: hold it where it is.
+                self.kind[v.idx()] = HELD;
+                self.target[v.idx()] = Vec3::from_array(self.u[v.idx()]);
+                self.v[v.idx()] = Vec3::ZERO;
+            }
+        }
+        Ok(change)
+    }
+}

@@ -1,0 +1,60 @@
+//! Simulation backends: what the simulation process and the tools drive.
+//! The tensor-mass explicit integrator ([`crate::tensor_mass::Explicit`])
+//! is one; [`Implicit`] (backward Euler, beyond the paper) another. Tools,
+//! contact and the reaction force work on any [`Backend`]; hot paths are
+//! generic over it.
+//!
+//! ```
+//! use sim_server::backend::{Backend, Implicit, ImplicitConfig};
+//! use sim_server::prelude::*;
+//! let mesh = BoxSpec::new(Vec3::new(0.04, 0.02, 0.02), CellSize::EdgeM(0.005)).generate().unwrap();
+//! let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 5.0).unwrap();
+//! let model = ElasticModel::new(mesh.clone(), TetMaterials::uniform(tissue, mesh.tet_count())).unwrap();
+//! // Ten times the explicit stability bound: fine for backward Euler.
+//! let mut sim = Implicit::new(model, ImplicitConfig::new(0.005)).unwrap();
+//! sim.fix(VertexId(0));
+//! sim.set_external_force(VertexId(7), Vec3::new(0.0, 0.0, -0.01));
+//! sim.step();
+//! assert!(sim.displacement(VertexId(7)).z < 0.0);
+//! ```
+
+mod explicit;
+mod implicit;
+
+pub use implicit::{Implicit, ImplicitConfig, ImplicitError};
+
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use crate::tensor_mass::{CutChange, CutError, ElasticModel};
+
+/// A deformable-body simulation the tools can act on.
+pub trait Backend {
+    /// The backend's name (`tensor-mass`, `implicit`).
+    fn name(&self) -> &'static str;
+    /// The model (mesh, topology, tensors).
+    fn model(&self) -> &ElasticModel;
+    /// Advances one step.
+    fn step(&mut self);
+    /// The step (s).
+    fn dt_s(&self) -> Real;
+    /// Displacement of `v` (m).
+    fn displacement(&self, v: VertexId) -> Vec3;
+    /// All displacements (m).
+    fn displacements(&self) -> &[[Real; 3]];
+    /// Current position of `v` (m).
+    fn position(&self, v: VertexId) -> Vec3 {
+        self.model().mesh().positions_m()[v.idx()] + self.displacement(v)
+    }
+    /// Fixes `v` at rest.
+    fn fix(&mut self, v: VertexId) {
+        self.prescribe(v, Vec3::ZERO);
+    }
+    /// Imposes displacement `d_m` on `v` from the next step on.
+    fn prescribe(&mut self, v: VertexId, d_m: Vec3);
+    /// Frees `v`.
+    fn release(&mut self, v: VertexId);
+    /// Sets the external force on `v` (N).
+    fn set_external_force(&mut self, v: VertexId, f_n: Vec3);
+    /// Removes a tetrahedron (cutting); a backend that cannot cut refuses.
+    fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError>;
+}
