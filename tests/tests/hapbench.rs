@@ -138,3 +138,30 @@ fn hapbench_latency_measures_the_system_beside_its_baselines() {
     );
     assert!(dir.join("latency.svg").exists());
 }
+
+#[test]
+fn hapbench_tradeoff_sweeps_every_backend_and_errors_fall_with_the_mesh() {
+    let dir = scratch_dir("hapbench-trade");
+    let v = hapbench(
+        &["tradeoff", "--duration-s", "0.3"],
+        &dir.join("t.json"),
+        Some(&dir),
+    );
+    for b in ["tensor-mass", "implicit"] {
+        let s = &v["backends"][b];
+        assert!(s["steps_per_s"].as_f64().unwrap() > 0.0, "{b}: {v}");
+        assert!(s["error"].as_f64().unwrap().is_finite(), "{b}: {v}");
+    }
+    let sweep = v["sweep"].as_array().unwrap();
+    let errors: Vec<f64> = sweep
+        .iter()
+        .filter(|p| p["backend"] == "tensor-mass")
+        .map(|p| p["error"].as_f64().unwrap())
+        .collect();
+    assert!(
+        errors.len() >= 3 && errors.windows(2).all(|w| w[1] < w[0]),
+        "{errors:?}"
+    );
+    assert!(sweep.iter().any(|p| p["pareto"] == true));
+    assert!(dir.join("tradeoff.svg").exists());
+}

@@ -6,6 +6,7 @@ mod extrapolation;
 mod latency;
 mod plot;
 mod stability;
+mod tradeoff;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -13,7 +14,7 @@ use clap::{Parser, Subcommand};
 #[derive(Parser)]
 #[command(
     version,
-    about = "hapsim benchmarks: latency, force extrapolation error, stability at the extremes"
+    about = "hapsim benchmarks: latency, force extrapolation error, speed against accuracy, stability at the extremes"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -32,6 +33,9 @@ enum Command {
     /// Sim -> daemon, daemon -> sim and device -> force latency and the
     /// daemon's tick lateness, beside bare iceoryx2 and bare sleep baselines.
     Latency(latency::Args),
+    /// Speed against accuracy for every backend over mesh sizes and time
+    /// steps, with the Pareto front.
+    Tradeoff(tradeoff::Args),
     /// The latency baseline's publisher process (started by `latency`).
     #[command(hide = true)]
     Probe(latency::ProbeArgs),
@@ -42,6 +46,7 @@ fn main() -> Result<()> {
         Command::Extrapolation(args) => extrapolation::run(&args),
         Command::Stability(args) => stability::run(&args),
         Command::Latency(args) => latency::run(&args),
+        Command::Tradeoff(args) => tradeoff::run(&args),
         Command::Probe(args) => latency::probe(&args),
     }
 }
