@@ -15,7 +15,7 @@
 use anyhow::{Context, Result};
 use haptic_daemon::device::Trajectory;
 use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use serde::Serialize;
 use shared::protocol::MAX_TOOLS;
 use sim_server::contact::ToolInput;
@@ -26,6 +26,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::plot::{Series, chart};
+use crate::progress::bar;
 
 /// The default hand path (tool 0).
 const PRESS_SLIDE_CSV: &str = include_str!("../../../data/press-slide.csv");
@@ -186,13 +187,6 @@ pub fn run(args: &Args) -> Result<()> {
     let (h, s) = (1.0 / args.haptic_rate, 1.0 / args.sim_rate);
     let ticks = (duration / h).floor() as usize;
     let sim_steps = (duration / s).ceil() as usize + 1;
-    let style = ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} {eta}")
-        .unwrap_or_else(|_| ProgressStyle::default_bar());
-    let bar = |len: usize, msg: &'static str| {
-        let b = ProgressBar::new(len as u64).with_style(style.clone());
-        b.set_message(msg);
-        b
-    };
     let b = bar(ticks, "truth");
     let truth = simulate(&src, h, (0..).map(|k| traj.sample(k as f64 * h)), ticks, &b)
         .context("ground truth")?;

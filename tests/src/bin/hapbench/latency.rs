@@ -26,6 +26,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use crate::plot::{Series, chart};
+use crate::progress::bar;
 
 /// Flags of `hapbench latency`.
 #[derive(clap::Args)]
@@ -150,6 +151,7 @@ pub fn run(args: &Args) -> Result<()> {
     // sleep baseline alike, so that only what is measured differs.
     let _ = haptic_daemon::rt::minimal_timer_slack();
     let node = services::node("hapbench-latency")?;
+    let progress = bar(3, "latency");
 
     // Baseline 1: bare iceoryx2 between two processes.
     let probe_session = format!("hapbench-probe{pid}");
@@ -177,6 +179,7 @@ pub fn run(args: &Args) -> Result<()> {
     }
     let _ = probe.wait();
     drop(sub);
+    progress.inc(1);
 
     // Baseline 2: bare clock_nanosleep at 1 kHz (timer slack as the daemon's).
     let mut pacer = Pacer::new(1_000_000, monotonic_ns());
@@ -186,6 +189,7 @@ pub fn run(args: &Args) -> Result<()> {
         sleep.push(late as f64 * 1e-3);
     }
 
+    progress.inc(1);
     // The system.
     let session_name = format!("hapbench-lat{pid}");
     let session = SessionName::new(&session_name)?;
@@ -259,6 +263,7 @@ pub fn run(args: &Args) -> Result<()> {
     let _ = daemon.wait();
     let _ = sim.kill();
     let _ = sim.wait();
+    progress.finish_and_clear();
     anyhow::ensure!(
         !s2d.is_empty() && !d2s.is_empty(),
         "no traffic between sim-server and haptic-daemon"

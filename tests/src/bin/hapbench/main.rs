@@ -5,6 +5,7 @@
 mod extrapolation;
 mod latency;
 mod plot;
+mod progress;
 mod stability;
 mod tradeoff;
 

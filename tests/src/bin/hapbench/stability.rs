@@ -14,6 +14,10 @@ use sim_server::server::prepare;
 use sim_server::tensor_mass::element_bound;
 use std::path::PathBuf;
 
+use crate::plot::{Series, chart};
+use crate::progress::bar;
+use indicatif::ProgressBar;
+
 /// Flags of `hapbench stability`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -23,6 +27,66 @@ pub struct Args {
     /// Write the results here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Write SVG plots (stable step and displacement per family) here.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// Cases in a run (for the progress bar).
+const CASES: usize = 31;
+
+/// One chart per family of cases: the stable step bound and the largest
+/// displacement against the pushed value (log10 of it for the wide ranges).
+fn plot(dir: &std::path::Path, cases: &[Case]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    for (family, log) in [
+        ("poisson", false),
+        ("anisotropy_mu_ratio", true),
+        ("membrane_alpha_over_young", true),
+        ("sliver_thickness_m", true),
+    ] {
+        let x = |v: f64| if log { v.log10() } else { v };
+        let of: Vec<&Case> = cases.iter().filter(|c| c.case == family).collect();
+        let pts = |f: &dyn Fn(&Case) -> f64| -> Vec<(f64, f64)> {
+            of.iter()
+                .filter(|c| c.outcome == "stable")
+                .map(|c| (x(c.value), f(c)))
+                .collect()
+        };
+        let series = [
+            Series {
+                name: "bound (us)",
+                color: "#1f77b4",
+                points: pts(&|c| c.dt_bound_s * 1e6),
+            },
+            Series {
+                name: "max u (mm)",
+                color: "#d62728",
+                points: pts(&|c| c.max_displacement_m * 1e3),
+            },
+        ];
+        let xs: Vec<f64> = of.iter().map(|c| x(c.value)).collect();
+        let (x0, x1) = (
+            xs.iter().copied().fold(f64::INFINITY, f64::min),
+            xs.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
+        let label = if log {
+            format!("log10 {family}")
+        } else {
+            family.to_string()
+        };
+        let svg = chart(
+            &format!("Stable cases: {family}"),
+            &label,
+            "us / mm",
+            x0,
+            x1,
+            &series,
+        );
+        let path = dir.join(format!("stability-{family}.svg"));
+        std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// One case's outcome.
@@ -90,6 +154,7 @@ fn press(t: f64) -> [f64; 3] {
 }
 
 fn run_case(
+    progress: &ProgressBar,
     case: &'static str,
     value: f64,
     scene: &str,
@@ -97,6 +162,7 @@ fn run_case(
     path: Path,
     duration_s: f64,
 ) -> Case {
+    progress.inc(1);
     let mut out = Case {
         case,
         value,
@@ -177,11 +243,13 @@ pub fn run(args: &Args) -> Result<()> {
         "--duration-s must be positive"
     );
     let d = args.duration_s;
+    let progress = bar(CASES, "stability");
     let mut cases = Vec::new();
     let base =
         |nu: f64, extra: &str, sim: &str| format!("{BLOCK}{PULL}{}{sim}", material(nu, extra));
     for nu in [0.3, 0.45, 0.49, 0.499] {
         cases.push(run_case(
+            &progress,
             "poisson",
             nu,
             &base(nu, "", ""),
@@ -200,6 +268,7 @@ pub fn run(args: &Args) -> Result<()> {
             (ratio - 1.0) * mu
         );
         cases.push(run_case(
+            &progress,
             "anisotropy_mu_ratio",
             ratio,
             &base(0.4, &extra, ""),
@@ -209,6 +278,7 @@ pub fn run(args: &Args) -> Result<()> {
         ));
     }
     cases.push(run_case(
+        &progress,
         "anisotropy_delta_lambda_over_lambda",
         2.0,
         &base(
@@ -226,6 +296,7 @@ pub fn run(args: &Args) -> Result<()> {
     for factor in [1.0, 10.0, 100.0, 1000.0] {
         let sim = format!("\n[membrane]\nalpha = {}\n", 5000.0 * factor);
         cases.push(run_case(
+            &progress,
             "membrane_alpha_over_young",
             factor,
             &base(0.4, "", &sim),
@@ -247,6 +318,7 @@ pub fn run(args: &Args) -> Result<()> {
                 _ => "dt_over_bound_substep",
             };
             cases.push(run_case(
+                &progress,
                 name,
                 f,
                 &base(0.4, "", &sim),
@@ -267,6 +339,7 @@ pub fn run(args: &Args) -> Result<()> {
             [x, y, z - 0.02 + h]
         };
         cases.push(run_case(
+            &progress,
             "sliver_thickness_m",
             h,
             &scene,
@@ -276,6 +349,7 @@ pub fn run(args: &Args) -> Result<()> {
         ));
     }
     cases.push(run_case(
+        &progress,
         "tool_depth_m",
         0.05,
         &base(0.4, "", ""),
@@ -284,6 +358,7 @@ pub fn run(args: &Args) -> Result<()> {
         d,
     ));
     cases.push(run_case(
+        &progress,
         "tool_speed_m_s",
         2.0,
         &base(0.4, "", ""),
@@ -291,6 +366,7 @@ pub fn run(args: &Args) -> Result<()> {
         Box::new(|t| [0.03 - 2.0 * (t - 0.05).max(0.0), 0.01, 0.018]),
         d,
     ));
+    progress.finish_and_clear();
     println!(
         "{:<28} {:>9} {:<18} {:>11} {:>9} {:>10} {:>9}",
         "case", "value", "outcome", "bound us", "substeps", "max u mm", "max F N"
@@ -311,6 +387,9 @@ pub fn run(args: &Args) -> Result<()> {
                 format!("  ({})", c.message)
             }
         );
+    }
+    if let Some(dir) = &args.plot {
+        plot(dir, &cases)?;
     }
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&serde_json::json!({ "cases": cases }))?;

@@ -16,6 +16,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::plot::{Series, chart};
+use crate::progress::bar;
 
 /// Flags of `hapbench tradeoff`.
 #[derive(clap::Args)]
@@ -148,7 +149,9 @@ pub fn run(args: &Args) -> Result<()> {
         args.duration_s.is_finite() && args.duration_s >= 0.2,
         "--duration-s must be at least 0.2"
     );
+    let progress = bar(1 + CELLS_M.len() * 5, "tradeoff");
     let u_ref = reference()?;
+    progress.inc(1);
     let mut points = Vec::new();
     for cell in CELLS_M {
         let m = model(cell)?;
@@ -162,6 +165,7 @@ pub fn run(args: &Args) -> Result<()> {
             args.duration_s,
             u_ref,
         )?);
+        progress.inc(1);
         let mut p = measure(
             Explicit::<f32>::new(m.clone(), cfg)?,
             cell,
@@ -170,11 +174,14 @@ pub fn run(args: &Args) -> Result<()> {
         )?;
         p.backend = "tensor-mass-f32".into();
         points.push(p);
+        progress.inc(1);
         for dt in [0.001, 0.004, 0.016] {
             let sim = Implicit::new(m.clone(), ImplicitConfig::new(dt))?;
             points.push(measure(sim, cell, args.duration_s, u_ref)?);
+            progress.inc(1);
         }
     }
+    progress.finish_and_clear();
     for i in 0..points.len() {
         let (e, r) = (points[i].error, points[i].realtime_factor);
         points[i].pareto = !points.iter().any(|q| {
