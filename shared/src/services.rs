@@ -83,8 +83,23 @@ pub fn node(name: &str) -> Result<Node<Ipc>, ServiceError> {
         .name(&node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Ipc>()
-        .map_err(|e| err(format!("{e:?}")))
+        .map_err(|e| {
+            // iceoryx2 reports a directory another user owns as an internal
+            // error; say what it most likely is.
+            let private = std::fs::read_dir(ICEORYX2_NODES_DIR)
+                .is_err_and(|e| e.kind() == std::io::ErrorKind::PermissionDenied);
+            err(if private {
+                format!(
+                    "{e:?}: {ICEORYX2_NODES_DIR} belongs to another user; a session's shared memory is private to the user who started it, so run every process of a session as the same user"
+                )
+            } else {
+                format!("{e:?}")
+            })
+        })
 }
+
+/// Where iceoryx2 (default configuration) keeps its node records.
+const ICEORYX2_NODES_DIR: &str = "/tmp/iceoryx2/nodes";
 
 fn verifier(service: &str) -> Result<AttributeVerifier, ServiceError> {
     let open = |reason: String| ServiceError::Open {

@@ -76,6 +76,7 @@ fn session_memory_is_private_to_its_user() {
         let err = String::from_utf8_lossy(&join.stderr);
         eprintln!("as nobody: {}", err.lines().next().unwrap_or(""));
         assert!(!join.status.success(), "nobody joined the session");
+        assert!(err.contains("another user"), "{err}");
         assert!(
             !err.contains("setpriv:"),
             "the copy did not even start: {err}"
