@@ -2,17 +2,25 @@
 # Prepares a fresh Debian machine to build and test the project. Idempotent.
 # The build needs a Rust toolchain (>= 1.95) and a C compiler; the viewer's
 # snapshots (and the tests that take them) need Mesa's EGL with its software
-# rasterizer (loaded at run time, no display needed).
+# rasterizer (loaded at run time, no display needed); the Python backend
+# example needs iceoryx2's Python package.
 set -euo pipefail
 need_apt=()
 command -v cc >/dev/null 2>&1 || need_apt+=(gcc)
 command -v pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
+command -v python3 >/dev/null 2>&1 || need_apt+=(python3 python3-pip)
 if ! { ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null; } | grep 'libEGL_mesa\.so\.0' >/dev/null; then
   need_apt+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
 fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" -eq 0 ]; then apt-get update -qq && apt-get install -y -qq "${need_apt[@]}";
   else sudo apt-get update -qq && sudo apt-get install -y -qq "${need_apt[@]}"; fi
+fi
+# The out-of-process backend example and its test: iceoryx2's Python package,
+# the same version as the Rust crate.
+if ! python3 -c 'import iceoryx2' >/dev/null 2>&1; then
+  python3 -m pip install --quiet --disable-pip-version-check iceoryx2==0.10.0 2>/dev/null \
+    || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages iceoryx2==0.10.0
 fi
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: installing the Rust toolchain with rustup" >&2
