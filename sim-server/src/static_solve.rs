@@ -129,6 +129,70 @@ pub fn solve_static(
             vertex: v,
         });
     }
+    let asm = assemble(model, dirichlet);
+    let mut u = asm.u.clone();
+    let free = &asm.free;
+    let membrane_blocks = &asm.membrane_blocks;
+    let f: Vec<Real> = loads_n.iter().flat_map(|l| l.to_array()).collect();
+    let mut rhs = asm.rhs_imposed.clone();
+    for (d, &i) in free.iter().enumerate() {
+        if i != usize::MAX {
+            rhs[i] += f[d];
+        }
+    }
+    if let Some(llt) = factor(&asm, dirichlet)? {
+        let mut x = faer::Mat::<Real>::from_fn(asm.nf, 1, |i, _| rhs[i]);
+        llt.solve_in_place(x.as_mut());
+        for (d, &i) in free.iter().enumerate() {
+            if i != usize::MAX {
+                u[d] = x[(i, 0)];
+            }
+        }
+    }
+    let displacement_m: Vec<Vec3> = u
+        .chunks_exact(3)
+        .map(|c| Vec3::new(c[0], c[1], c[2]))
+        .collect();
+    let mut ku = vec![Vec3::ZERO; n];
+    model.elastic_forces(&displacement_m, &mut ku);
+    for (a, b, t) in membrane_blocks {
+        ku[*a] -= *t * displacement_m[*b];
+    }
+    // elastic_forces gives -K u; reaction = K u - f at imposed dofs.
+    let force_n = (0..n)
+        .map(|v| {
+            let mut out = loads_n[v];
+            for a in 0..3 {
+                if free[3 * v + a] == usize::MAX && dirichlet.dofs[v][a].is_some() {
+                    out[a] = -ku[v][a] - loads_n[v][a];
+                }
+            }
+            out
+        })
+        .collect();
+    Ok(StaticSolution {
+        displacement_m,
+        force_n,
+    })
+}
+
+/// The free block of K (lower triangle) for the imposed degrees of
+/// freedom, and what the imposed values contribute to the right side.
+struct Assembly {
+    /// Free index of each degree of freedom (`usize::MAX`: imposed or dead).
+    free: Vec<usize>,
+    nf: usize,
+    /// Imposed values (free entries 0).
+    u: Vec<Real>,
+    triplets: Vec<Triplet<usize, usize, Real>>,
+    /// -K_fp u_p.
+    rhs_imposed: Vec<Real>,
+    /// A nonlinear membrane's tangent at rest (not in the model's K).
+    membrane_blocks: Vec<(usize, usize, crate::math::Mat3)>,
+}
+
+fn assemble(model: &ElasticModel, dirichlet: &Dirichlet) -> Assembly {
+    let n = model.vertex_count();
     // Number the free degrees of freedom of vertices that still have material.
     let topo = model.topology();
     let mut free = vec![usize::MAX; 3 * n];
@@ -147,7 +211,6 @@ pub fn solve_static(
             }
         }
     }
-    let f: Vec<Real> = loads_n.iter().flat_map(|l| l.to_array()).collect();
     // Stiffness blocks as (row vertex, col vertex, block) for both triangles.
     let blocks = model
         .vertex_tensors()
@@ -209,51 +272,70 @@ pub fn solve_static(
             }
         }
     }
-    for (d, &i) in free.iter().enumerate() {
-        if i != usize::MAX {
-            rhs[i] += f[d];
-        }
+    Assembly {
+        free,
+        nf,
+        u,
+        triplets,
+        rhs_imposed: rhs,
+        membrane_blocks,
     }
-    if nf > 0 {
-        let k = SparseColMat::<usize, Real>::try_new_from_triplets(nf, nf, &triplets)
-            .map_err(|e| StaticError::Factorization(format!("{e:?}")))?;
-        let llt = k.sp_cholesky(faer::Side::Lower).map_err(|e| match e {
+}
+
+type Cholesky = faer::sparse::linalg::solvers::Llt<usize, Real>;
+
+/// Factorizes the free block (`None` when nothing is free).
+fn factor(asm: &Assembly, dirichlet: &Dirichlet) -> Result<Option<Cholesky>, StaticError> {
+    if asm.nf == 0 {
+        return Ok(None);
+    }
+    let k = SparseColMat::<usize, Real>::try_new_from_triplets(asm.nf, asm.nf, &asm.triplets)
+        .map_err(|e| StaticError::Factorization(format!("{e:?}")))?;
+    k.sp_cholesky(faer::Side::Lower)
+        .map(Some)
+        .map_err(|e| match e {
             faer::sparse::linalg::LltError::Numeric(_) => StaticError::Singular {
                 constrained: dirichlet.count(),
             },
             other => StaticError::Factorization(other.to_string()),
-        })?;
-        let mut x = faer::Mat::<Real>::from_fn(nf, 1, |i, _| rhs[i]);
-        llt.solve_in_place(x.as_mut());
-        for (d, &i) in free.iter().enumerate() {
+        })
+}
+
+/// K factorized once for a set of imposed degrees of freedom, then solved
+/// for many load cases (the precomputed backend's unit responses).
+pub struct Factorized {
+    asm: Assembly,
+    llt: Option<Cholesky>,
+}
+
+impl Factorized {
+    /// Assembles and factorizes K with `dirichlet` imposed.
+    pub fn new(model: &ElasticModel, dirichlet: &Dirichlet) -> Result<Self, StaticError> {
+        let asm = assemble(model, dirichlet);
+        let llt = factor(&asm, dirichlet)?;
+        Ok(Self { asm, llt })
+    }
+
+    /// The displacements (m) under per-vertex loads `loads_n`, written to `out`.
+    pub fn solve_into(&self, loads_n: &[Vec3], out: &mut [Vec3]) {
+        let asm = &self.asm;
+        let mut x = faer::Mat::<Real>::from_fn(asm.nf, 1, |i, _| asm.rhs_imposed[i]);
+        for (d, &i) in asm.free.iter().enumerate() {
             if i != usize::MAX {
-                u[d] = x[(i, 0)];
+                x[(i, 0)] += loads_n[d / 3][d % 3];
             }
         }
-    }
-    let displacement_m: Vec<Vec3> = u
-        .chunks_exact(3)
-        .map(|c| Vec3::new(c[0], c[1], c[2]))
-        .collect();
-    let mut ku = vec![Vec3::ZERO; n];
-    model.elastic_forces(&displacement_m, &mut ku);
-    for (a, b, t) in &membrane_blocks {
-        ku[*a] -= *t * displacement_m[*b];
-    }
-    // elastic_forces gives -K u; reaction = K u - f at imposed dofs.
-    let force_n = (0..n)
-        .map(|v| {
-            let mut out = loads_n[v];
-            for a in 0..3 {
-                if free[3 * v + a] == usize::MAX && dirichlet.dofs[v][a].is_some() {
-                    out[a] = -ku[v][a] - loads_n[v][a];
+        if let Some(llt) = &self.llt {
+            llt.solve_in_place(x.as_mut());
+        }
+        for (v, o) in out.iter_mut().enumerate() {
+            *o = Vec3::from_array(std::array::from_fn(|a| {
+                let d = 3 * v + a;
+                match asm.free[d] {
+                    usize::MAX => asm.u[d],
+                    i => x[(i, 0)],
                 }
-            }
-            out
-        })
-        .collect();
-    Ok(StaticSolution {
-        displacement_m,
-        force_n,
-    })
+            }));
+        }
+    }
 }

@@ -161,7 +161,7 @@ force_n = [0.0, 0.0, -0.01]
 }
 
 #[test]
-fn run_takes_the_implicit_backend_and_refuses_unbuilt_ones() {
+fn run_takes_the_implicit_and_precomputed_backends_and_refuses_unbuilt_ones() {
     let dir = scratch_dir("run-backend");
     let json = dir.join("implicit.json");
     let session = format!("implicit{}", std::process::id());
@@ -180,21 +180,26 @@ fn run_takes_the_implicit_backend_and_refuses_unbuilt_ones() {
     let v = read_json(&json);
     assert_eq!(v["steps"], 200);
     assert!(v["finite"].as_bool().unwrap());
+    // Precomputed: the responses are computed once, then read from the cache.
+    for round in 0..2 {
+        let out = Command::new(binary("sim-server"))
+            .args(["run", "--backend", "precomputed", "--headless", "--quiet"])
+            .args(["--steps", "100", "--session", &session])
+            .env("XDG_CACHE_HOME", dir.join("cache"))
+            .output()
+            .expect("run sim-server");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        assert_eq!(err.contains("read from the cache"), round == 1, "{err}");
+    }
     let out = Command::new(binary("sim-server"))
-        .args([
-            "run",
-            "--backend",
-            "precomputed",
-            "--headless",
-            "--steps",
-            "1",
-        ])
+        .args(["run", "--backend", "hybrid", "--headless", "--steps", "1"])
         .output()
         .expect("run sim-server");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("precomputed") && err.contains("implicit"),
+        err.contains("hybrid") && err.contains("precomputed"),
         "{err}"
     );
 }

@@ -20,8 +20,10 @@
 
 mod explicit;
 mod implicit;
+mod precomputed;
 
 pub use implicit::{Implicit, ImplicitConfig, ImplicitError};
+pub use precomputed::{Precomputed, PrecomputedError};
 
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};

@@ -169,7 +169,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         Ok(s) => s,
         Err(e) => {
             let _ = daemon.kill();
-            return Err(e.into());
+            return Err(e);
         }
     };
     let status = daemon.wait()?;

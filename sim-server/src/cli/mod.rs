@@ -7,10 +7,10 @@ pub mod run;
 pub mod solve;
 
 use anyhow::{Context, Result};
-use sim_server::backend::{Implicit, ImplicitConfig};
+use sim_server::backend::{Implicit, ImplicitConfig, Precomputed};
 use sim_server::scene::spec::BackendName;
 use sim_server::scene::{BuiltScene, SceneSource, build_scene};
-use sim_server::server::{RunConfig, RunError, RunSummary, prepare, prepare_with, run};
+use sim_server::server::{RunConfig, RunSummary, prepare, prepare_with, run};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -21,8 +21,8 @@ pub fn run_scene(
     backend: Option<BackendName>,
     cfg: &RunConfig,
     stop: Arc<AtomicBool>,
-) -> Result<RunSummary, RunError> {
-    match backend.unwrap_or(scene.settings.backend) {
+) -> Result<RunSummary> {
+    Ok(match backend.unwrap_or(scene.settings.backend) {
         BackendName::Implicit => {
             // Stable at any step: the real-time step, not the explicit bound.
             let dt = scene
@@ -32,11 +32,60 @@ pub fn run_scene(
             let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
                 Implicit::new(model, ImplicitConfig::new(dt_s))
             })?;
-            run(prepared, cfg, stop)
+            run(prepared, cfg, stop)?
         }
-        _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop),
-        _ => run(prepare::<f64>(scene, None)?, cfg, stop),
-    }
+        BackendName::Precomputed => {
+            if scene
+                .prescribed
+                .iter()
+                .any(|(_, d)| *d != sim_server::math::Vec3::ZERO)
+            {
+                anyhow::bail!(
+                    "the precomputed backend holds the scene's fixed vertices only; this scene prescribes displacements: use tensor-mass or implicit"
+                );
+            }
+            let fixed: Vec<_> = scene
+                .fixed
+                .iter()
+                .chain(scene.prescribed.iter().map(|(v, _)| v))
+                .copied()
+                .collect();
+            let dt = scene
+                .settings
+                .dt_s
+                .unwrap_or(1.0 / scene.settings.rate_hz.unwrap_or(1000.0));
+            let cache = cache_dir();
+            let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
+                let mut shown = 0;
+                Precomputed::new(model, &fixed, dt_s, cache.as_deref(), |done, total| {
+                    let pct = 100 * done / total.max(1);
+                    if pct >= shown + 10 || done == total {
+                        shown = pct;
+                        eprint!("\rprecomputing unit responses: {pct:3}% ({done}/{total})");
+                        if done == total {
+                            eprintln!();
+                        }
+                    }
+                })
+            })?;
+            if prepared.sim.from_cache {
+                eprintln!("precomputed responses read from the cache");
+            }
+            run(prepared, cfg, stop)?
+        }
+        _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop)?,
+        _ => run(prepare::<f64>(scene, None)?, cfg, stop)?,
+    })
+}
+
+/// Where precomputed responses are kept: `$XDG_CACHE_HOME/hapsim`, else
+/// `~/.cache/hapsim` (none without a home).
+fn cache_dir() -> Option<std::path::PathBuf> {
+    std::env::var_os("XDG_CACHE_HOME")
+        .filter(|v| !v.is_empty())
+        .map(std::path::PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| std::path::PathBuf::from(h).join(".cache")))
+        .map(|d| d.join("hapsim"))
 }
 
 /// Reads and builds a scene file, or the embedded scene when `path` is `None`.

@@ -17,8 +17,9 @@ pub struct RunArgs {
     /// Session shared with the daemon and the viewer.
     #[arg(long, default_value = "default")]
     pub session: String,
-    /// Backend: tensor-mass (explicit, the paper's) or implicit (backward
-    /// Euler); default: the scene's `[simulation] backend`, else tensor-mass.
+    /// Backend: tensor-mass (explicit, the paper's), implicit (backward
+    /// Euler) or precomputed (static responses, no cutting); default: the
+    /// scene's `[simulation] backend`, else tensor-mass.
     #[arg(long)]
     pub backend: Option<String>,
     /// Step as fast as possible instead of in real time.
@@ -47,8 +48,11 @@ pub fn run(args: RunArgs) -> Result<()> {
         None => None,
         Some("tensor-mass") => Some(BackendName::TensorMass),
         Some("implicit") => Some(BackendName::Implicit),
+        Some("precomputed") => Some(BackendName::Precomputed),
         Some(other) => {
-            bail!("backend {other:?} is not available in this release; use tensor-mass or implicit")
+            bail!(
+                "backend {other:?} is not available in this release; use tensor-mass, implicit or precomputed"
+            )
         }
     };
     if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {

@@ -136,4 +136,6 @@ pub struct ContactReport {
     pub tets_removed: usize,
     /// Vertices constrained for the coming step.
     pub constrained_vertices: usize,
+    /// The tool tried to cut and the backend cannot (precomputed).
+    pub cut_refused: bool,
 }

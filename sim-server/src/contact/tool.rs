@@ -13,7 +13,7 @@ use crate::math::{Real, Vec3};
 use crate::mesh::TET_FACES;
 use crate::scene::ToolDecl;
 use crate::scene::spec::ToolKind;
-use crate::tensor_mass::ElasticModel;
+use crate::tensor_mass::{CutError, ElasticModel};
 
 /// How far (fraction of the radius) below the new plane a persisting
 /// contact vertex may be and still be re-projected.
@@ -45,6 +45,7 @@ pub struct ToolContact {
     gripping: bool,
     armed: bool,
     removed: usize,
+    cut_refused: bool,
     vertex_edges: VertexEdges,
     tet_offsets: Vec<u32>,
     vertex_tets: Vec<TetId>,
@@ -90,6 +91,7 @@ impl ToolContact {
             gripping: false,
             armed: false,
             removed: 0,
+            cut_refused: false,
             vertex_edges: VertexEdges::new(model),
             tet_offsets,
             vertex_tets,
@@ -123,6 +125,7 @@ impl ToolContact {
         std::mem::swap(&mut self.constraints, &mut self.previous);
         self.constraints.clear();
         self.removed = 0;
+        self.cut_refused = false;
         let Some((tip_m, jaw)) = input else {
             self.pose = None;
             self.gripped.clear();
@@ -192,6 +195,7 @@ impl ToolContact {
             contact: !self.constraints.is_empty(),
             gripping: self.gripping,
             tets_removed: self.removed,
+            cut_refused: self.cut_refused,
             constrained_vertices: self.constraints.len(),
         }
     }
@@ -384,8 +388,14 @@ impl ToolContact {
         let mut removed = 0;
         for &t in &self.doomed {
             // A tetrahedron may be listed once per doomed vertex.
-            if sim.model().topology().is_alive(t) && sim.remove_tet(t).is_ok() {
-                removed += 1;
+            if !sim.model().topology().is_alive(t) {
+                continue;
+            }
+            match sim.remove_tet(t) {
+                Ok(_) => removed += 1,
+                // A backend that cannot cut says so; the cut is not made.
+                Err(CutError::Unsupported { .. }) => self.cut_refused = true,
+                Err(_) => {}
             }
         }
         removed

@@ -524,12 +524,14 @@ fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneErr
     let sim = sim.get_ref();
     if let Some(b) = &sim.backend {
         match b.get_ref() {
-            BackendName::TensorMass | BackendName::Implicit => s.backend = *b.get_ref(),
+            BackendName::TensorMass | BackendName::Implicit | BackendName::Precomputed => {
+                s.backend = *b.get_ref()
+            }
             other => {
                 return Err(src.error(
                     b.span(),
                     format!(
-                        "backend {other:?} is not available yet; use \"tensor-mass\" or \"implicit\""
+                        "backend {other:?} is not available yet; use \"tensor-mass\", \"implicit\" or \"precomputed\""
                     ),
                 ));
             }

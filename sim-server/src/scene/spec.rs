@@ -330,7 +330,7 @@ pub struct ToolSpec {
 pub enum BackendName {
     /// Explicit tensor-mass.
     TensorMass,
-    /// Precomputed (Cotin): not built yet.
+    /// Precomputed (Cotin): static unit responses.
     Precomputed,
     /// Hybrid: not built yet.
     Hybrid,

@@ -267,6 +267,7 @@ pub fn run<B: Backend>(
     let mut last_status = start_ns;
     let mut last_step_ns = start_ns;
     let mut removed_total = 0u64;
+    let mut cut_refusal_told = false;
     loop {
         if stop.load(Ordering::Relaxed)
             || cfg.max_steps.is_some_and(|m| summary.steps >= m)
@@ -311,6 +312,13 @@ pub fn run<B: Backend>(
             }
             if report.gripping {
                 flags[i] |= GRIPPING;
+            }
+            if report.cut_refused && !cut_refusal_told {
+                cut_refusal_told = true;
+                eprintln!(
+                    "sim-server: tool {i} tried to cut, but the {} backend cannot cut (its responses assume the uncut mesh): use tensor-mass or implicit to cut",
+                    sim.name()
+                );
             }
             if report.tets_removed > 0 {
                 flags[i] |= CUTTING;

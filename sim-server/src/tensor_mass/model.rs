@@ -43,6 +43,14 @@ pub enum CutError {
     /// Restoring a tetrahedron that is present.
     #[error("tetrahedron {0} is present; only removed tetrahedra can be added back")]
     AlreadyPresent(u32),
+    /// The backend cannot cut.
+    #[error("the {backend} backend cannot cut: {why}")]
+    Unsupported {
+        /// Which backend.
+        backend: &'static str,
+        /// Why, and what to use instead.
+        why: &'static str,
+    },
 }
 
 /// What a cut changed: the tetrahedron's 4 vertices and 6 edges (whose

@@ -8,7 +8,7 @@
 
 use anyhow::{Context, Result};
 use serde::Serialize;
-use sim_server::backend::{Backend, Implicit, ImplicitConfig};
+use sim_server::backend::{Backend, Implicit, ImplicitConfig, Precomputed};
 use sim_server::prelude::*;
 use sim_server::tensor_mass::element_bound;
 use std::collections::BTreeMap;
@@ -149,7 +149,7 @@ pub fn run(args: &Args) -> Result<()> {
         args.duration_s.is_finite() && args.duration_s >= 0.2,
         "--duration-s must be at least 0.2"
     );
-    let progress = bar(1 + CELLS_M.len() * 5, "tradeoff");
+    let progress = bar(1 + CELLS_M.len() * 6, "tradeoff");
     let u_ref = reference()?;
     progress.inc(1);
     let mut points = Vec::new();
@@ -180,6 +180,12 @@ pub fn run(args: &Args) -> Result<()> {
             points.push(measure(sim, cell, args.duration_s, u_ref)?);
             progress.inc(1);
         }
+        // precomputed: static, so one step settles it; its steps/s exclude
+        // the one-off precomputation.
+        let (wall, _) = boundary(&m);
+        let sim = Precomputed::new(m.clone(), &wall, 0.001, None, |_, _| {})?;
+        points.push(measure(sim, cell, args.duration_s, u_ref)?);
+        progress.inc(1);
     }
     progress.finish_and_clear();
     for i in 0..points.len() {
@@ -236,6 +242,7 @@ pub fn run(args: &Args) -> Result<()> {
             ("tensor-mass", "#1f77b4"),
             ("tensor-mass-f32", "#17becf"),
             ("implicit", "#d62728"),
+            ("precomputed", "#2ca02c"),
         ];
         let mut series = Vec::new();
         for (name, color) in colors {

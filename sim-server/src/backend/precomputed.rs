@@ -1,0 +1,324 @@
+//! The precomputed (quasi-static) backend of Cotin et al. (paper 3.5): the
+//! response of every vertex to a unit force on each axis of each free
+//! surface vertex is solved once (one sparse factorization, 3 solves per
+//! surface vertex); a step is then linear algebra on those responses:
+//!
+//! - external forces: u = sum over loaded vertices of T_.s F_s;
+//! - imposed surface displacements (tool contact): the forces F_c on the d
+//!   constrained vertices solve the small 3d x 3d system T_cc F_c =
+//!   d_c - u_c, then u += sum_c T_.c F_c.
+//!
+//! It is static (no inertia, no damping), so it is the fastest and the
+//! least dynamic backend. Cutting is refused: the responses assume the mesh
+//! they were computed on. The responses are cached on disk, keyed by a hash
+//! of the mesh, the tensors (hence materials) and the fixed set.
+
+use super::Backend;
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use crate::static_solve::{Dirichlet, Factorized, StaticError};
+use crate::tensor_mass::{CutChange, CutError, ElasticModel};
+use nalgebra::{DMatrix, DVector};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+const NONE: u32 = u32::MAX;
+const MAGIC: &[u8; 8] = b"HAPSIMP1";
+
+/// Why the precomputation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PrecomputedError {
+    /// The stiffness could not be factorized.
+    #[error(transparent)]
+    Static(#[from] StaticError),
+}
+
+/// The precomputed backend.
+pub struct Precomputed {
+    model: ElasticModel,
+    dt_s: Real,
+    /// Surface index of each vertex (NONE: interior or fixed).
+    slot: Vec<u32>,
+    surface: Vec<VertexId>,
+    /// responses[(3 s + a) * n + j]: displacement of vertex j under a unit
+    /// force along axis a on surface vertex s.
+    responses: Vec<Vec3>,
+    u: Vec<[Real; 3]>,
+    held: Vec<Option<Vec3>>,
+    fext: Vec<Vec3>,
+    constrained: Vec<(u32, Vec3)>,
+    work: Vec<Vec3>,
+    /// Whether the last load came from the disk cache.
+    pub from_cache: bool,
+}
+
+fn fnv(bytes: impl Iterator<Item = u8>, mut h: u64) -> u64 {
+    for b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x100_0000_01b3);
+    }
+    h
+}
+
+fn key(model: &ElasticModel, fixed: &[VertexId]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325;
+    let f = |x: Real| x.to_le_bytes();
+    h = fnv(
+        model
+            .mesh()
+            .positions_m()
+            .iter()
+            .flat_map(|p| p.to_array().map(f))
+            .flatten(),
+        h,
+    );
+    h = fnv(
+        model
+            .mesh()
+            .tets()
+            .iter()
+            .flat_map(|t| t.map(|v| v.0.to_le_bytes()))
+            .flatten(),
+        h,
+    );
+    h = fnv(
+        model
+            .vertex_tensors()
+            .iter()
+            .chain(model.edge_tensors())
+            .flat_map(|m| m.to_cols_array().map(f))
+            .flatten(),
+        h,
+    );
+    let mut fixed: Vec<u32> = fixed.iter().map(|v| v.0).collect();
+    fixed.sort_unstable();
+    fnv(fixed.iter().flat_map(|v| v.to_le_bytes()), h)
+}
+
+impl Precomputed {
+    /// Precomputes `model` with `fixed` held at rest (reads or writes
+    /// `cache_dir` when given; `progress` gets (done, total) solves).
+    pub fn new(
+        model: ElasticModel,
+        fixed: &[VertexId],
+        dt_s: Real,
+        cache_dir: Option<&Path>,
+        mut progress: impl FnMut(usize, usize),
+    ) -> Result<Self, PrecomputedError> {
+        let n = model.vertex_count();
+        let mut slot = vec![NONE; n];
+        let mut surface = Vec::new();
+        let is_fixed = {
+            let mut f = vec![false; n];
+            for v in fixed {
+                f[v.idx()] = true;
+            }
+            f
+        };
+        for tri in model.topology().surface_triangles(model.mesh()) {
+            for v in tri {
+                if slot[v.idx()] == NONE && !is_fixed[v.idx()] {
+                    slot[v.idx()] = surface.len() as u32;
+                    surface.push(v);
+                }
+            }
+        }
+        let cache: Option<PathBuf> =
+            cache_dir.map(|d| d.join(format!("precomputed-{:016x}.bin", key(&model, fixed))));
+        let expected = 3 * surface.len() * n;
+        let mut responses = cache
+            .as_deref()
+            .and_then(|p| read_cache(p, expected))
+            .unwrap_or_default();
+        let from_cache = responses.len() == expected;
+        if !from_cache {
+            let mut bc = Dirichlet::new(n);
+            for v in fixed {
+                bc.fix(*v);
+            }
+            let k = Factorized::new(&model, &bc)?;
+            responses = vec![Vec3::ZERO; expected];
+            let mut load = vec![Vec3::ZERO; n];
+            for (s, v) in surface.iter().enumerate() {
+                for a in 0..3 {
+                    load[v.idx()] = Vec3::ZERO;
+                    load[v.idx()][a] = 1.0;
+                    let at = (3 * s + a) * n;
+                    k.solve_into(&load, &mut responses[at..at + n]);
+                    load[v.idx()] = Vec3::ZERO;
+                    progress(3 * s + a + 1, 3 * surface.len());
+                }
+            }
+            if let Some(p) = &cache {
+                // A cache that cannot be written costs the next start time only.
+                let _ = write_cache(p, &responses);
+            }
+        }
+        Ok(Self {
+            model,
+            dt_s,
+            slot,
+            surface,
+            responses,
+            u: vec![[0.0; 3]; n],
+            held: vec![None; n],
+            fext: vec![Vec3::ZERO; n],
+            constrained: Vec::new(),
+            work: Vec::new(),
+            from_cache,
+        })
+    }
+
+    /// Free surface vertices (the precomputed sources).
+    pub fn surface_len(&self) -> usize {
+        self.surface.len()
+    }
+
+    fn response(&self, s: u32, a: usize) -> &[Vec3] {
+        let n = self.u.len();
+        let at = (3 * s as usize + a) * n;
+        &self.responses[at..at + n]
+    }
+}
+
+fn read_cache(path: &Path, expected: usize) -> Option<Vec<Vec3>> {
+    let mut f = std::fs::File::open(path).ok()?;
+    let mut magic = [0u8; 8];
+    f.read_exact(&mut magic).ok()?;
+    let mut len = [0u8; 8];
+    f.read_exact(&mut len).ok()?;
+    if &magic != MAGIC || u64::from_le_bytes(len) as usize != expected {
+        return None;
+    }
+    let mut bytes = Vec::new();
+    f.read_to_end(&mut bytes).ok()?;
+    if bytes.len() != expected * 24 {
+        return None;
+    }
+    Some(
+        bytes
+            .chunks_exact(24)
+            .map(|c| {
+                Vec3::from_array(std::array::from_fn(|k| {
+                    Real::from_le_bytes(c[8 * k..8 * k + 8].try_into().unwrap_or([0; 8]))
+                }))
+            })
+            .collect(),
+    )
+}
+
+fn write_cache(path: &Path, responses: &[Vec3]) -> std::io::Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let tmp = path.with_extension("tmp");
+    let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+    f.write_all(MAGIC)?;
+    f.write_all(&(responses.len() as u64).to_le_bytes())?;
+    for r in responses {
+        for x in r.to_array() {
+            f.write_all(&x.to_le_bytes())?;
+        }
+    }
+    f.flush()?;
+    drop(f);
+    std::fs::rename(tmp, path)
+}
+
+impl Backend for Precomputed {
+    fn name(&self) -> &'static str {
+        "precomputed"
+    }
+    fn model(&self) -> &ElasticModel {
+        &self.model
+    }
+    fn dt_s(&self) -> Real {
+        self.dt_s
+    }
+
+    fn step(&mut self) {
+        let n = self.u.len();
+        let mut u = std::mem::take(&mut self.work);
+        u.clear();
+        u.resize(n, Vec3::ZERO);
+        for (v, f) in self.fext.iter().enumerate() {
+            let s = self.slot[v];
+            if s == NONE || *f == Vec3::ZERO {
+                continue;
+            }
+            for a in 0..3 {
+                if f[a] != 0.0 {
+                    for (o, r) in u.iter_mut().zip(self.response(s, a)) {
+                        *o += f[a] * *r;
+                    }
+                }
+            }
+        }
+        self.constrained.clear();
+        for (v, h) in self.held.iter().enumerate() {
+            if let (Some(d), s) = (h, self.slot[v])
+                && s != NONE
+            {
+                self.constrained.push((s, *d));
+            }
+        }
+        let c = self.constrained.len();
+        if c > 0 {
+            let mut t = DMatrix::<Real>::zeros(3 * c, 3 * c);
+            let mut rhs = DVector::<Real>::zeros(3 * c);
+            for (i, &(si, di)) in self.constrained.iter().enumerate() {
+                let vi = self.surface[si as usize].idx();
+                for a in 0..3 {
+                    rhs[3 * i + a] = di[a] - u[vi][a];
+                }
+                for (j, &(sj, _)) in self.constrained.iter().enumerate() {
+                    for b in 0..3 {
+                        let r = self.response(sj, b)[vi];
+                        for a in 0..3 {
+                            t[(3 * i + a, 3 * j + b)] = r[a];
+                        }
+                    }
+                }
+            }
+            if let Some(forces) = t.lu().solve(&rhs) {
+                for (j, &(sj, _)) in self.constrained.iter().enumerate() {
+                    for b in 0..3 {
+                        let fb = forces[3 * j + b];
+                        for (o, r) in u.iter_mut().zip(self.response(sj, b)) {
+                            *o += fb * *r;
+                        }
+                    }
+                }
+            }
+        }
+        for (v, o) in self.u.iter_mut().enumerate() {
+            *o = match self.held[v] {
+                Some(d) => d.to_array(),
+                None => u[v].to_array(),
+            };
+        }
+        self.work = u;
+    }
+
+    fn displacement(&self, v: VertexId) -> Vec3 {
+        Vec3::from_array(self.u[v.idx()])
+    }
+    fn displacements(&self) -> &[[Real; 3]] {
+        &self.u
+    }
+    fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        self.held[v.idx()] = Some(d_m);
+    }
+    fn release(&mut self, v: VertexId) {
+        self.held[v.idx()] = None;
+    }
+    fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
+        self.fext[v.idx()] = f_n;
+    }
+    fn remove_tet(&mut self, _t: TetId) -> Result<CutChange, CutError> {
+        Err(CutError::Unsupported {
+            backend: "precomputed",
+            why: "its responses were computed on the uncut mesh; cut with tensor-mass or implicit",
+        })
+    }
+}
