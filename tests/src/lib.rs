@@ -50,3 +50,41 @@ pub fn read_json(path: &std::path::Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
+
+/// Waits for `child` at most `limit`: a process that hangs is a test
+/// failure, not a stuck CI, so past the limit it is killed and the test
+/// panics naming `what`.
+pub fn wait_bounded(
+    child: &mut std::process::Child,
+    limit: std::time::Duration,
+    what: &str,
+) -> std::process::ExitStatus {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            return status;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            panic!("{what} did not stop within {limit:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// [`wait_bounded`], then asserts that `child` succeeded (showing its
+/// stderr when it was piped) and returns its output.
+pub fn finish(
+    mut child: std::process::Child,
+    limit: std::time::Duration,
+    what: &str,
+) -> std::process::Output {
+    let status = wait_bounded(&mut child, limit, what);
+    let out = child.wait_with_output().expect("collect output");
+    assert!(
+        status.success(),
+        "{what} failed ({status}): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}

@@ -6,7 +6,7 @@
 use shared::{SessionName, monotonic_ns, services};
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, contact_sample, read_json, scratch_dir};
+use system_tests::{binary, contact_sample, finish, read_json, scratch_dir};
 
 const CHILD_ENV: &str = "HAPSIM_TEST_PUBLISHER_SESSION";
 
@@ -36,7 +36,7 @@ fn forces_arrive_and_ramp_to_zero_when_the_simulation_is_killed() {
     let session = format!("wd{}", std::process::id());
     let dir = scratch_dir("watchdog");
     let (record, json) = (dir.join("rec.csv"), dir.join("out.json"));
-    let mut daemon = Command::new(binary("haptic-daemon"))
+    let daemon = Command::new(binary("haptic-daemon"))
         .args([
             "run",
             "--device",
@@ -75,25 +75,7 @@ fn forces_arrive_and_ramp_to_zero_when_the_simulation_is_killed() {
     unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
     let killed_ns = monotonic_ns();
     let _ = child.wait();
-    // Watchdog: a test that hangs is a failure, not a stuck CI.
-    let mut waited = 0;
-    let status = loop {
-        if let Some(s) = daemon.try_wait().unwrap() {
-            break s;
-        }
-        waited += 1;
-        if waited > 300 {
-            let _ = daemon.kill();
-            panic!("haptic-daemon did not stop after its duration");
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    let out = daemon.wait_with_output().unwrap();
-    assert!(
-        status.success(),
-        "daemon failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    finish(daemon, Duration::from_secs(30), "haptic-daemon");
 
     let text = std::fs::read_to_string(&record).unwrap();
     let mut lines = text.lines();

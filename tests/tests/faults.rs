@@ -10,8 +10,8 @@ use shared::monotonic_ns;
 use sim_server::scene::{SceneSource, build_scene};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
-use system_tests::{binary, read_json, scratch_dir};
+use std::time::Duration;
+use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded};
 
 const MAX_FORCE_N: f64 = 4.0;
 /// The daemon's default slew limit: full scale in 5 ms.
@@ -27,20 +27,6 @@ fn sim_server(session: &str, args: &[&str]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start sim-server")
-}
-
-fn wait_bounded(child: &mut Child, limit: Duration, what: &str) -> std::process::ExitStatus {
-    let start = Instant::now();
-    loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            return s;
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            panic!("{what} did not stop within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 fn signal(child: &Child, sig: i32) -> u64 {
@@ -121,7 +107,7 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
     .unwrap();
     let mut first = sim_server(&session, &["--duration-s", "60"]);
     std::thread::sleep(Duration::from_millis(500));
-    let mut daemon = Command::new(binary("haptic-daemon"))
+    let daemon = Command::new(binary("haptic-daemon"))
         .args([
             "run",
             "--quiet",
@@ -154,26 +140,14 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
     std::thread::sleep(Duration::from_millis(1000));
     // Restart over the dead simulation's shared memory.
     let restarted = monotonic_ns();
-    let mut second = sim_server(&session, &["--duration-s", "60"]);
+    let second = sim_server(&session, &["--duration-s", "60"]);
     std::thread::sleep(Duration::from_millis(2500));
     let stopped = signal(&second, libc::SIGSTOP);
     std::thread::sleep(Duration::from_millis(400));
     let resumed = signal(&second, libc::SIGCONT);
-    let status = wait_bounded(&mut daemon, Duration::from_secs(30), "haptic-daemon");
-    let daemon_out = daemon.wait_with_output().unwrap();
-    assert!(
-        status.success(),
-        "daemon: {}",
-        String::from_utf8_lossy(&daemon_out.stderr)
-    );
+    finish(daemon, Duration::from_secs(30), "haptic-daemon");
     signal(&second, libc::SIGTERM);
-    let status = wait_bounded(&mut second, Duration::from_secs(10), "restarted sim-server");
-    let out = second.wait_with_output().unwrap();
-    assert!(
-        status.success(),
-        "sim-server: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    finish(second, Duration::from_secs(10), "restarted sim-server");
 
     let rows = read_record(&record);
     let end = rows.last().unwrap().0;

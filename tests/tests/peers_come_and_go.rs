@@ -8,7 +8,7 @@ use shared::protocol::PROTOCOL_VERSION;
 use shared::services;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{binary, finish, read_json, scratch_dir};
 
 /// Joins the session as a viewer would, waits for one mesh frame and
 /// returns its vertex count; the node leaves when this returns.
@@ -45,7 +45,7 @@ fn simulation_outlives_its_viewer_and_daemon_leaving_and_coming_back() {
     let session = SessionName::new(&name).unwrap();
     let dir = scratch_dir("peers");
     let (sim_json, daemon_json) = (dir.join("sim.json"), dir.join("daemon.json"));
-    let mut sim = Command::new(binary("sim-server"))
+    let sim = Command::new(binary("sim-server"))
         .args(["run", "--quiet", "--duration-s", "9", "--session", &name])
         .arg("--json")
         .arg(&sim_json)
@@ -86,20 +86,7 @@ fn simulation_outlives_its_viewer_and_daemon_leaving_and_coming_back() {
     let max = d["max_force_n"].as_f64().unwrap();
     assert!(max.is_finite() && max <= 4.0 + 1e-12, "{d}");
 
-    let start = Instant::now();
-    while sim.try_wait().unwrap().is_none() {
-        if start.elapsed() > Duration::from_secs(15) {
-            let _ = sim.kill();
-            panic!("sim-server did not stop after its duration");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = sim.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "sim-server: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    finish(sim, Duration::from_secs(15), "sim-server");
     let s = read_json(&sim_json);
     assert!(s["finite"].as_bool().unwrap(), "{s}");
     // Both daemons' poses arrived (the second one ran 2 s at 1 kHz).

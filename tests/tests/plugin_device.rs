@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{binary, read_json, scratch_dir, wait_bounded};
 
 fn build_plugin(dir: &Path) -> PathBuf {
     let src = concat!(env!("CARGO_MANIFEST_DIR"), "/plugin/fake_device.c");
@@ -92,7 +92,6 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
 
     // A read that never returns: the daemon says so and exits within a
     // bound instead of hanging with the device uncommanded.
-    let start = std::time::Instant::now();
     let mut child = Command::new(binary("haptic-daemon"))
         .args(["run", "--rt-priority", "0", "--quiet", "--duration-s", "30"])
         .args(["--session", &session])
@@ -102,16 +101,11 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        if start.elapsed() > std::time::Duration::from_secs(10) {
-            let _ = child.kill();
-            panic!("the daemon hung on a blocking device");
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    };
+    let status = wait_bounded(
+        &mut child,
+        std::time::Duration::from_secs(10),
+        "the daemon on a blocking device",
+    );
     let err = String::from_utf8_lossy(&child.wait_with_output().unwrap().stderr).to_string();
     assert_eq!(status.code(), Some(3), "{err}");
     assert!(err.contains("has not returned from a call"), "{err}");

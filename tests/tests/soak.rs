@@ -6,8 +6,8 @@
 //! 10 minutes (`HAPSIM_SOAK_S`).
 
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
-use system_tests::{binary, read_json, scratch_dir};
+use std::time::Duration;
+use system_tests::{binary, finish, read_json, scratch_dir};
 
 fn rss_kib(child: &Child) -> u64 {
     let status = std::fs::read_to_string(format!("/proc/{}/status", child.id())).unwrap();
@@ -16,19 +16,6 @@ fn rss_kib(child: &Child) -> u64 {
         .find_map(|l| l.strip_prefix("VmRSS:"))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
         .expect("VmRSS in /proc/PID/status")
-}
-
-fn wait(child: &mut Child, limit: Duration, what: &str) {
-    let start = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            panic!("{what} did not stop within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let status = child.wait().unwrap();
-    assert!(status.success(), "{what} failed ({status})");
 }
 
 #[test]
@@ -49,7 +36,7 @@ fn recording_a_running_stack_loses_nothing_and_memory_stays_flat() {
             .spawn()
             .unwrap_or_else(|e| panic!("start {bin}: {e}"))
     };
-    let mut sim = spawn(
+    let sim = spawn(
         "sim-server",
         &[
             "run",
@@ -60,7 +47,7 @@ fn recording_a_running_stack_loses_nothing_and_memory_stays_flat() {
             &(secs + 4).to_string(),
         ],
     );
-    let mut recorder = spawn(
+    let recorder = spawn(
         "haptic-daemon",
         &[
             "record",
@@ -77,7 +64,7 @@ fn recording_a_running_stack_loses_nothing_and_memory_stays_flat() {
         ],
     );
     std::thread::sleep(Duration::from_millis(800));
-    let mut daemon = spawn(
+    let daemon = spawn(
         "haptic-daemon",
         &[
             "run",
@@ -99,9 +86,9 @@ fn recording_a_running_stack_loses_nothing_and_memory_stays_flat() {
     std::thread::sleep(Duration::from_secs(secs.saturating_sub(5)));
     let late = [rss_kib(&sim), rss_kib(&daemon), rss_kib(&recorder)];
     let limit = Duration::from_secs(30);
-    wait(&mut daemon, limit, "haptic-daemon");
-    wait(&mut recorder, limit, "recorder");
-    wait(&mut sim, limit, "sim-server");
+    finish(daemon, limit, "haptic-daemon");
+    finish(recorder, limit, "recorder");
+    finish(sim, limit, "sim-server");
 
     let r = read_json(&dir.join("recorder.json"));
     let d = read_json(&dir.join("daemon.json"));

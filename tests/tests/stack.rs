@@ -5,7 +5,7 @@
 
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{binary, finish, read_json, scratch_dir};
 
 #[test]
 fn simulation_and_daemon_talk_and_forces_stay_safe() {
@@ -16,7 +16,7 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
         dir.join("daemon.json"),
         dir.join("rec.csv"),
     );
-    let mut sim = Command::new(binary("sim-server"))
+    let sim = Command::new(binary("sim-server"))
         .args(["run", "--quiet", "--duration-s", "4", "--session", &session])
         .arg("--json")
         .arg(&sim_json)
@@ -48,21 +48,7 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
         "daemon: {}",
         String::from_utf8_lossy(&daemon.stderr)
     );
-    let mut waited = 0;
-    while sim.try_wait().unwrap().is_none() {
-        waited += 1;
-        if waited > 200 {
-            let _ = sim.kill();
-            panic!("sim-server did not stop after its duration");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = sim.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "sim-server: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    finish(sim, Duration::from_secs(10), "sim-server");
     let s: serde_json::Value = read_json(&sim_json);
     let d: serde_json::Value = read_json(&daemon_json);
     assert!(s["poses_received"].as_u64().unwrap() > 100, "{s}");

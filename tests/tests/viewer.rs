@@ -16,7 +16,7 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{binary, finish, read_json, scratch_dir};
 
 fn liver() -> ElasticModel {
     let src = SceneSource::embedded();
@@ -270,23 +270,6 @@ fn sim_server(session: &str, seconds: &str, json: &Path) -> std::process::Child 
         .expect("start sim-server")
 }
 
-fn finish(mut sim: std::process::Child) {
-    let start = std::time::Instant::now();
-    while sim.try_wait().unwrap().is_none() {
-        if start.elapsed() > Duration::from_secs(20) {
-            let _ = sim.kill();
-            panic!("sim-server did not stop after its duration");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let out = sim.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "sim-server: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 #[test]
 fn a_viewer_started_before_or_after_the_simulation_shows_the_mesh() {
     let name = format!("vieworder{}", std::process::id());
@@ -316,7 +299,7 @@ fn a_viewer_started_before_or_after_the_simulation_shows_the_mesh() {
         assert!(r["triangles"].as_u64().unwrap() > 1000, "{r}");
         assert!(r["covered_pixels"].as_u64().unwrap() > 1000, "{r}");
     }
-    finish(sim);
+    finish(sim, Duration::from_secs(20), "sim-server");
 }
 
 #[test]
@@ -352,7 +335,7 @@ fn without_a_daemon_the_viewer_drives_a_tool_into_the_liver() {
         services::publisher(&services::pose_service(&node, &session_name).unwrap()).unwrap();
     driver.update(&session);
     assert!(!driver.active());
-    finish(sim);
+    finish(sim, Duration::from_secs(20), "sim-server");
     let s = read_json(&sim_json);
     assert!(s["poses_received"].as_u64().unwrap() > 100, "{s}");
     assert!(s["contact_steps"].as_u64().unwrap() > 100, "{s}");
@@ -378,7 +361,7 @@ fn the_viewer_session_follows_a_simulation_that_stops_and_restarts() {
     let first = sim_server(&name, "2", &dir.join("a.json"));
     wait_drawable(&mut session, 0);
     let vertices = session.positions_m.len();
-    finish(first);
+    finish(first, Duration::from_secs(20), "sim-server");
     // The simulation is gone: after a second without frames the viewer says so.
     std::thread::sleep(Duration::from_millis(1200));
     session.poll(monotonic_ns());
@@ -389,5 +372,5 @@ fn the_viewer_session_follows_a_simulation_that_stops_and_restarts() {
     assert!(session.sim_alive(monotonic_ns()));
     assert_eq!(session.positions_m.len(), vertices);
     assert_eq!(session.topology_version, 1, "the new simulation's surface");
-    finish(second);
+    finish(second, Duration::from_secs(20), "sim-server");
 }
