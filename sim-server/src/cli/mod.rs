@@ -25,10 +25,7 @@ pub fn run_scene(
     Ok(match backend.unwrap_or(scene.settings.backend) {
         BackendName::Implicit => {
             // Stable at any step: the real-time step, not the explicit bound.
-            let dt = scene
-                .settings
-                .dt_s
-                .unwrap_or(1.0 / scene.settings.rate_hz.unwrap_or(1000.0));
+            let dt = real_time_step(&scene);
             let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
                 Implicit::new(model, ImplicitConfig::new(dt_s))
             })?;
@@ -50,10 +47,7 @@ pub fn run_scene(
                 .chain(scene.prescribed.iter().map(|(v, _)| v))
                 .copied()
                 .collect();
-            let dt = scene
-                .settings
-                .dt_s
-                .unwrap_or(1.0 / scene.settings.rate_hz.unwrap_or(1000.0));
+            let dt = real_time_step(&scene);
             let cache = cache_dir();
             let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
                 let mut shown = 0;
@@ -76,6 +70,15 @@ pub fn run_scene(
         _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop)?,
         _ => run(prepare::<f64>(scene, None)?, cfg, stop)?,
     })
+}
+
+/// The step of backends not bound by the explicit stability limit: the
+/// scene's `dt_s`, else one period of its rate (1 kHz by default).
+fn real_time_step(scene: &BuiltScene) -> f64 {
+    scene
+        .settings
+        .dt_s
+        .unwrap_or(1.0 / scene.settings.rate_hz.unwrap_or(1000.0))
 }
 
 /// Where precomputed responses are kept: `$XDG_CACHE_HOME/hapsim`, else

@@ -144,11 +144,7 @@ fn figures(rendered: &[[f64; 3]], truth: &[[f64; 3]], hand: &[[f64; 3]]) -> Meth
         .map(|(a, b)| norm(sub(*a, *b)))
         .collect();
     let mut jumps: Vec<f64> = rendered.windows(2).map(|w| norm(sub(w[1], w[0]))).collect();
-    jumps.sort_by(f64::total_cmp);
-    let p99 = jumps
-        .get(((jumps.len() as f64 - 1.0) * 0.99).round().max(0.0) as usize)
-        .copied()
-        .unwrap_or(0.0);
+    let p99 = crate::latency::stats(&mut jumps).p99;
     let energy: f64 = rendered
         .iter()
         .zip(hand.windows(2))

@@ -68,7 +68,8 @@ pub struct Stats {
     pub max: f64,
 }
 
-fn stats(v: &mut [f64]) -> Stats {
+/// Percentiles of `v` (sorted in place); zeros when empty.
+pub fn stats(v: &mut [f64]) -> Stats {
     if v.is_empty() {
         return Stats::default();
     }
