@@ -82,6 +82,7 @@
 //! quasi-static stiffness; it is what a local-model extrapolator needs to
 //! stay stiff enough on contact, not an exact compliance.
 
+mod adjacency;
 mod claims;
 mod geometry;
 mod reaction;

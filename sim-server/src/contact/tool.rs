@@ -2,9 +2,10 @@
 //! for all tools in turn each step: cut, hold the gripped vertices, detect
 //! and project the sliding contacts, then commit to the simulation.
 
+use super::adjacency::Adjacency;
 use super::claims::Claims;
 use super::geometry::{Plane, Segment, ToolPose};
-use super::reaction::{Reaction, VertexEdges, along};
+use super::reaction::{Reaction, along};
 use super::surface_index::SurfaceIndex;
 use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
 use crate::backend::Backend;
@@ -46,9 +47,6 @@ pub struct ToolContact {
     armed: bool,
     removed: usize,
     cut_refused: bool,
-    vertex_edges: VertexEdges,
-    tet_offsets: Vec<u32>,
-    vertex_tets: Vec<TetId>,
     doomed: Vec<TetId>,
 }
 
@@ -56,24 +54,6 @@ impl ToolContact {
     /// Tool number `slot` over `model`, touching nothing.
     pub(super) fn new(decl: &ToolDecl, slot: usize, model: &ElasticModel) -> Self {
         let n = model.vertex_count();
-        let tets = model.mesh().tets();
-        let mut tet_offsets = vec![0u32; n + 1];
-        for tet in tets {
-            for v in tet {
-                tet_offsets[v.idx() + 1] += 1;
-            }
-        }
-        for i in 0..n {
-            tet_offsets[i + 1] += tet_offsets[i];
-        }
-        let mut fill = tet_offsets.clone();
-        let mut vertex_tets = vec![TetId(0); tet_offsets[n] as usize];
-        for (t, tet) in tets.iter().enumerate() {
-            for v in tet {
-                vertex_tets[fill[v.idx()] as usize] = TetId::from(t);
-                fill[v.idx()] += 1;
-            }
-        }
         Self {
             decl: decl.clone(),
             slot,
@@ -92,9 +72,6 @@ impl ToolContact {
             armed: false,
             removed: 0,
             cut_refused: false,
-            vertex_edges: VertexEdges::new(model),
-            tet_offsets,
-            vertex_tets,
             doomed: Vec::new(),
         }
     }
@@ -121,7 +98,12 @@ impl ToolContact {
 
     /// Phase 1: places the tool (`None`: withdrawn, it lets go of
     /// everything) and cuts.
-    pub(super) fn begin<B: Backend + ?Sized>(&mut self, sim: &mut B, input: Option<(Vec3, Real)>) {
+    pub(super) fn begin<B: Backend + ?Sized>(
+        &mut self,
+        sim: &mut B,
+        adj: &Adjacency,
+        input: Option<(Vec3, Real)>,
+    ) {
         std::mem::swap(&mut self.constraints, &mut self.previous);
         self.constraints.clear();
         self.removed = 0;
@@ -137,8 +119,8 @@ impl ToolContact {
         self.direction = pose.direction;
         self.pose = Some(pose);
         self.removed = match self.decl.kind {
-            ToolKind::Grasper => self.grasp(sim, &pose, jaw),
-            ToolKind::Cavitron => self.burn(sim, &pose),
+            ToolKind::Grasper => self.grasp(sim, adj, &pose, jaw),
+            ToolKind::Cavitron => self.burn(sim, adj, &pose),
             ToolKind::Hook => 0,
         };
     }
@@ -160,14 +142,15 @@ impl ToolContact {
         &mut self,
         sim: &B,
         index: &SurfaceIndex,
+        adj: &Adjacency,
         claims: &mut Claims,
     ) {
         let Some(pose) = self.pose else { return };
         if self.decl.kind != ToolKind::Cavitron {
-            self.plane_pass(sim, index, claims, &pose.tip, Part::Tip, &pose);
+            self.plane_pass(sim, index, adj, claims, &pose.tip, Part::Tip);
         }
         if let Some(shaft) = pose.shaft {
-            self.plane_pass(sim, index, claims, &shaft, Part::Shaft, &pose);
+            self.plane_pass(sim, index, adj, claims, &shaft, Part::Shaft);
         }
     }
 
@@ -202,14 +185,12 @@ impl ToolContact {
 
     /// The force on the tool and the contact stiffness after the step, from
     /// the vertices the last update imposed (see the module documentation).
-    pub fn reaction<B: Backend + ?Sized>(&self, sim: &B) -> Reaction {
+    pub(super) fn reaction<B: Backend + ?Sized>(&self, sim: &B, adj: &Adjacency) -> Reaction {
         let model = sim.model();
         let mut out = Reaction::NONE;
         for c in &self.constraints {
             let v = c.vertex;
-            out.force_n += self
-                .vertex_edges
-                .elastic_force_n(model, v, |w| sim.displacement(w));
+            out.force_n += adj.elastic_force_n(model, v, |w| sim.displacement(w));
             let k = &model.vertex_tensors()[v.idx()];
             out.stiffness_n_per_m += match c.kind {
                 ConstraintKind::Tip(n) | ConstraintKind::Shaft(n) => along(k, n),
@@ -233,11 +214,12 @@ impl ToolContact {
         &mut self,
         sim: &B,
         index: &SurfaceIndex,
+        adj: &Adjacency,
         claims: &mut Claims,
         segment: &Segment,
         part: Part,
-        pose: &ToolPose,
     ) {
+        let Some(pose) = self.pose else { return };
         let r = pose.radius_m;
         self.candidates.clear();
         index.candidates(segment, r, &mut self.candidates);
@@ -262,7 +244,7 @@ impl ToolContact {
                 self.mark[v.idx()] = true;
             }
         }
-        let normal = self.mean_normal(sim);
+        let normal = self.mean_normal(sim, adj);
         for v in self.hits.iter().chain(&self.kept) {
             self.mark[v.idx()] = false;
         }
@@ -291,8 +273,7 @@ impl ToolContact {
         for i in 0..self.kept.len() {
             let v = self.kept[i];
             let x = sim.position(v);
-            let pushing = self
-                .vertex_edges
+            let pushing = adj
                 .elastic_force_n(model, v, |w| sim.displacement(w))
                 .dot(n)
                 > 0.0;
@@ -308,14 +289,13 @@ impl ToolContact {
     /// Mean outward normal (area-weighted, current positions) of the surface
     /// triangles touching the marked vertices (this pass's hits and kept),
     /// found through each vertex's tetrahedra, each triangle counted once.
-    fn mean_normal<B: Backend + ?Sized>(&self, sim: &B) -> Option<Vec3> {
+    fn mean_normal<B: Backend + ?Sized>(&self, sim: &B, adj: &Adjacency) -> Option<Vec3> {
         let model = sim.model();
         let topo = model.topology();
         let tets = model.mesh().tets();
         let mut sum = Vec3::ZERO;
         for &v in self.hits.iter().chain(&self.kept) {
-            let range = self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;
-            for &t in &self.vertex_tets[range] {
+            for &t in adj.tets_of(v) {
                 if !topo.is_alive(t) {
                     continue;
                 }
@@ -337,7 +317,13 @@ impl ToolContact {
     }
 
     /// The grasper's state: grip, let go, cut. Returns tetrahedra removed.
-    fn grasp<B: Backend + ?Sized>(&mut self, sim: &mut B, pose: &ToolPose, jaw: Real) -> usize {
+    fn grasp<B: Backend + ?Sized>(
+        &mut self,
+        sim: &mut B,
+        adj: &Adjacency,
+        pose: &ToolPose,
+        jaw: Real,
+    ) -> usize {
         if self.gripping && jaw > GRIP_BELOW {
             self.gripped.clear();
             self.gripping = false;
@@ -356,8 +342,7 @@ impl ToolContact {
         }
         self.doomed.clear();
         for &(v, _) in &self.gripped {
-            let range = self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;
-            self.doomed.extend_from_slice(&self.vertex_tets[range]);
+            self.doomed.extend_from_slice(adj.tets_of(v));
         }
         self.gripped.clear();
         self.gripping = false;
@@ -366,7 +351,12 @@ impl ToolContact {
 
     /// The cavitron: removes the live tetrahedra with a vertex within the
     /// radius of the tip. Returns how many.
-    fn burn<B: Backend + ?Sized>(&mut self, sim: &mut B, pose: &ToolPose) -> usize {
+    fn burn<B: Backend + ?Sized>(
+        &mut self,
+        sim: &mut B,
+        adj: &Adjacency,
+        pose: &ToolPose,
+    ) -> usize {
         self.doomed.clear();
         let topo = sim.model().topology();
         for v in 0..sim.model().vertex_count() {
@@ -376,9 +366,7 @@ impl ToolContact {
                 && pose.tip.might_touch(x, pose.radius_m)
                 && pose.tip.distance_m(x) < pose.radius_m
             {
-                let range =
-                    self.tet_offsets[v.idx()] as usize..self.tet_offsets[v.idx() + 1] as usize;
-                self.doomed.extend_from_slice(&self.vertex_tets[range]);
+                self.doomed.extend_from_slice(adj.tets_of(v));
             }
         }
         self.remove_doomed(sim)

@@ -1,6 +1,7 @@
 //! The tools of a scene, updated together each step so that they share one
 //! surface index and never fight over a vertex.
 
+use super::adjacency::Adjacency;
 use super::claims::Claims;
 use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
@@ -31,6 +32,7 @@ pub struct ToolInput {
 pub struct Tools {
     tools: Vec<ToolContact>,
     index: SurfaceIndex,
+    adjacency: Adjacency,
     claims: Claims,
     reports: Vec<ContactReport>,
 }
@@ -55,6 +57,7 @@ impl Tools {
             reports: vec![ContactReport::default(); tools.len()],
             tools,
             index: SurfaceIndex::new(model, margin_m),
+            adjacency: Adjacency::new(model),
             claims: Claims::new(model.vertex_count()),
         }
     }
@@ -110,7 +113,11 @@ impl Tools {
         let input = |i: usize| inputs.get(i).copied().flatten();
         self.claims.clear();
         for (i, t) in self.tools.iter_mut().enumerate() {
-            t.begin(sim, input(i).map(|p| (p.tip_m, p.jaw_opening)));
+            t.begin(
+                sim,
+                &self.adjacency,
+                input(i).map(|p| (p.tip_m, p.jaw_opening)),
+            );
         }
         // After the cuts: the index follows them and the new positions.
         self.index.refit(sim);
@@ -118,7 +125,7 @@ impl Tools {
             t.hold(sim, &mut self.claims);
         }
         for t in &mut self.tools {
-            t.detect(sim, &self.index, &mut self.claims);
+            t.detect(sim, &self.index, &self.adjacency, &mut self.claims);
         }
         for (i, t) in self.tools.iter_mut().enumerate() {
             let jaw = input(i).map_or(1.0, |p| p.jaw_opening);
@@ -129,6 +136,6 @@ impl Tools {
 
     /// The force on tool `i` and its contact stiffness after the step.
     pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
-        self.tools[i].reaction(sim)
+        self.tools[i].reaction(sim, &self.adjacency)
     }
 }

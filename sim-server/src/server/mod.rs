@@ -363,7 +363,7 @@ pub fn run<B: Backend>(
         last_step_ns = now;
         let reaction_t0 = monotonic_ns();
         for (i, c) in contacts.iter().enumerate() {
-            let r = c.reaction(&sim);
+            let r = contacts.reaction(i, &sim);
             let f = r.force_n;
             let out = &mut msg.tools[i];
             out.force_n = f.to_array();
