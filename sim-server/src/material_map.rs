@@ -110,6 +110,19 @@ impl TetMaterials {
         Ok(())
     }
 
+    /// The materials of `tets` (in that order) as a map of their own.
+    pub fn subset(&self, tets: &[TetId]) -> Self {
+        Self {
+            table: self.table.clone(),
+            index: tets.iter().map(|t| self.index[t.idx()]).collect(),
+            fibers: if self.fibers.is_empty() {
+                Vec::new()
+            } else {
+                tets.iter().map(|t| self.fibers[t.idx()]).collect()
+            },
+        }
+    }
+
     /// The material of `t`.
     pub fn material(&self, t: TetId) -> &Material {
         &self.table[self.index[t.idx()].0 as usize]

@@ -80,8 +80,21 @@ impl Membrane {
         alpha_n_per_m2: Real,
         model: MembraneModel,
     ) -> Self {
+        Self::on_faces(mesh, topo, alpha_n_per_m2, model, |_, _| true)
+    }
+
+    /// Builds the capsule on the surface faces of `topo` that `keep` accepts
+    /// (a part of a larger body keeps only the faces on the body's surface,
+    /// not those where it meets the other parts).
+    pub fn on_faces(
+        mesh: &TetMesh,
+        topo: &Topology,
+        alpha_n_per_m2: Real,
+        model: MembraneModel,
+        keep: impl Fn(TetId, usize) -> bool,
+    ) -> Self {
         let mut per_tet: Vec<Vec<CapsuleFace>> = vec![Vec::new(); mesh.tet_count()];
-        for (t, k) in topo.surface_faces() {
+        for (t, k) in topo.surface_faces().filter(|&(t, k)| keep(t, k)) {
             let tet = mesh.tets()[t.idx()];
             let f = TET_FACES[k];
             let p = f.map(|l| mesh.positions_m()[tet[l].idx()]);

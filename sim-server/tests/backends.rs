@@ -2,9 +2,11 @@
 //! the static solver, energy decays with damping once the load is gone, and
 //! a tool pressing the same depth feels the same reaction. The implicit
 //! backend runs at ten times the explicit stability bound; the precomputed
-//! one is static (responses to unit forces on the surface).
+//! one is static (responses to unit forces on the surface); the hybrid runs
+//! twice, the probe once on its tensor-mass part and once on its
+//! precomputed part.
 
-use sim_server::backend::{Backend, Implicit, ImplicitConfig, Precomputed};
+use sim_server::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
 use sim_server::contact::{ToolInput, Tools};
 use sim_server::prelude::*;
 use sim_server::scene::ToolDecl;
@@ -45,8 +47,23 @@ fn backends() -> Vec<Box<dyn Backend>> {
     vec![
         Box::new(Explicit::<f64>::new(m.clone(), ExplicitConfig::new(0.9 * bound)).unwrap()),
         Box::new(Implicit::new(m.clone(), ImplicitConfig::new(10.0 * bound)).unwrap()),
-        Box::new(Precomputed::new(m, &fixed, 10.0 * bound, None, |_, _| {}).unwrap()),
+        Box::new(Precomputed::new(m.clone(), &fixed, 10.0 * bound, None, |_, _| {}).unwrap()),
+        // Hybrid with the probe on the tensor-mass part (x > 2 cm), then
+        // with it on the precomputed part (tensor-mass at the free end).
+        Box::new(hybrid(&m, &fixed, |x| x > 0.02, 10.0 * bound)),
+        Box::new(hybrid(&m, &fixed, |x| x > 0.032, 10.0 * bound)),
     ]
+}
+
+fn hybrid(m: &ElasticModel, fixed: &[VertexId], cuttable: impl Fn(f64) -> bool, dt: f64) -> Hybrid {
+    let tets: Vec<TetId> = (0..m.mesh().tet_count())
+        .map(TetId::from)
+        .filter(|t| {
+            let p = m.mesh().tet_points(*t);
+            cuttable((p[0].x + p[1].x + p[2].x + p[3].x) / 4.0)
+        })
+        .collect();
+    Hybrid::new(m.clone(), fixed, &tets, HybridConfig::new(dt), |_, _| {}).unwrap()
 }
 
 fn element_bound_of(m: &ElasticModel) -> f64 {

@@ -317,11 +317,17 @@ fn each_kind_of_mistake_names_its_line() {
     fails_at(&format!("{BASE}{tool}"), 16, "exceeds length_m");
     let ok_tool = tool.replace("tip_length_m = 0.5", "tip_length_m = 0.01");
     fails_at(&format!("{BASE}{ok_tool}{ok_tool}"), 19, "unique");
-    // Simulation: a backend that does not exist yet, zero threads, negative dt.
+    // Simulation: the hybrid without its split, a split that selects
+    // nothing, zero threads, negative dt.
+    fails_at(
+        &format!("{BASE}\n[hybrid]\nselect = {{ sphere_m = [5, 5, 5, 0.01] }}\n"),
+        11,
+        "[hybrid] select picks 0 of",
+    );
     fails_at(
         &format!("{BASE}\n[simulation]\nbackend = \"hybrid\"\n"),
         11,
-        "not available yet",
+        "needs a [hybrid] section",
     );
     fails_at(
         &format!("{BASE}\n[simulation]\nthreads = 0\n"),

@@ -161,7 +161,7 @@ force_n = [0.0, 0.0, -0.01]
 }
 
 #[test]
-fn run_takes_the_implicit_and_precomputed_backends_and_refuses_unbuilt_ones() {
+fn run_takes_every_backend_and_refuses_unknown_ones() {
     let dir = scratch_dir("run-backend");
     let json = dir.join("implicit.json");
     let session = format!("implicit{}", std::process::id());
@@ -192,14 +192,55 @@ fn run_takes_the_implicit_and_precomputed_backends_and_refuses_unbuilt_ones() {
         assert!(out.status.success(), "{err}");
         assert_eq!(err.contains("read from the cache"), round == 1, "{err}");
     }
+    // Hybrid on the embedded liver (its [hybrid] section splits it): the
+    // precomputed part's responses are cached the same way.
+    for round in 0..2 {
+        let out = Command::new(binary("sim-server"))
+            .args(["run", "--backend", "hybrid", "--headless", "--quiet"])
+            .args(["--steps", "100", "--session", &session])
+            .env("XDG_CACHE_HOME", dir.join("cache"))
+            .output()
+            .expect("run sim-server");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{err}");
+        assert!(err.contains("shared vertices"), "{err}");
+        assert_eq!(err.contains("read from the cache"), round == 1, "{err}");
+    }
+    // A scene asking for the hybrid without saying where to split: refused
+    // at its [simulation] backend line.
+    let scene = dir.join("unsplit.toml");
+    std::fs::write(
+        &scene,
+        r#"[mesh]
+generate = { shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.01 }
+
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 5.0
+
+[simulation]
+backend = "hybrid"
+"#,
+    )
+    .unwrap();
     let out = Command::new(binary("sim-server"))
-        .args(["run", "--backend", "hybrid", "--headless", "--steps", "1"])
+        .args(["run", "--headless", "--steps", "1", "--scene"])
+        .arg(&scene)
         .output()
         .expect("run sim-server");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("hybrid") && err.contains("precomputed"),
+        err.contains("unsplit.toml:11:") && err.contains("[hybrid]"),
         "{err}"
     );
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--backend", "hybird", "--headless", "--steps", "1"])
+        .output()
+        .expect("run sim-server");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("unknown backend \"hybird\""), "{err}");
 }

@@ -1,6 +1,8 @@
 //! Simulation backends: what the simulation process and the tools drive.
 //! The tensor-mass explicit integrator ([`crate::tensor_mass::Explicit`])
-//! is one; [`Implicit`] (backward Euler, beyond the paper) another. Tools,
+//! is one; [`Precomputed`] (Cotin's static responses), [`Hybrid`] (a
+//! precomputed part joined to a cuttable tensor-mass part) and [`Implicit`]
+//! (backward Euler, beyond the paper) the others. Tools,
 //! contact and the reaction force work on any [`Backend`]; hot paths are
 //! generic over it.
 //!
@@ -18,10 +20,13 @@
 //! assert!(sim.displacement(VertexId(7)).z < 0.0);
 //! ```
 
+mod cache;
 mod explicit;
+mod hybrid;
 mod implicit;
 mod precomputed;
 
+pub use hybrid::{Hybrid, HybridConfig, HybridError};
 pub use implicit::{Implicit, ImplicitConfig, ImplicitError};
 pub use precomputed::{Precomputed, PrecomputedError};
 

@@ -180,6 +180,12 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
             "off"
         }
     );
+    if let Some(t) = r.hybrid_tets {
+        println!(
+            "  hybrid split: {t} tensor-mass (cuttable) tetrahedra, {} precomputed (read by --backend hybrid)",
+            mesh.tet_count() - t
+        );
+    }
     if let Some(j) = json {
         write_json(
             j,

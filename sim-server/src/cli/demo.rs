@@ -32,6 +32,10 @@ pub struct DemoArgs {
     /// not --headless).
     #[arg(long)]
     pub no_viewer: bool,
+    /// Backend (tensor-mass, implicit, precomputed, hybrid); default the
+    /// scene's.
+    #[arg(long)]
+    pub backend: Option<String>,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -103,6 +107,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     if !(args.duration_s.is_finite() && args.duration_s > 0.0) {
         bail!("--duration-s must be positive");
     }
+    let backend = super::parse_backend(args.backend.as_deref())?;
     let (src, scene) = load_scene(None)?;
     if scene.tools.len() < 2 {
         bail!("the demo scene needs two tools");
@@ -158,7 +163,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         status: !args.headless,
         scripts: vec![cavitron_script()],
     };
-    let result = super::run_scene(scene, None, &cfg, stop);
+    let result = super::run_scene(scene, backend, &cfg, stop);
     if let Some(v) = &mut viewer {
         // SIGTERM: the window closes; nothing of the viewer's needs saving.
         // SAFETY: kill(2) on our own child's pid.

@@ -7,13 +7,29 @@ pub mod run;
 pub mod solve;
 
 use anyhow::{Context, Result};
-use sim_server::backend::{Implicit, ImplicitConfig, Precomputed};
+use sim_server::backend::{Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
 use sim_server::scene::spec::BackendName;
-use sim_server::scene::{BuiltScene, SceneSource, build_scene};
+use sim_server::scene::{BuiltScene, HYBRID_NEEDS_SPLIT, SceneSource, build_scene};
 use sim_server::server::{RunConfig, RunSummary, prepare, prepare_with, run};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+
+/// The backend a `--backend` flag names (`None`: the scene's).
+pub fn parse_backend(name: Option<&str>) -> Result<Option<BackendName>> {
+    Ok(match name {
+        None => None,
+        Some("tensor-mass") => Some(BackendName::TensorMass),
+        Some("implicit") => Some(BackendName::Implicit),
+        Some("precomputed") => Some(BackendName::Precomputed),
+        Some("hybrid") => Some(BackendName::Hybrid),
+        Some(other) => {
+            anyhow::bail!(
+                "unknown backend {other:?}; use tensor-mass, implicit, precomputed or hybrid"
+            )
+        }
+    })
+}
 
 /// Runs `scene` on `backend` (the scene's when `None`).
 pub fn run_scene(
@@ -50,26 +66,67 @@ pub fn run_scene(
             let dt = real_time_step(&scene);
             let cache = cache_dir();
             let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
-                let mut shown = 0;
-                Precomputed::new(model, &fixed, dt_s, cache.as_deref(), |done, total| {
-                    let pct = 100 * done / total.max(1);
-                    if pct >= shown + 10 || done == total {
-                        shown = pct;
-                        eprint!("\rprecomputing unit responses: {pct:3}% ({done}/{total})");
-                        if done == total {
-                            eprintln!();
-                        }
-                    }
-                })
+                Precomputed::new(model, &fixed, dt_s, cache.as_deref(), progress_line())
             })?;
             if prepared.sim.from_cache {
                 eprintln!("precomputed responses read from the cache");
             }
             run(prepared, cfg, stop)?
         }
+        BackendName::Hybrid => {
+            let Some(tets) = scene.hybrid_tets.clone() else {
+                anyhow::bail!("{HYBRID_NEEDS_SPLIT}");
+            };
+            let prescribed = scene.prescribed.clone();
+            let fixed = scene.fixed.clone();
+            let cache_dir = cache_dir();
+            let prepared = prepare_with(scene, None, |model, settings, dt_s| {
+                let config = HybridConfig {
+                    dt_s,
+                    policy: settings.policy,
+                    cache_dir,
+                };
+                Hybrid::new(model, &fixed, &tets, config, progress_line())
+            })?;
+            if let Some((v, _)) = prescribed.iter().find(|(v, d)| {
+                *d != sim_server::math::Vec3::ZERO && !prepared.sim.can_prescribe(*v)
+            }) {
+                anyhow::bail!(
+                    "the hybrid backend cannot impose the scene's displacement on vertex {}: it is inside the precomputed part (outside [hybrid] select), whose responses cover surface forces only",
+                    v.0
+                );
+            }
+            eprintln!(
+                "hybrid: {} tensor-mass tetrahedra, {} shared vertices, {} precomputed surface vertices{}",
+                prepared.sim.tensor_mass_tets(),
+                prepared.sim.shared_len(),
+                prepared.sim.precomputed_sources(),
+                if prepared.sim.from_cache() {
+                    " (responses read from the cache)"
+                } else {
+                    ""
+                }
+            );
+            run(prepared, cfg, stop)?
+        }
         _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop)?,
         _ => run(prepare::<f64>(scene, None)?, cfg, stop)?,
     })
+}
+
+/// A progress line on stderr for a precomputation, every 10%.
+fn progress_line() -> impl FnMut(usize, usize) {
+    let mut shown = 0;
+    move |done, total| {
+        let pct = 100 * done / total.max(1);
+        if pct >= shown + 10 || done == total {
+            shown = pct;
+            eprint!("\rprecomputing unit responses: {pct:3}% ({done}/{total})");
+            if done == total {
+                eprintln!();
+            }
+        }
+    }
 }
 
 /// The step of backends not bound by the explicit stability limit: the

@@ -2,7 +2,6 @@
 
 use super::{load_scene, write_json};
 use anyhow::{Result, bail};
-use sim_server::scene::spec::BackendName;
 use sim_server::server::RunConfig;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -18,8 +17,10 @@ pub struct RunArgs {
     #[arg(long, default_value = "default")]
     pub session: String,
     /// Backend: tensor-mass (explicit, the paper's), implicit (backward
-    /// Euler) or precomputed (static responses, no cutting); default: the
-    /// scene's `[simulation] backend`, else tensor-mass.
+    /// Euler), precomputed (static responses, no cutting) or hybrid
+    /// (precomputed joined to a cuttable tensor-mass part the scene's
+    /// `[hybrid]` selects); default: the scene's `[simulation] backend`,
+    /// else tensor-mass.
     #[arg(long)]
     pub backend: Option<String>,
     /// Step as fast as possible instead of in real time.
@@ -44,17 +45,7 @@ pub struct RunArgs {
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
 pub fn run(args: RunArgs) -> Result<()> {
-    let backend = match args.backend.as_deref() {
-        None => None,
-        Some("tensor-mass") => Some(BackendName::TensorMass),
-        Some("implicit") => Some(BackendName::Implicit),
-        Some("precomputed") => Some(BackendName::Precomputed),
-        Some(other) => {
-            bail!(
-                "backend {other:?} is not available in this release; use tensor-mass, implicit or precomputed"
-            )
-        }
-    };
+    let backend = super::parse_backend(args.backend.as_deref())?;
     if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {
         bail!("--viewer-rate must be a positive number of Hz");
     }

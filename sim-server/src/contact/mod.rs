@@ -137,6 +137,7 @@ pub struct ContactReport {
     pub tets_removed: usize,
     /// Vertices constrained for the coming step.
     pub constrained_vertices: usize,
-    /// The tool tried to cut and the backend cannot (precomputed).
-    pub cut_refused: bool,
+    /// The tool tried to cut and the backend refused: why (the precomputed
+    /// backend cannot cut; the hybrid cuts only its tensor-mass part).
+    pub cut_refused: Option<&'static str>,
 }

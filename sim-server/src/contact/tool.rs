@@ -46,7 +46,7 @@ pub struct ToolContact {
     gripping: bool,
     armed: bool,
     removed: usize,
-    cut_refused: bool,
+    cut_refused: Option<&'static str>,
     doomed: Vec<TetId>,
 }
 
@@ -71,7 +71,7 @@ impl ToolContact {
             gripping: false,
             armed: false,
             removed: 0,
-            cut_refused: false,
+            cut_refused: None,
             doomed: Vec::new(),
         }
     }
@@ -107,7 +107,7 @@ impl ToolContact {
         std::mem::swap(&mut self.constraints, &mut self.previous);
         self.constraints.clear();
         self.removed = 0;
-        self.cut_refused = false;
+        self.cut_refused = None;
         let Some((tip_m, jaw)) = input else {
             self.pose = None;
             self.gripped.clear();
@@ -382,7 +382,7 @@ impl ToolContact {
             match sim.remove_tet(t) {
                 Ok(_) => removed += 1,
                 // A backend that cannot cut says so; the cut is not made.
-                Err(CutError::Unsupported { .. }) => self.cut_refused = true,
+                Err(CutError::Unsupported { why, .. }) => self.cut_refused = Some(why),
                 Err(_) => {}
             }
         }

@@ -76,6 +76,8 @@ pub struct SceneReport {
     pub prescribed_vertices: usize,
     /// Vertices carrying a force.
     pub loaded_vertices: usize,
+    /// Tetrahedra of the hybrid's tensor-mass part, when `[hybrid]` is given.
+    pub hybrid_tets: Option<usize>,
 }
 
 /// A built scene.
@@ -90,6 +92,8 @@ pub struct BuiltScene {
     pub loads_n: Vec<Vec3>,
     /// Declared tools.
     pub tools: Vec<ToolDecl>,
+    /// The hybrid's tensor-mass (cuttable) part, when `[hybrid]` is given.
+    pub hybrid_tets: Option<Vec<TetId>>,
     /// Settings.
     pub settings: SimSettings,
     /// Summary.
@@ -382,6 +386,25 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
     }
     fixed.sort_unstable();
     fixed.dedup();
+    let hybrid_tets = match &spec.hybrid {
+        Some(h) => {
+            let select = &h.get_ref().select;
+            let tets = Region::new(src, select)?.tets(mesh, &physical);
+            if tets.is_empty() || tets.len() == mesh.tet_count() {
+                return Err(src.error(
+                    select.span(),
+                    format!(
+                        "[hybrid] select picks {} of {} tetrahedra; the tensor-mass part and the precomputed rest must both be non-empty",
+                        tets.len(),
+                        mesh.tet_count()
+                    ),
+                ));
+            }
+            report.hybrid_tets = Some(tets.len());
+            Some(tets)
+        }
+        None => None,
+    };
     let mut prescribed = Vec::new();
     let mut loads_n: Vec<Vec3> = Vec::new();
     for load in &spec.load {
@@ -503,10 +526,14 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         prescribed,
         loads_n,
         tools,
+        hybrid_tets,
         settings,
         report,
     })
 }
+
+/// Why a scene cannot run on the hybrid backend.
+pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] section naming its tensor-mass (cuttable) part, e.g. [hybrid] select = { sphere_m = [x, y, z, r] }; the rest is precomputed";
 
 fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneError> {
     let mut s = SimSettings {
@@ -523,19 +550,10 @@ fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneErr
     };
     let sim = sim.get_ref();
     if let Some(b) = &sim.backend {
-        match b.get_ref() {
-            BackendName::TensorMass | BackendName::Implicit | BackendName::Precomputed => {
-                s.backend = *b.get_ref()
-            }
-            other => {
-                return Err(src.error(
-                    b.span(),
-                    format!(
-                        "backend {other:?} is not available yet; use \"tensor-mass\", \"implicit\" or \"precomputed\""
-                    ),
-                ));
-            }
+        if *b.get_ref() == BackendName::Hybrid && spec.hybrid.is_none() {
+            return Err(src.error(b.span(), HYBRID_NEEDS_SPLIT));
         }
+        s.backend = *b.get_ref();
     }
     s.dt_s = sim
         .dt_s

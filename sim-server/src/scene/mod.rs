@@ -9,7 +9,7 @@ mod materials;
 mod select;
 pub mod spec;
 
-pub use build::{BuiltScene, SceneReport, SimSettings, ToolDecl, build_scene};
+pub use build::{BuiltScene, HYBRID_NEEDS_SPLIT, SceneReport, SimSettings, ToolDecl, build_scene};
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};

@@ -35,6 +35,18 @@ pub struct SceneSpec {
     pub tool: Vec<Spanned<ToolSpec>>,
     /// `[simulation]`: backend, step and threads.
     pub simulation: Option<Spanned<SimulationSpec>>,
+    /// `[hybrid]`: the split of the hybrid backend.
+    pub hybrid: Option<Spanned<HybridSpec>>,
+}
+
+/// `[hybrid]`: the tetrahedra (by centroid, or by physical tag) that form the
+/// hybrid backend's tensor-mass part, the one tools can cut; the rest is
+/// precomputed. Read only by the hybrid backend.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HybridSpec {
+    /// The tensor-mass (cuttable) region.
+    pub select: Spanned<Selection>,
 }
 
 /// `[mesh]`.
@@ -332,7 +344,7 @@ pub enum BackendName {
     TensorMass,
     /// Precomputed (Cotin): static unit responses.
     Precomputed,
-    /// Hybrid: not built yet.
+    /// Hybrid: a precomputed part joined to a cuttable tensor-mass part.
     Hybrid,
     /// Implicit backward Euler.
     Implicit,

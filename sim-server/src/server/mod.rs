@@ -313,10 +313,12 @@ pub fn run<B: Backend>(
             if report.gripping {
                 flags[i] |= GRIPPING;
             }
-            if report.cut_refused && !cut_refusal_told {
+            if let Some(why) = report.cut_refused
+                && !cut_refusal_told
+            {
                 cut_refusal_told = true;
                 eprintln!(
-                    "sim-server: tool {i} tried to cut, but the {} backend cannot cut (its responses assume the uncut mesh): use tensor-mass or implicit to cut",
+                    "sim-server: tool {i} tried to cut, but the {} backend refused: {why}",
                     sim.name()
                 );
             }

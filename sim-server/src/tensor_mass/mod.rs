@@ -9,9 +9,11 @@ pub mod explicit;
 pub mod kernel;
 pub mod model;
 pub mod stability;
+pub mod submodel;
 
 pub use element::{Geometry, TetElastic};
 pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError};
 pub use kernel::{Kernel, Storage};
 pub use model::{CutChange, CutError, ElasticModel, ModelError};
 pub use stability::{BoundMethod, PowerEstimate, StableStep, element_bound, power_iteration};
+pub use submodel::{Submodel, SubmodelError};

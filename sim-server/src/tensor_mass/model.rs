@@ -76,6 +76,10 @@ pub struct ElasticModel {
     mass_kg: Vec<Real>,
     damping_kg_s: Vec<Real>,
     membrane: Option<Membrane>,
+    /// Mass and damping attached to vertices from outside the model (a
+    /// hybrid's static part); kept when the vertex loses its last
+    /// tetrahedron. Empty unless [`ElasticModel::attach_mass`] was called.
+    attached: Vec<(Real, Real)>,
     orphans: Orphans,
     topology_changes: u64,
 }
@@ -102,6 +106,7 @@ impl ElasticModel {
             materials,
             topo,
             membrane: None,
+            attached: Vec::new(),
             orphans: Orphans::default(),
             topology_changes: 0,
         };
@@ -114,15 +119,26 @@ impl ElasticModel {
     /// Adds the surface membrane (paper 3.7) on the current surface. With
     /// [`MembraneModel::Linear`] its springs are folded into the tensors here.
     pub fn with_membrane(
+        self,
+        alpha_n_per_m2: Real,
+        model: MembraneModel,
+    ) -> Result<Self, ModelError> {
+        self.with_membrane_on(alpha_n_per_m2, model, |_, _| true)
+    }
+
+    /// Adds the membrane on the surface faces `keep` accepts (see
+    /// [`Membrane::on_faces`]).
+    pub fn with_membrane_on(
         mut self,
         alpha_n_per_m2: Real,
         model: MembraneModel,
+        keep: impl Fn(TetId, usize) -> bool,
     ) -> Result<Self, ModelError> {
         if !(alpha_n_per_m2.is_finite() && alpha_n_per_m2 >= 0.0) {
             return Err(ModelError::MembraneAlpha(alpha_n_per_m2));
         }
         assert!(self.membrane.is_none(), "the membrane is set once");
-        let membrane = Membrane::new(&self.mesh, &self.topo, alpha_n_per_m2, model);
+        let membrane = Membrane::on_faces(&self.mesh, &self.topo, alpha_n_per_m2, model, keep);
         if model == MembraneModel::Linear {
             let rest = self.mesh.positions_m();
             for (e, &k) in membrane.stiffness_n_per_m().iter().enumerate() {
@@ -137,6 +153,20 @@ impl ElasticModel {
         }
         self.membrane = Some(membrane);
         Ok(self)
+    }
+
+    /// Adds mass (kg) and damping (kg/s) to vertex `v` from outside the
+    /// model: a hybrid gives the vertices it shares with its static part
+    /// that part's share, so they keep their inertia (and the explicit
+    /// bound of the whole body holds) even once cuts orphan them here.
+    pub fn attach_mass(&mut self, v: VertexId, mass_kg: Real, damping_kg_s: Real) {
+        if self.attached.is_empty() {
+            self.attached = vec![(0.0, 0.0); self.mass_kg.len()];
+        }
+        self.attached[v.idx()].0 += mass_kg;
+        self.attached[v.idx()].1 += damping_kg_s;
+        self.mass_kg[v.idx()] += mass_kg;
+        self.damping_kg_s[v.idx()] += damping_kg_s;
     }
 
     /// Counts removals and restorations: a reader that cached something
@@ -237,9 +267,10 @@ impl ElasticModel {
             self.edge_k[e.idx()] = Mat3::ZERO;
         }
         for v in &orphans.vertices {
+            let (m, c) = self.attached.get(v.idx()).copied().unwrap_or_default();
             self.vertex_k[v.idx()] = Mat3::ZERO;
-            self.mass_kg[v.idx()] = 0.0;
-            self.damping_kg_s[v.idx()] = 0.0;
+            self.mass_kg[v.idx()] = m;
+            self.damping_kg_s[v.idx()] = c;
         }
         self.orphans = orphans;
         self.topology_changes += 1;

@@ -1,0 +1,212 @@
+use super::static_part::StaticPart;
+use super::*;
+use crate::material::Material;
+use crate::material_map::TetMaterials;
+use crate::mesh::{BoxSpec, CellSize};
+use crate::static_solve::{Dirichlet, solve_static};
+
+const SIZE: [Real; 3] = [0.04, 0.02, 0.02];
+
+fn body(membrane: bool) -> ElasticModel {
+    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 40.0).unwrap();
+    let n = mesh.tet_count();
+    let m = ElasticModel::new(mesh, TetMaterials::uniform(tissue, n)).unwrap();
+    if membrane {
+        m.with_membrane(400.0, MembraneModel::Linear).unwrap()
+    } else {
+        m
+    }
+}
+
+fn select(m: &ElasticModel, keep: impl Fn(Vec3) -> bool) -> Vec<TetId> {
+    (0..m.mesh().tet_count())
+        .map(TetId::from)
+        .filter(|t| {
+            let p = m.mesh().tet_points(*t);
+            keep((p[0] + p[1] + p[2] + p[3]) / 4.0)
+        })
+        .collect()
+}
+
+fn vertices(m: &ElasticModel, keep: impl Fn(Vec3) -> bool) -> Vec<VertexId> {
+    let p = m.mesh().positions_m();
+    (0..p.len())
+        .filter(|&v| keep(p[v]))
+        .map(VertexId::from)
+        .collect()
+}
+
+/// The condensation is exact: for any shared displacements, loads and a
+/// tool hold, the part's displacements are in equilibrium at its free
+/// vertices, the held vertex is where the tool put it, and the force on
+/// each shared vertex is the part's elastic force there (to the single
+/// precision the lifting is stored in for placing vertices).
+#[test]
+fn the_precomputed_part_is_condensed_exactly_on_the_shared_vertices() {
+    let m = body(true);
+    let part_tets = select(&m, |c| c.x < 0.025);
+    let part = m.submodel(&part_tets, None).unwrap();
+    let pm = &part.model;
+    let pos = pm.mesh().positions_m();
+    let fixed: Vec<VertexId> = (0..pos.len())
+        .filter(|&v| pos[v].x < 1e-9)
+        .map(VertexId::from)
+        .collect();
+    let tm = m.submodel(&select(&m, |c| c.x >= 0.025), None).unwrap();
+    let shared: Vec<VertexId> = part
+        .vertices
+        .iter()
+        .enumerate()
+        .filter(|(_, g)| tm.vertices.contains(g))
+        .map(|(l, _)| VertexId::from(l))
+        .collect();
+    assert!(shared.len() > 5);
+    let mut sp = StaticPart::new(pm, &fixed, &shared, None, |_, _| {}).unwrap();
+    let u_shared: Vec<Vec3> = (0..shared.len())
+        .map(|i| {
+            let x = i as Real;
+            Vec3::new((x * 0.7).sin(), (x * 1.3).cos(), (x * 0.4).sin()) * 1e-4
+        })
+        .collect();
+    // A load on a top vertex and a hold on another, both off the interface.
+    let top: Vec<usize> = (0..pos.len())
+        .filter(|&v| pos[v].z > SIZE[2] - 1e-9 && pos[v].x > 0.004 && pos[v].x < 0.016)
+        .collect();
+    let (loaded, held) = (top[0], top[top.len() - 1]);
+    sp.set_force(loaded, Vec3::new(0.0, 0.003, -0.01));
+    let d = Vec3::new(0.0, 0.0, -5e-4);
+    sp.hold(held, Some(d));
+    let mut f_shared = vec![Vec3::ZERO; shared.len()];
+    sp.shared_forces(&u_shared, &mut f_shared);
+    let mut u = vec![Vec3::ZERO; pos.len()];
+    sp.displacements(&u_shared, &mut u);
+    let mut f = vec![Vec3::ZERO; pos.len()];
+    pm.elastic_forces(&u, &mut f);
+    let scale = f.iter().map(|x| x.length()).fold(0.0, Real::max);
+    assert!(scale > 1e-3, "the part is loaded ({scale} N)");
+    assert!((u[held] - d).length() < 1e-15);
+    for (i, v) in shared.iter().enumerate() {
+        assert!((u[v.idx()] - u_shared[i]).length() < 1e-15);
+        assert!(
+            (f[v.idx()] - f_shared[i]).length() < 1e-6 * scale,
+            "shared vertex {i}: {} vs {}",
+            f[v.idx()],
+            f_shared[i]
+        );
+    }
+    for (v, fv) in f.iter().enumerate() {
+        let clamped = fixed.contains(&VertexId::from(v)) || shared.contains(&VertexId::from(v));
+        if clamped || v == held {
+            continue;
+        }
+        let ext = if v == loaded {
+            Vec3::new(0.0, 0.003, -0.01)
+        } else {
+            Vec3::ZERO
+        };
+        assert!(
+            (*fv + ext).length() < 1e-6 * scale,
+            "vertex {v} out of equilibrium by {}",
+            *fv + ext
+        );
+    }
+}
+
+fn settle(sim: &mut Hybrid, seconds: Real) {
+    for _ in 0..(seconds / sim.dt_s()).ceil() as usize {
+        sim.step();
+    }
+}
+
+fn static_reference(m: &ElasticModel, fixed: &[VertexId], loads: &[(VertexId, Vec3)]) -> Vec<Vec3> {
+    let mut bc = Dirichlet::new(m.vertex_count());
+    for v in fixed {
+        bc.fix(*v);
+    }
+    let mut f = vec![Vec3::ZERO; m.vertex_count()];
+    for (v, l) in loads {
+        f[v.idx()] = *l;
+    }
+    solve_static(m, &bc, &f).unwrap().displacement_m
+}
+
+/// Cut the tensor-mass part until a shared vertex has no tensor-mass
+/// tetrahedron left: the hybrid still settles on the static solution of the
+/// cut body, and a cut in the precomputed part is refused.
+#[test]
+fn after_cuts_the_hybrid_settles_on_the_static_solution_of_the_cut_body() {
+    let m = body(true);
+    let fixed = vertices(&m, |p| p.x < 1e-9);
+    let end = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
+    let loads: Vec<(VertexId, Vec3)> = end
+        .iter()
+        .map(|v| (*v, Vec3::new(0.0, 0.0, -0.01 / end.len() as Real)))
+        .collect();
+    let cuttable = select(&m, |c| c.x > 0.015 && c.x < 0.03);
+    let dt = 0.9 * element_bound(&m).dt_max_s;
+    let mut sim = Hybrid::new(
+        m.clone(),
+        &fixed,
+        &cuttable,
+        HybridConfig::new(dt),
+        |_, _| {},
+    )
+    .unwrap();
+    for (v, l) in &loads {
+        sim.set_external_force(*v, *l);
+    }
+    // The tensor-mass tetrahedra at the top of the x = 1.5 cm interface.
+    let mut cut = m.clone();
+    for t in select(&m, |c| c.x > 0.015 && c.x < 0.02 && c.z > 0.015) {
+        sim.remove_tet(t).unwrap();
+        cut.remove_tet(t).unwrap();
+    }
+    let orphaned = sim
+        .shared_tm
+        .iter()
+        .filter(|&&l| sim.tm.model().topology().vertex_tet_count(VertexId(l)) == 0)
+        .count();
+    assert!(
+        orphaned > 0,
+        "a shared vertex lost its last tensor-mass tetrahedron"
+    );
+    let err = sim.remove_tet(TetId(0)).unwrap_err().to_string();
+    assert!(err.contains("precomputed part"), "{err}");
+    settle(&mut sim, 3.0);
+    let reference = static_reference(&cut, &fixed, &loads);
+    let scale = reference.iter().map(|u| u.length()).fold(0.0, Real::max);
+    let err = (0..reference.len())
+        .filter(|&v| cut.topology().vertex_tet_count(VertexId::from(v)) > 0)
+        .map(|v| (sim.displacement(VertexId::from(v)) - reference[v]).length())
+        .fold(0.0, Real::max);
+    assert!(err < 1e-3 * scale, "{err} m off (scale {scale} m)");
+    // The body the tools see is the cut one.
+    assert_eq!(
+        sim.model().topology().alive_count(),
+        cut.topology().alive_count()
+    );
+}
+
+#[test]
+fn a_split_without_both_parts_is_refused() {
+    let m = body(false);
+    let all: Vec<TetId> = (0..m.mesh().tet_count()).map(TetId::from).collect();
+    for region in [&[][..], &all[..]] {
+        let err = Hybrid::new(m.clone(), &[], region, HybridConfig::new(1e-4), |_, _| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("needs both parts"), "{err}");
+    }
+    let fixed = vertices(&m, |p| p.x < 1e-9);
+    let mut cfg = HybridConfig::new(1.0);
+    cfg.policy = DtPolicy::Refuse;
+    let err = Hybrid::new(m.clone(), &fixed, &all[..10], cfg, |_, _| {})
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("exceeds the stable step"), "{err}");
+}
