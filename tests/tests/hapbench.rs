@@ -147,7 +147,7 @@ fn hapbench_tradeoff_sweeps_every_backend_and_errors_fall_with_the_mesh() {
         &dir.join("t.json"),
         Some(&dir),
     );
-    for b in ["tensor-mass", "implicit"] {
+    for b in ["tensor-mass", "implicit", "precomputed", "hybrid"] {
         let s = &v["backends"][b];
         assert!(s["steps_per_s"].as_f64().unwrap() > 0.0, "{b}: {v}");
         assert!(s["error"].as_f64().unwrap().is_finite(), "{b}: {v}");
@@ -162,6 +162,20 @@ fn hapbench_tradeoff_sweeps_every_backend_and_errors_fall_with_the_mesh() {
         errors.len() >= 3 && errors.windows(2).all(|w| w[1] < w[0]),
         "{errors:?}"
     );
+    // The hybrid's coupling is exact at rest: it heads where the static
+    // precomputed backend is at once on every mesh (within 5%: 0.3 s is
+    // not quite settled).
+    for p in sweep.iter().filter(|p| p["backend"] == "hybrid") {
+        let same = sweep
+            .iter()
+            .find(|q| q["backend"] == "precomputed" && q["cell_m"] == p["cell_m"])
+            .unwrap();
+        let (a, b) = (
+            p["error"].as_f64().unwrap(),
+            same["error"].as_f64().unwrap(),
+        );
+        assert!((a - b).abs() < 0.05 * b, "hybrid {a} vs precomputed {b}");
+    }
     assert!(sweep.iter().any(|p| p["pareto"] == true));
     assert!(dir.join("tradeoff.svg").exists());
 }

@@ -97,10 +97,12 @@ pub fn run_scene(
                 );
             }
             eprintln!(
-                "hybrid: {} tensor-mass tetrahedra, {} shared vertices, {} precomputed surface vertices{}",
+                "hybrid: {} tensor-mass tetrahedra, {} shared vertices, {} precomputed surface vertices, stable step {:.3e} s ({} sub-steps per step){}",
                 prepared.sim.tensor_mass_tets(),
                 prepared.sim.shared_len(),
                 prepared.sim.precomputed_sources(),
+                prepared.sim.stable_step().dt_max_s,
+                prepared.sim.substeps(),
                 if prepared.sim.from_cache() {
                     " (responses read from the cache)"
                 } else {

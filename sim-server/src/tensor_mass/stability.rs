@@ -49,7 +49,8 @@ pub struct StableStep {
 }
 
 impl StableStep {
-    fn from_lambda(lambda: Real, method: BoundMethod) -> Self {
+    /// The step for omega_max^2 = `lambda`.
+    pub fn from_lambda(lambda: Real, method: BoundMethod) -> Self {
         let omega = lambda.max(0.0).sqrt();
         Self {
             omega_max_rad_s: omega,

@@ -12,7 +12,10 @@
 //! solution of the whole body. The shared vertices carry the whole body's
 //! lumped mass (the precomputed part's share attached), so the element bound
 //! of the whole mesh is a proven stable step for the coupled system (its
-//! condensed stiffness is bounded by the uncondensed one).
+//! condensed stiffness is bounded by the uncondensed one); a second proven
+//! bound (the tensor-mass part's elements plus the condensed stiffness over
+//! the attached mass) is used when larger, e.g. when the stiffest elements
+//! are precomputed.
 //!
 //! Cuts are confined to the tensor-mass part; a tetrahedron of the
 //! precomputed part is refused with a message naming the region. The
@@ -180,10 +183,12 @@ impl Hybrid {
             .filter(|v| tm_of[v.idx()] != NONE && part_of[v.idx()] != NONE && !is_fixed[v.idx()])
             .collect();
         // The shared vertices carry the precomputed part's share of mass.
+        let mut shared_mass = Vec::with_capacity(shared.len());
         for v in &shared {
             let l = part_of[v.idx()] as usize;
             let (m, c) = (part.model.masses_kg()[l], part.model.damping_kg_s()[l]);
             tm.model.attach_mass(VertexId(tm_of[v.idx()]), m, c);
+            shared_mass.push(m);
         }
         let to_part = |v: &VertexId| VertexId(part_of[v.idx()]);
         let part_fixed: Vec<VertexId> = fixed
@@ -199,7 +204,22 @@ impl Hybrid {
             config.cache_dir.as_deref(),
             progress,
         )?;
-        let stable = element_bound(&model);
+        // Two proven bounds on omega_max^2; the smaller wins. The whole
+        // body's element bound (the condensed stiffness is below the
+        // uncondensed one, the masses are the whole body's), and, by Weyl's
+        // inequality, the tensor-mass part's element bound plus a Gershgorin
+        // bound of the condensed stiffness over the precomputed part's share
+        // of mass alone. Both survive cuts (elements only leave; the shared
+        // vertices never weigh less than that share), and the second lets
+        // the step grow when the stiff elements are in the precomputed part.
+        let whole = element_bound(&model);
+        let split = element_bound(&tm.model).omega_max_rad_s.powi(2)
+            + static_part.condensed_lambda(&shared_mass);
+        let stable = if split < whole.omega_max_rad_s.powi(2) {
+            StableStep::from_lambda(split, whole.method)
+        } else {
+            whole
+        };
         let substeps = if dt_s <= stable.dt_max_s || config.policy == DtPolicy::Unchecked {
             1
         } else if config.policy == DtPolicy::Substep {

@@ -198,6 +198,21 @@ impl StaticPart {
         self.sources.len()
     }
 
+    /// A proven bound on the largest eigenvalue of M^-1/2 S M^-1/2 for the
+    /// shared vertices' masses `mass_kg` (Gershgorin on the scaled rows).
+    pub fn condensed_lambda(&self, mass_kg: &[Real]) -> Real {
+        let m = self.schur_dim();
+        (0..m)
+            .map(|r| {
+                let row = &self.schur[r * m..(r + 1) * m];
+                row.iter()
+                    .enumerate()
+                    .map(|(c, s)| s.abs() / (mass_kg[r / 3] * mass_kg[c / 3]).sqrt())
+                    .sum::<Real>()
+            })
+            .fold(0.0, Real::max)
+    }
+
     /// Whether local vertex `v` is a force source (free surface vertex).
     pub fn is_source(&self, v: usize) -> bool {
         self.source_of[v] != NONE

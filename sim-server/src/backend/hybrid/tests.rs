@@ -210,3 +210,67 @@ fn a_split_without_both_parts_is_refused() {
         .to_string();
     assert!(err.contains("exceeds the stable step"), "{err}");
 }
+
+/// With the stiff elements in the precomputed part, the hybrid's step is not
+/// bounded by them the way the whole body's is: larger, and still stable
+/// for many steps just under it.
+#[test]
+fn stiff_precomputed_elements_do_not_limit_the_step() {
+    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let soft = Material::isotropic(5000.0, 0.45, 1000.0, 40.0).unwrap();
+    let stiff = Material::isotropic(500_000.0, 0.45, 1000.0, 40.0).unwrap();
+    let mut mats = TetMaterials::uniform(soft, mesh.tet_count());
+    let id = mats.add(stiff).unwrap();
+    let centroid = |t: TetId| {
+        let p = mesh.tet_points(t);
+        (p[0] + p[1] + p[2] + p[3]) / 4.0
+    };
+    for t in (0..mesh.tet_count()).map(TetId::from) {
+        if centroid(t).x < 0.02 {
+            mats.assign(t, id).unwrap();
+        }
+    }
+    let m = ElasticModel::new(mesh.clone(), mats).unwrap();
+    let fixed = vertices(&m, |p| p.x < 1e-9);
+    let cuttable = select(&m, |c| c.x > 0.02);
+    let whole = element_bound(&m).dt_max_s;
+    let probe = Hybrid::new(
+        m.clone(),
+        &fixed,
+        &cuttable,
+        HybridConfig::new(whole),
+        |_, _| {},
+    )
+    .unwrap();
+    let own = probe.stable_step().dt_max_s;
+    // The shared vertices still touch the stiff elements (their condensed
+    // stiffness over the precomputed share of mass), so the gain is modest.
+    assert!(
+        own > 1.2 * whole,
+        "hybrid step {own} s vs whole body {whole} s"
+    );
+    let mut sim = Hybrid::new(
+        m,
+        &fixed,
+        &cuttable,
+        HybridConfig::new(0.95 * own),
+        |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(sim.substeps(), 1);
+    let end = vertices(sim.model(), |p| p.x > SIZE[0] - 1e-9);
+    for v in &end {
+        sim.set_external_force(*v, Vec3::new(0.0, 0.0, -0.001));
+    }
+    for _ in 0..20_000 {
+        sim.step();
+    }
+    let worst = sim
+        .displacements()
+        .iter()
+        .map(|u| Vec3::from_array(*u).length())
+        .fold(0.0, Real::max);
+    assert!(worst.is_finite() && worst < 0.01, "{worst} m");
+}
