@@ -65,6 +65,7 @@ pub(super) unsafe fn run_part<S: Storage>(
     // row's highest column), chosen by A/B runs at 1M tetrahedra.
     let ahead = edges.as_ptr().wrapping_add(96);
     for i in start..end {
+        inp.prefetch_ahead(i);
         let ui = &u[i];
         let wi = load3(ui);
         let (bi0, bi1, bi2) = (

@@ -309,6 +309,18 @@ pub struct StepInputs<'a> {
 }
 
 impl StepInputs<'_> {
+    /// Hints the cache to fetch the imposed displacement of the vertex a few
+    /// rows on when it has one: held vertices are scattered through the
+    /// numbering, so each read of `target` would otherwise miss (14% of the
+    /// step on the 1M-tetrahedron box, per `perf annotate`).
+    #[inline(always)]
+    pub fn prefetch_ahead(&self, i: usize) {
+        const AHEAD: usize = 16;
+        if self.kind.get(i + AHEAD) == Some(&kind::PRESCRIBED) {
+            prefetch_at(self.target, i + AHEAD);
+        }
+    }
+
     /// Finishes vertex `i`: `ku` is its final (K U)_i, `next` holds U_i(t-1)
     /// on entry and U_i(t+1) on exit.
     #[inline(always)]
@@ -356,8 +368,14 @@ pub struct Part<'a> {
 #[inline(always)]
 fn prefetch<T>(slice: &[T], at: usize) {
     const AHEAD: usize = 32;
+    prefetch_at(slice, at + AHEAD);
+}
+
+/// Hints the cache to fetch `slice[at]` (nothing past the end).
+#[inline(always)]
+fn prefetch_at<T>(slice: &[T], at: usize) {
     #[cfg(target_arch = "x86_64")]
-    if let Some(x) = slice.get(at + AHEAD) {
+    if let Some(x) = slice.get(at) {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
         // SAFETY: SSE is part of the x86_64 baseline, and a prefetch only
         // hints the cache: it never faults or changes memory.
@@ -420,6 +438,7 @@ impl<S: Storage> Kernel<S> {
         let u = inp.u;
         let tile = |v: V3| [v[0], v[1], v[2], v[0], v[1], v[2], v[0], v[1], v[2]];
         for i in start..end {
+            inp.prefetch_ahead(i);
             let ui = u[i];
             let ti = [
                 ui[0], ui[0], ui[0], ui[1], ui[1], ui[1], ui[2], ui[2], ui[2],
