@@ -244,3 +244,61 @@ backend = "hybrid"
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("unknown backend \"hybird\""), "{err}");
 }
+
+#[test]
+fn static_backends_refuse_a_force_their_responses_cannot_carry() {
+    let dir = scratch_dir("interior-load");
+    let scene = dir.join("interior.toml");
+    std::fs::write(
+        &scene,
+        r#"[mesh]
+generate = { shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.01 }
+
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 5.0
+
+[[fixed]]
+select = { box_m = [[-1, -1, -1], [0.0001, 1, 1]] }
+
+# The centre of the block: an interior vertex.
+[[load]]
+select = { sphere_m = [0.02, 0.01, 0.01, 0.001] }
+force_n = [0.0, 0.0, -0.01]
+
+[hybrid]
+select = { box_m = [[0.03, -1, -1], [1, 1, 1]] }
+"#,
+    )
+    .unwrap();
+    for backend in ["precomputed", "hybrid"] {
+        let out = Command::new(binary("sim-server"))
+            .args(["run", "--headless", "--steps", "1", "--backend", backend])
+            .arg("--scene")
+            .arg(&scene)
+            .env("XDG_CACHE_HOME", dir.join("cache"))
+            .output()
+            .expect("run sim-server");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{backend}: {err}");
+        assert!(
+            err.contains(backend) && err.contains("surface") && err.contains("vertex"),
+            "{backend}: {err}"
+        );
+    }
+    // The explicit backend takes it.
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--headless", "--quiet", "--steps", "1", "--session"])
+        .arg(format!("interior{}", std::process::id()))
+        .arg("--scene")
+        .arg(&scene)
+        .output()
+        .expect("run sim-server");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

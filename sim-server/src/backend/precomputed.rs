@@ -125,6 +125,12 @@ impl Precomputed {
         })
     }
 
+    /// Whether a force on `v` is represented: the responses cover forces
+    /// on free surface vertices only.
+    pub fn can_load(&self, v: VertexId) -> bool {
+        self.slot.get(v.idx()).is_some_and(|&s| s != NONE)
+    }
+
     /// Free surface vertices (the precomputed sources).
     pub fn surface_len(&self) -> usize {
         self.surface.len()

@@ -65,9 +65,21 @@ pub fn run_scene(
                 .collect();
             let dt = real_time_step(&scene);
             let cache = cache_dir();
+            let loads = scene.loads_n.clone();
+            // A force on a held vertex goes to the support in every backend.
+            let mut held = fixed.clone();
+            held.sort_unstable();
             let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
                 Precomputed::new(model, &fixed, dt_s, cache.as_deref(), progress_line())
             })?;
+            if let Some(v) = interior_load(&loads, |v| {
+                prepared.sim.can_load(v) || held.binary_search(&v).is_ok()
+            }) {
+                anyhow::bail!(
+                    "the precomputed backend applies forces to surface vertices only (its responses are to surface forces); the scene loads interior vertex {}: use tensor-mass or implicit",
+                    v.0
+                );
+            }
             if prepared.sim.from_cache {
                 eprintln!("precomputed responses read from the cache");
             }
@@ -78,6 +90,14 @@ pub fn run_scene(
                 anyhow::bail!("{HYBRID_NEEDS_SPLIT}");
             };
             let prescribed = scene.prescribed.clone();
+            let loads = scene.loads_n.clone();
+            let mut held: Vec<_> = scene
+                .fixed
+                .iter()
+                .chain(scene.prescribed.iter().map(|(v, _)| v))
+                .copied()
+                .collect();
+            held.sort_unstable();
             let fixed = scene.fixed.clone();
             let cache_dir = cache_dir();
             let prepared = prepare_with(scene, None, |model, settings, dt_s| {
@@ -88,11 +108,20 @@ pub fn run_scene(
                 };
                 Hybrid::new(model, &fixed, &tets, config, progress_line())
             })?;
-            if let Some((v, _)) = prescribed.iter().find(|(v, d)| {
-                *d != sim_server::math::Vec3::ZERO && !prepared.sim.can_prescribe(*v)
-            }) {
+            if let Some((v, _)) = prescribed
+                .iter()
+                .find(|(v, d)| *d != sim_server::math::Vec3::ZERO && !prepared.sim.can_load(*v))
+            {
                 anyhow::bail!(
                     "the hybrid backend cannot impose the scene's displacement on vertex {}: it is inside the precomputed part (outside [hybrid] select), whose responses cover surface forces only",
+                    v.0
+                );
+            }
+            if let Some(v) = interior_load(&loads, |v| {
+                prepared.sim.can_load(v) || held.binary_search(&v).is_ok()
+            }) {
+                anyhow::bail!(
+                    "the hybrid backend's precomputed part takes forces on its surface only; the scene loads vertex {} inside it (outside [hybrid] select): move the load or the region, or use tensor-mass",
                     v.0
                 );
             }
@@ -114,6 +143,19 @@ pub fn run_scene(
         _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop)?,
         _ => run(prepare::<f64>(scene, None)?, cfg, stop)?,
     })
+}
+
+/// The first vertex with a non-zero force that `accepts` refuses.
+fn interior_load(
+    loads_n: &[sim_server::math::Vec3],
+    accepts: impl Fn(sim_server::ids::VertexId) -> bool,
+) -> Option<sim_server::ids::VertexId> {
+    loads_n
+        .iter()
+        .enumerate()
+        .map(|(v, f)| (sim_server::ids::VertexId::from(v), f))
+        .find(|(v, f)| **f != sim_server::math::Vec3::ZERO && !accepts(*v))
+        .map(|(v, _)| v)
 }
 
 /// A progress line on stderr for a precomputation, every 10%.

@@ -294,10 +294,10 @@ impl Hybrid {
         self.part.source_count()
     }
 
-    /// Whether a displacement can be imposed on `v`: any vertex of the
-    /// tensor-mass part, or a free surface vertex of the precomputed part
-    /// (its responses cover forces on the surface only).
-    pub fn can_prescribe(&self, v: VertexId) -> bool {
+    /// Whether a displacement can be imposed on, or a force applied to,
+    /// `v`: any vertex of the tensor-mass part, or a free surface vertex of
+    /// the precomputed part (its responses cover forces on the surface only).
+    pub fn can_load(&self, v: VertexId) -> bool {
         match (self.tm_of.get(v.idx()), self.part_of.get(v.idx())) {
             (Some(&l), _) if l != NONE => true,
             (_, Some(&p)) if p != NONE => self.part.is_source(p as usize),
