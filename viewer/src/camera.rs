@@ -2,7 +2,7 @@
 //! named view. The `top` view is orthographic with a documented mapping, so
 //! tests can predict where each vertex lands in a snapshot.
 
-use three_d::{Camera, Vec3, Viewport, degrees, vec3};
+use three_d::{Camera, InnerSpace, PhysicalPoint, Vec3, Viewport, degrees, vec3};
 
 /// A named view of the scene.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -79,9 +79,63 @@ pub fn framing(viewport: Viewport, lo: Vec3, hi: Vec3, view: View) -> Camera {
     }
 }
 
+/// Where the mouse puts a driven tool's tip: on the line of sight under
+/// `pixel`, where it crosses the plane through `centre` facing the camera,
+/// then `depth_m` further along the view (W/S in the window). None when the
+/// line of sight runs along that plane.
+pub fn tip_under_cursor(
+    camera: &Camera,
+    pixel: PhysicalPoint,
+    centre: Vec3,
+    depth_m: f32,
+) -> Option<Vec3> {
+    let origin = camera.position_at_pixel(pixel);
+    let dir = camera.view_direction_at_pixel(pixel);
+    let n = camera.view_direction();
+    let denom = dir.dot(n);
+    (denom.abs() > 1e-6).then(|| {
+        let t = (centre - origin).dot(n) / denom;
+        origin + dir * t + n * depth_m
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The tip under the image centre is the organ's centre; under any
+    /// pixel it lies on the centre's plane and projects back to that pixel;
+    /// pushing in moves it along the view, away from the eye.
+    #[test]
+    fn the_tip_follows_the_cursor_on_the_plane_through_the_centre() {
+        let vp = Viewport::new_at_origo(640, 480);
+        let (lo, hi) = (vec3(-0.1, -0.05, -0.04), vec3(0.1, 0.05, 0.04));
+        let centre = (lo + hi) * 0.5;
+        for view in [View::Iso, View::Top, View::Front] {
+            let cam = framing(vp, lo, hi, view);
+            let mid = PhysicalPoint { x: 320.0, y: 240.0 };
+            let tip = tip_under_cursor(&cam, mid, centre, 0.0).unwrap();
+            assert!((tip - centre).magnitude() < 1e-4, "{view:?}: {tip:?}");
+            let n = cam.view_direction();
+            for (x, y) in [(100.0, 80.0), (600.0, 400.0), (320.0, 30.0)] {
+                let p = PhysicalPoint { x, y };
+                let tip = tip_under_cursor(&cam, p, centre, 0.0).unwrap();
+                assert!(
+                    (tip - centre).dot(n).abs() < 1e-4,
+                    "{view:?}: off the plane"
+                );
+                let back = cam.pixel_at_position(tip);
+                assert!(
+                    (back.x - x).abs() < 0.5 && (back.y - y).abs() < 0.5,
+                    "{view:?}: ({x}, {y}) -> {back:?}"
+                );
+                let pushed = tip_under_cursor(&cam, p, centre, 0.01).unwrap();
+                let eye = cam.position();
+                assert!((pushed - tip).dot(n) > 0.0099);
+                assert!((pushed - eye).magnitude() > (tip - eye).magnitude());
+            }
+        }
+    }
 
     #[test]
     fn bounds_skip_non_finite_points_and_top_height_fits_both_axes() {

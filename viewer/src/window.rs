@@ -8,7 +8,7 @@
 //! push it in and pull it out, the left button closes the jaws (grip), X
 //! held closes them fully (cut), 1-4 pick the tool.
 
-use crate::camera::{View, bounds, framing};
+use crate::camera::{View, bounds, framing, tip_under_cursor};
 use crate::drive::{Driver, JAW_CUT, JAW_GRIP};
 use crate::overlay;
 use crate::render::{Layers, Renderer};
@@ -114,17 +114,10 @@ pub fn run(mut session: Session, info: SceneInfo, mut layers: Layers) -> anyhow:
         }
         // The tip: under the cursor, on the plane through the organ's centre
         // facing the camera, moved along the view by W/S.
-        if let Some(p) = cursor {
-            let origin = camera.position_at_pixel(p);
-            let dir = camera.view_direction_at_pixel(p);
-            let centre = (lo + hi) * 0.5;
-            let n = camera.view_direction();
-            let denom = dir.dot(n);
-            if denom.abs() > 1e-6 {
-                let t = (centre - origin).dot(n) / denom;
-                let tip = origin + dir * t + n * depth_m;
-                driver.tip_m = [tip.x as f64, tip.y as f64, tip.z as f64];
-            }
+        if let Some(tip) =
+            cursor.and_then(|p| tip_under_cursor(&camera, p, (lo + hi) * 0.5, depth_m))
+        {
+            driver.tip_m = [tip.x as f64, tip.y as f64, tip.z as f64];
         }
         driver.jaw_opening = if cutting {
             JAW_CUT
