@@ -221,6 +221,7 @@ fn precomputed_responses_are_cached_and_cutting_is_refused() {
         sim.step();
     }
     assert_eq!(first.displacements(), second.displacements());
+    assert!(!second.can_cut(TetId(0)) && !second.dynamic());
     let err = second.remove_tet(TetId(0)).unwrap_err().to_string();
     assert!(
         err.contains("precomputed") && err.contains("cannot cut"),

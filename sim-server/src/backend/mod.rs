@@ -64,4 +64,24 @@ pub trait Backend {
     fn set_external_force(&mut self, v: VertexId, f_n: Vec3);
     /// Removes a tetrahedron (cutting); a backend that cannot cut refuses.
     fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError>;
+    /// Whether [`Backend::remove_tet`] would accept tetrahedron `t` (the
+    /// cutting capability: everywhere for tensor-mass and implicit, nowhere
+    /// for precomputed, in its tensor-mass part for the hybrid).
+    fn can_cut(&self, t: TetId) -> bool {
+        let _ = t;
+        true
+    }
+    /// Whether the backend integrates inertia (false: quasi-static).
+    fn dynamic(&self) -> bool {
+        true
+    }
+}
+
+/// How much of the body `sim` can cut: (cuttable, live) tetrahedra.
+pub fn cuttable<B: Backend + ?Sized>(sim: &B) -> (usize, usize) {
+    let topo = sim.model().topology();
+    (0..sim.model().mesh().tet_count())
+        .map(TetId::from)
+        .filter(|t| topo.is_alive(*t))
+        .fold((0, 0), |(c, n), t| (c + sim.can_cut(t) as usize, n + 1))
 }

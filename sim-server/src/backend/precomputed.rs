@@ -233,6 +233,12 @@ impl Backend for Precomputed {
     fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
         self.fext[v.idx()] = f_n;
     }
+    fn can_cut(&self, _t: TetId) -> bool {
+        false
+    }
+    fn dynamic(&self) -> bool {
+        false
+    }
     fn remove_tet(&mut self, _t: TetId) -> Result<CutChange, CutError> {
         Err(CutError::Unsupported {
             backend: "precomputed",

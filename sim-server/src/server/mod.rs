@@ -234,6 +234,23 @@ pub fn run<B: Backend>(
         tools: mut contacts,
         dt_s,
     } = prepared;
+    if cfg.status {
+        let (cut, live) = crate::backend::cuttable(&sim);
+        eprintln!(
+            "sim-server: {} backend, {}, cuts {}",
+            sim.name(),
+            if sim.dynamic() {
+                "dynamic"
+            } else {
+                "quasi-static"
+            },
+            match cut {
+                0 => "nowhere".to_string(),
+                c if c == live => "anywhere".to_string(),
+                c => format!("in {c} of {live} tetrahedra"),
+            }
+        );
+    }
     let node = services::node("sim-server")?;
     let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
     let force_service = services::force_service(&node, &cfg.session)?;

@@ -394,6 +394,9 @@ impl Backend for Hybrid {
             },
         }
     }
+    fn can_cut(&self, t: TetId) -> bool {
+        self.tm_tet.get(t.idx()).is_some_and(|&l| l != NONE)
+    }
     fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         if t.idx() >= self.tm_tet.len() {
             return Err(CutError::NoSuchTet(t.0));

@@ -160,7 +160,12 @@ fn after_cuts_the_hybrid_settles_on_the_static_solution_of_the_cut_body() {
     }
     // The tensor-mass tetrahedra at the top of the x = 1.5 cm interface.
     let mut cut = m.clone();
+    assert_eq!(
+        crate::backend::cuttable(&sim),
+        (cuttable.len(), m.mesh().tet_count())
+    );
     for t in select(&m, |c| c.x > 0.015 && c.x < 0.02 && c.z > 0.015) {
+        assert!(sim.can_cut(t));
         sim.remove_tet(t).unwrap();
         cut.remove_tet(t).unwrap();
     }
@@ -173,6 +178,7 @@ fn after_cuts_the_hybrid_settles_on_the_static_solution_of_the_cut_body() {
         orphaned > 0,
         "a shared vertex lost its last tensor-mass tetrahedron"
     );
+    assert!(!sim.can_cut(TetId(0)));
     let err = sim.remove_tet(TetId(0)).unwrap_err().to_string();
     assert!(err.contains("precomputed part"), "{err}");
     settle(&mut sim, 3.0);
