@@ -179,3 +179,28 @@ fn hapbench_tradeoff_sweeps_every_backend_and_errors_fall_with_the_mesh() {
     assert!(sweep.iter().any(|p| p["pareto"] == true));
     assert!(dir.join("tradeoff.svg").exists());
 }
+
+/// `--scene`: every backend on the embedded liver (it declares a hybrid
+/// split), against the scene's own static solution, which the static
+/// precomputed backend reproduces exactly.
+#[test]
+fn hapbench_tradeoff_runs_every_backend_on_a_scene() {
+    let dir = scratch_dir("hapbench-trade-scene");
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../sim-server/scenes/liver.toml"
+    );
+    let v = hapbench(
+        &["tradeoff", "--scene", scene, "--duration-s", "0.3"],
+        &dir.join("t.json"),
+        None,
+    );
+    for b in ["tensor-mass", "implicit", "precomputed", "hybrid"] {
+        let s = &v["backends"][b];
+        assert!(s["steps_per_s"].as_f64().unwrap() > 0.0, "{b}: {v}");
+        let e = s["error"].as_f64().unwrap();
+        assert!(e.is_finite() && e < 0.5, "{b}: {v}");
+    }
+    assert!(v["backends"]["precomputed"]["error"].as_f64().unwrap() < 1e-6);
+    assert_eq!(v["sweep"][0]["tets"], 7950);
+}

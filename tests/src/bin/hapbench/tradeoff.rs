@@ -5,6 +5,13 @@
 //! with the converged reference: the static solution on a mesh twice finer
 //! than the finest in the sweep. Speed is steps per second of wall time and
 //! the real-time factor (simulated seconds per second).
+//!
+//! With `--scene FILE` the same backends run on that scene instead (its
+//! mesh, materials, fixed vertices and forces, or, without forces, 0.01 N
+//! down on its highest free surface vertex), over time steps only, and the
+//! reference is the scene's own static solution: the error left is the
+//! backends' (time stepping, solver, coupling), not the mesh's. The hybrid
+//! runs when the scene has a `[hybrid]` section.
 
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -30,6 +37,23 @@ pub struct Args {
     /// Write the Pareto plot here.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Sweep the backends on this scene instead of the generated block.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+}
+
+/// One body to sweep: its model, supports and forces, the probe vertex and
+/// the reference displacement there.
+struct Case {
+    model: ElasticModel,
+    fixed: Vec<VertexId>,
+    loads: Vec<(VertexId, Vec3)>,
+    probe: VertexId,
+    u_ref: Vec3,
+    /// Cell size (m): the generator's, or the scene mesh's median edge.
+    cell_m: f64,
+    /// The hybrid's tensor-mass part, if it is to run.
+    hybrid_tets: Option<Vec<TetId>>,
 }
 
 const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
@@ -98,7 +122,7 @@ fn boundary(m: &ElasticModel) -> (Vec<VertexId>, Vec<(VertexId, Vec3)>) {
 
 const PROBE: [f64; 3] = [SIZE[0], SIZE[1] / 2.0, SIZE[2] / 2.0];
 
-fn reference() -> Result<f64> {
+fn reference() -> Result<Vec3> {
     let m = model(CELLS_M[CELLS_M.len() - 1] / 2.0)?;
     let (wall, loads) = boundary(&m);
     let mut bc = Dirichlet::new(m.vertex_count());
@@ -111,34 +135,167 @@ fn reference() -> Result<f64> {
     }
     let sol = solve_static(&m, &bc, &f)?;
     let probe = find(&m, PROBE).context("the probe is not a vertex of the reference mesh")?;
-    Ok(sol.displacement_m[probe.idx()].z)
+    Ok(sol.displacement_m[probe.idx()])
 }
 
-fn measure<B: Backend>(mut sim: B, cell_m: f64, duration_s: f64, u_ref: f64) -> Result<Point> {
-    let (wall, loads) = boundary(sim.model());
-    for v in wall {
-        sim.fix(v);
+/// The block on `cell_m` cells against the fine reference `u_ref`; the
+/// hybrid makes the loaded quarter (x > 3 cm) its tensor-mass part.
+fn block_case(cell_m: f64, u_ref: Vec3) -> Result<Case> {
+    let m = model(cell_m)?;
+    let (fixed, loads) = boundary(&m);
+    let probe = find(&m, PROBE).context("the probe is not a vertex")?;
+    let hybrid_tets = (0..m.mesh().tet_count())
+        .map(TetId::from)
+        .filter(|t| {
+            let p = m.mesh().tet_points(*t);
+            (p[0].x + p[1].x + p[2].x + p[3].x) / 4.0 > 0.75 * SIZE[0]
+        })
+        .collect();
+    Ok(Case {
+        model: m,
+        fixed,
+        loads,
+        probe,
+        u_ref,
+        cell_m,
+        hybrid_tets: Some(hybrid_tets),
+    })
+}
+
+/// A scene file as a case: its reference is its own static solution.
+fn scene_case(path: &std::path::Path) -> Result<Case> {
+    use sim_server::scene::{SceneSource, build_scene};
+    let src = SceneSource::read(path)?;
+    let scene = build_scene(&src, &src.parse()?)
+        .with_context(|| format!("cannot build scene {}", src.name))?;
+    anyhow::ensure!(
+        scene.prescribed.iter().all(|(_, d)| *d == Vec3::ZERO),
+        "{}: tradeoff compares backends under forces; this scene imposes displacements",
+        src.name
+    );
+    let m = scene.model;
+    let mut fixed = scene.fixed.clone();
+    fixed.extend(scene.prescribed.iter().map(|(v, _)| *v));
+    fixed.sort_unstable();
+    fixed.dedup();
+    anyhow::ensure!(
+        !fixed.is_empty(),
+        "{}: the scene fixes no vertex, so it has no static solution to compare with",
+        src.name
+    );
+    let mut loads: Vec<(VertexId, Vec3)> = scene
+        .loads_n
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| **f != Vec3::ZERO)
+        .map(|(v, f)| (VertexId::from(v), *f))
+        .collect();
+    if loads.is_empty() {
+        let rest = m.mesh().positions_m();
+        let top = m
+            .topology()
+            .surface_triangles(m.mesh())
+            .flatten()
+            .filter(|v| fixed.binary_search(v).is_err())
+            .max_by(|a, b| rest[a.idx()].z.total_cmp(&rest[b.idx()].z))
+            .context("the scene has no free surface vertex")?;
+        loads.push((top, Vec3::new(0.0, 0.0, -0.01)));
     }
-    for (v, l) in loads {
-        sim.set_external_force(v, l);
+    let mut bc = Dirichlet::new(m.vertex_count());
+    for v in &fixed {
+        bc.fix(*v);
     }
-    let probe = find(sim.model(), PROBE).context("the probe is not a vertex")?;
+    let mut f = vec![Vec3::ZERO; m.vertex_count()];
+    for (v, l) in &loads {
+        f[v.idx()] = *l;
+    }
+    let reference = solve_static(&m, &bc, &f)?.displacement_m;
+    let probe = (0..reference.len())
+        .max_by(|a, b| reference[*a].length().total_cmp(&reference[*b].length()))
+        .map(VertexId::from)
+        .context("empty mesh")?;
+    let rest = m.mesh().positions_m();
+    let mut edges: Vec<f64> = m
+        .topology()
+        .edges()
+        .iter()
+        .map(|[a, b]| rest[a.idx()].distance(rest[b.idx()]))
+        .collect();
+    edges.sort_by(f64::total_cmp);
+    Ok(Case {
+        cell_m: edges.get(edges.len() / 2).copied().unwrap_or(0.0),
+        u_ref: reference[probe.idx()],
+        probe,
+        fixed,
+        loads,
+        hybrid_tets: scene.hybrid_tets,
+        model: m,
+    })
+}
+
+/// Every backend on `case`: tensor-mass just under its bound in f64 and f32
+/// storage, implicit at 1, 4 and 16 ms, precomputed (static: its steps/s
+/// exclude the one-off precomputation), hybrid when the case has a split.
+fn sweep(case: &Case, duration_s: f64, tick: &mut dyn FnMut()) -> Result<Vec<Point>> {
+    let m = &case.model;
+    let bound = element_bound(m).dt_max_s;
+    let mut points = Vec::new();
+    let cfg = ExplicitConfig::new(0.9 * bound);
+    points.push(measure(
+        Explicit::<f64>::new(m.clone(), cfg)?,
+        case,
+        duration_s,
+    )?);
+    tick();
+    let mut p = measure(Explicit::<f32>::new(m.clone(), cfg)?, case, duration_s)?;
+    p.backend = "tensor-mass-f32".into();
+    points.push(p);
+    tick();
+    for dt in [0.001, 0.004, 0.016] {
+        let sim = Implicit::new(m.clone(), ImplicitConfig::new(dt))?;
+        points.push(measure(sim, case, duration_s)?);
+        tick();
+    }
+    let sim = Precomputed::new(m.clone(), &case.fixed, 0.001, None, |_, _| {})?;
+    points.push(measure(sim, case, duration_s)?);
+    tick();
+    if let Some(tets) = &case.hybrid_tets {
+        let sim = Hybrid::new(
+            m.clone(),
+            &case.fixed,
+            tets,
+            HybridConfig::new(0.9 * bound),
+            |_, _| {},
+        )?;
+        points.push(measure(sim, case, duration_s)?);
+        tick();
+    }
+    Ok(points)
+}
+
+fn measure<B: Backend>(mut sim: B, case: &Case, duration_s: f64) -> Result<Point> {
+    for v in &case.fixed {
+        sim.fix(*v);
+    }
+    for (v, l) in &case.loads {
+        sim.set_external_force(*v, *l);
+    }
     let steps = (duration_s / sim.dt_s()).ceil() as usize;
     let start = Instant::now();
     for _ in 0..steps {
         sim.step();
     }
     let wall_s = start.elapsed().as_secs_f64().max(1e-9);
-    let u = sim.displacement(probe).z;
+    let u = sim.displacement(case.probe);
     anyhow::ensure!(u.is_finite(), "{} diverged", sim.name());
     Ok(Point {
         backend: sim.name().to_string(),
-        cell_m,
+        cell_m: case.cell_m,
         tets: sim.model().mesh().tet_count(),
         dt_s: sim.dt_s(),
         steps_per_s: steps as f64 / wall_s,
         realtime_factor: steps as f64 * sim.dt_s() / wall_s,
-        error: ((u - u_ref) / u_ref).abs(),
+        error: (u - case.u_ref).length() / case.u_ref.length(),
         pareto: false,
     })
 }
@@ -149,63 +306,27 @@ pub fn run(args: &Args) -> Result<()> {
         args.duration_s.is_finite() && args.duration_s >= 0.2,
         "--duration-s must be at least 0.2"
     );
-    let progress = bar(1 + CELLS_M.len() * 7, "tradeoff");
-    let u_ref = reference()?;
-    progress.inc(1);
-    let mut points = Vec::new();
-    for cell in CELLS_M {
-        let m = model(cell)?;
-        let bound = element_bound(&m).dt_max_s;
-        // tensor-mass: the explicit step just under its bound (a larger step
-        // only sub-steps), in f64 and in f32 storage.
-        let cfg = ExplicitConfig::new(0.9 * bound);
-        points.push(measure(
-            Explicit::<f64>::new(m.clone(), cfg)?,
-            cell,
-            args.duration_s,
-            u_ref,
-        )?);
-        progress.inc(1);
-        let mut p = measure(
-            Explicit::<f32>::new(m.clone(), cfg)?,
-            cell,
-            args.duration_s,
-            u_ref,
-        )?;
-        p.backend = "tensor-mass-f32".into();
-        points.push(p);
-        progress.inc(1);
-        for dt in [0.001, 0.004, 0.016] {
-            let sim = Implicit::new(m.clone(), ImplicitConfig::new(dt))?;
-            points.push(measure(sim, cell, args.duration_s, u_ref)?);
-            progress.inc(1);
+    let (mut points, u_ref) = match &args.scene {
+        Some(path) => {
+            let case = scene_case(path)?;
+            let progress = bar(7, "tradeoff");
+            let points = sweep(&case, args.duration_s, &mut || progress.inc(1))?;
+            progress.finish_and_clear();
+            (points, case.u_ref)
         }
-        // precomputed: static, so one step settles it; its steps/s exclude
-        // the one-off precomputation.
-        let (wall, _) = boundary(&m);
-        let sim = Precomputed::new(m.clone(), &wall, 0.001, None, |_, _| {})?;
-        points.push(measure(sim, cell, args.duration_s, u_ref)?);
-        progress.inc(1);
-        // hybrid: the loaded quarter (x > 3 cm) tensor-mass, the rest
-        // precomputed; explicit steps just under the whole body's bound.
-        let tets: Vec<TetId> = (0..m.mesh().tet_count())
-            .map(TetId::from)
-            .filter(|t| {
-                let p = m.mesh().tet_points(*t);
-                (p[0].x + p[1].x + p[2].x + p[3].x) / 4.0 > 0.75 * SIZE[0]
-            })
-            .collect();
-        let sim = Hybrid::new(
-            m.clone(),
-            &wall,
-            &tets,
-            HybridConfig::new(0.9 * bound),
-            |_, _| {},
-        )?;
-        points.push(measure(sim, cell, args.duration_s, u_ref)?);
-        progress.inc(1);
-    }
-    progress.finish_and_clear();
+        None => {
+            let progress = bar(1 + CELLS_M.len() * 7, "tradeoff");
+            let u_ref = reference()?;
+            progress.inc(1);
+            let mut points = Vec::new();
+            for cell in CELLS_M {
+                let case = block_case(cell, u_ref)?;
+                points.extend(sweep(&case, args.duration_s, &mut || progress.inc(1))?);
+            }
+            progress.finish_and_clear();
+            (points, u_ref)
+        }
+    };
     for i in 0..points.len() {
         let (e, r) = (points[i].error, points[i].realtime_factor);
         points[i].pareto = !points.iter().any(|q| {
@@ -215,10 +336,13 @@ pub fn run(args: &Args) -> Result<()> {
                 && (q.realtime_factor > r || q.error < e * 0.999)
         });
     }
-    // The summary: each backend's default (5 mm cells; implicit at 1 ms).
+    // The summary: each backend's default (5 mm cells for the block;
+    // implicit at 1 ms).
     let mut backends = BTreeMap::new();
     for p in &points {
-        if p.cell_m == 0.005 && (p.backend != "implicit" || p.dt_s == 0.001) {
+        if (args.scene.is_some() || p.cell_m == 0.005)
+            && (p.backend != "implicit" || p.dt_s == 0.001)
+        {
             backends.insert(
                 p.backend.clone(),
                 Summary {
@@ -247,7 +371,8 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(path) = &args.json {
         let v = serde_json::json!({
-            "reference_deflection_m": u_ref,
+            "reference_deflection_m": u_ref.z,
+            "reference_displacement_m": u_ref.to_array(),
             "backends": backends,
             "sweep": points,
         });
@@ -261,6 +386,7 @@ pub fn run(args: &Args) -> Result<()> {
             ("tensor-mass-f32", "#17becf"),
             ("implicit", "#d62728"),
             ("precomputed", "#2ca02c"),
+            ("hybrid", "#9467bd"),
         ];
         let mut series = Vec::new();
         for (name, color) in colors {
@@ -285,7 +411,11 @@ pub fn run(args: &Args) -> Result<()> {
             .map(|p| p.realtime_factor.log10())
             .fold(f64::NEG_INFINITY, f64::max);
         let svg = chart(
-            "Speed against accuracy (block under an end load)",
+            if args.scene.is_some() {
+                "Speed against accuracy (scene, against its static solution)"
+            } else {
+                "Speed against accuracy (block under an end load)"
+            },
             "log10 real-time factor",
             "log10 relative error",
             x0 - 0.1,
