@@ -280,3 +280,41 @@ fn stiff_precomputed_elements_do_not_limit_the_step() {
         .fold(0.0, Real::max);
     assert!(worst.is_finite() && worst < 0.01, "{worst} m");
 }
+
+/// Parts that meet only at fixed vertices exchange nothing: each settles
+/// on its own static solution (and nothing indexes an empty interface).
+#[test]
+fn parts_joined_only_at_fixed_vertices_settle_independently() {
+    let m = body(false);
+    let plane = |p: Vec3| p.x < 1e-9 || (p.x - 0.03).abs() < 1e-9;
+    let fixed = vertices(&m, plane);
+    let end = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
+    let loads: Vec<(VertexId, Vec3)> = end
+        .iter()
+        .map(|v| (*v, Vec3::new(0.0, 0.0, -0.002 / end.len() as Real)))
+        .collect();
+    let cuttable = select(&m, |c| c.x > 0.03);
+    let dt = 0.9 * element_bound(&m).dt_max_s;
+    let mut sim = Hybrid::new(
+        m.clone(),
+        &fixed,
+        &cuttable,
+        HybridConfig::new(dt),
+        |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(sim.shared_len(), 0);
+    for (v, l) in &loads {
+        sim.set_external_force(*v, *l);
+    }
+    settle(&mut sim, 2.0);
+    let reference = static_reference(&m, &fixed, &loads);
+    let scale = reference.iter().map(|u| u.length()).fold(0.0, Real::max);
+    let err = (0..reference.len())
+        .map(|v| (sim.displacement(VertexId::from(v)) - reference[v]).length())
+        .fold(0.0, Real::max);
+    assert!(
+        scale > 0.0 && err < 1e-3 * scale,
+        "{err} m off (scale {scale} m)"
+    );
+}
