@@ -196,8 +196,11 @@ pub fn prepare_with<B: Backend, E>(
         settings,
         ..
     } = scene;
-    let stable = crate::tensor_mass::element_bound(&model);
-    let dt_s = dt_s.or(settings.dt_s).unwrap_or(0.9 * stable.dt_max_s);
+    // The bound only when no step is given: backends that need it compute
+    // their own, and it costs an eigenproblem per tetrahedron.
+    let dt_s = dt_s
+        .or(settings.dt_s)
+        .unwrap_or_else(|| 0.9 * crate::tensor_mass::element_bound(&model).dt_max_s);
     let mut sim = make(model, &settings, dt_s)?;
     for v in &fixed {
         sim.fix(*v);

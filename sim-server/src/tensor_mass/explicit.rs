@@ -78,6 +78,28 @@ pub enum ExplicitError {
     },
 }
 
+/// Sub-steps per step of `dt_s` under `stable` as `policy` says: 1 when
+/// under the bound (or unchecked), the fewest equal sub-steps under it, or
+/// the refusal naming the bound.
+pub fn substeps_for(
+    dt_s: Real,
+    stable: &StableStep,
+    policy: DtPolicy,
+) -> Result<usize, ExplicitError> {
+    if dt_s <= stable.dt_max_s || policy == DtPolicy::Unchecked {
+        Ok(1)
+    } else if policy == DtPolicy::Substep {
+        Ok((dt_s / stable.dt_max_s).ceil() as usize)
+    } else {
+        Err(ExplicitError::Unstable {
+            dt_s,
+            dt_max_s: stable.dt_max_s,
+            omega_max_rad_s: stable.omega_max_rad_s,
+            method: stable.method.name(),
+        })
+    }
+}
+
 /// Row ranges and the rows each part must finish after the join.
 #[derive(Clone, Debug)]
 struct PartPlan {
@@ -131,18 +153,7 @@ impl<S: Storage> Explicit<S> {
             BoundMethod::Element => element_bound(&model),
             BoundMethod::PowerIteration => power_iteration(&model, 1e-6, 2000).step,
         };
-        let substeps = if dt_s <= stable.dt_max_s || config.policy == DtPolicy::Unchecked {
-            1
-        } else if config.policy == DtPolicy::Substep {
-            (dt_s / stable.dt_max_s).ceil() as usize
-        } else {
-            return Err(ExplicitError::Unstable {
-                dt_s,
-                dt_max_s: stable.dt_max_s,
-                omega_max_rad_s: stable.omega_max_rad_s,
-                method: stable.method.name(),
-            });
-        };
+        let substeps = substeps_for(dt_s, &stable, config.policy)?;
         let threads = config.threads.max(1);
         let pool = if threads > 1 {
             Some(

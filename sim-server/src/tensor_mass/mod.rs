@@ -12,7 +12,7 @@ pub mod stability;
 pub mod submodel;
 
 pub use element::{Geometry, TetElastic};
-pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError};
+pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError, substeps_for};
 pub use kernel::{Kernel, Storage};
 pub use model::{CutChange, CutError, ElasticModel, ModelError};
 pub use stability::{BoundMethod, PowerEstimate, StableStep, element_bound, power_iteration};

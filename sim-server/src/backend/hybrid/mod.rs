@@ -47,7 +47,7 @@ use crate::membrane::MembraneModel;
 use crate::static_solve::StaticError;
 use crate::tensor_mass::{
     CutChange, CutError, DtPolicy, ElasticModel, Explicit, ExplicitConfig, ExplicitError,
-    StableStep, SubmodelError, element_bound,
+    StableStep, SubmodelError, element_bound, substeps_for,
 };
 use static_part::StaticPart;
 use std::path::PathBuf;
@@ -220,21 +220,9 @@ impl Hybrid {
         } else {
             whole
         };
-        let substeps = if dt_s <= stable.dt_max_s || config.policy == DtPolicy::Unchecked {
-            1
-        } else if config.policy == DtPolicy::Substep {
-            (dt_s / stable.dt_max_s).ceil() as usize
-        } else {
-            return Err(ExplicitError::Unstable {
-                dt_s,
-                dt_max_s: stable.dt_max_s,
-                omega_max_rad_s: stable.omega_max_rad_s,
-                method: stable.method.name(),
-            }
-            .into());
-        };
-        // The bound is the whole body's, checked above: the part's own
-        // (lighter shared vertices) must not sub-step it again.
+        let substeps = substeps_for(dt_s, &stable, config.policy)?;
+        // The bound is the coupled system's, checked above: the part's own
+        // (without the condensed stiffness) must not sub-step it again.
         let mut explicit = Explicit::new(
             tm.model,
             ExplicitConfig {

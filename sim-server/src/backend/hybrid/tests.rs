@@ -121,16 +121,52 @@ fn settle(sim: &mut Hybrid, seconds: Real) {
     }
 }
 
-fn static_reference(m: &ElasticModel, fixed: &[VertexId], loads: &[(VertexId, Vec3)]) -> Vec<Vec3> {
-    let mut bc = Dirichlet::new(m.vertex_count());
+/// `total_n` straight down, shared by the vertices of the free end.
+fn end_loads(m: &ElasticModel, total_n: Real) -> Vec<(VertexId, Vec3)> {
+    let end = vertices(m, |p| p.x > SIZE[0] - 1e-9);
+    let share = Vec3::new(0.0, 0.0, -total_n / end.len() as Real);
+    end.into_iter().map(|v| (v, share)).collect()
+}
+
+/// The hybrid just under the whole body's element bound, loaded.
+fn loaded_hybrid(
+    m: &ElasticModel,
+    fixed: &[VertexId],
+    cuttable: &[TetId],
+    loads: &[(VertexId, Vec3)],
+) -> Hybrid {
+    let dt = 0.9 * element_bound(m).dt_max_s;
+    let mut sim =
+        Hybrid::new(m.clone(), fixed, cuttable, HybridConfig::new(dt), |_, _| {}).unwrap();
+    for (v, l) in loads {
+        sim.set_external_force(*v, *l);
+    }
+    sim
+}
+
+/// (largest distance of `sim` from the static solution of `body` over its
+/// live vertices, largest static displacement) (m).
+fn static_error(
+    sim: &Hybrid,
+    body: &ElasticModel,
+    fixed: &[VertexId],
+    loads: &[(VertexId, Vec3)],
+) -> (Real, Real) {
+    let mut bc = Dirichlet::new(body.vertex_count());
     for v in fixed {
         bc.fix(*v);
     }
-    let mut f = vec![Vec3::ZERO; m.vertex_count()];
+    let mut f = vec![Vec3::ZERO; body.vertex_count()];
     for (v, l) in loads {
         f[v.idx()] = *l;
     }
-    solve_static(m, &bc, &f).unwrap().displacement_m
+    let reference = solve_static(body, &bc, &f).unwrap().displacement_m;
+    let scale = reference.iter().map(|u| u.length()).fold(0.0, Real::max);
+    let err = (0..reference.len())
+        .filter(|&v| body.topology().vertex_tet_count(VertexId::from(v)) > 0)
+        .map(|v| (sim.displacement(VertexId::from(v)) - reference[v]).length())
+        .fold(0.0, Real::max);
+    (err, scale)
 }
 
 /// Cut the tensor-mass part until a shared vertex has no tensor-mass
@@ -140,24 +176,9 @@ fn static_reference(m: &ElasticModel, fixed: &[VertexId], loads: &[(VertexId, Ve
 fn after_cuts_the_hybrid_settles_on_the_static_solution_of_the_cut_body() {
     let m = body(true);
     let fixed = vertices(&m, |p| p.x < 1e-9);
-    let end = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
-    let loads: Vec<(VertexId, Vec3)> = end
-        .iter()
-        .map(|v| (*v, Vec3::new(0.0, 0.0, -0.01 / end.len() as Real)))
-        .collect();
+    let loads = end_loads(&m, 0.01);
     let cuttable = select(&m, |c| c.x > 0.015 && c.x < 0.03);
-    let dt = 0.9 * element_bound(&m).dt_max_s;
-    let mut sim = Hybrid::new(
-        m.clone(),
-        &fixed,
-        &cuttable,
-        HybridConfig::new(dt),
-        |_, _| {},
-    )
-    .unwrap();
-    for (v, l) in &loads {
-        sim.set_external_force(*v, *l);
-    }
+    let mut sim = loaded_hybrid(&m, &fixed, &cuttable, &loads);
     // The tensor-mass tetrahedra at the top of the x = 1.5 cm interface.
     let mut cut = m.clone();
     assert_eq!(
@@ -182,12 +203,7 @@ fn after_cuts_the_hybrid_settles_on_the_static_solution_of_the_cut_body() {
     let err = sim.remove_tet(TetId(0)).unwrap_err().to_string();
     assert!(err.contains("precomputed part"), "{err}");
     settle(&mut sim, 3.0);
-    let reference = static_reference(&cut, &fixed, &loads);
-    let scale = reference.iter().map(|u| u.length()).fold(0.0, Real::max);
-    let err = (0..reference.len())
-        .filter(|&v| cut.topology().vertex_tet_count(VertexId::from(v)) > 0)
-        .map(|v| (sim.displacement(VertexId::from(v)) - reference[v]).length())
-        .fold(0.0, Real::max);
+    let (err, scale) = static_error(&sim, &cut, &fixed, &loads);
     assert!(err < 1e-3 * scale, "{err} m off (scale {scale} m)");
     // The body the tools see is the cut one.
     assert_eq!(
@@ -288,31 +304,11 @@ fn parts_joined_only_at_fixed_vertices_settle_independently() {
     let m = body(false);
     let plane = |p: Vec3| p.x < 1e-9 || (p.x - 0.03).abs() < 1e-9;
     let fixed = vertices(&m, plane);
-    let end = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
-    let loads: Vec<(VertexId, Vec3)> = end
-        .iter()
-        .map(|v| (*v, Vec3::new(0.0, 0.0, -0.002 / end.len() as Real)))
-        .collect();
-    let cuttable = select(&m, |c| c.x > 0.03);
-    let dt = 0.9 * element_bound(&m).dt_max_s;
-    let mut sim = Hybrid::new(
-        m.clone(),
-        &fixed,
-        &cuttable,
-        HybridConfig::new(dt),
-        |_, _| {},
-    )
-    .unwrap();
+    let loads = end_loads(&m, 0.002);
+    let mut sim = loaded_hybrid(&m, &fixed, &select(&m, |c| c.x > 0.03), &loads);
     assert_eq!(sim.shared_len(), 0);
-    for (v, l) in &loads {
-        sim.set_external_force(*v, *l);
-    }
     settle(&mut sim, 2.0);
-    let reference = static_reference(&m, &fixed, &loads);
-    let scale = reference.iter().map(|u| u.length()).fold(0.0, Real::max);
-    let err = (0..reference.len())
-        .map(|v| (sim.displacement(VertexId::from(v)) - reference[v]).length())
-        .fold(0.0, Real::max);
+    let (err, scale) = static_error(&sim, &m, &fixed, &loads);
     assert!(
         scale > 0.0 && err < 1e-3 * scale,
         "{err} m off (scale {scale} m)"
