@@ -4,6 +4,18 @@
 use std::process::Command;
 use system_tests::{binary, read_json, scratch_dir};
 
+/// A 4 x 2 x 2 cm block on 1 cm cells, its material, and a blank line: the
+/// start of the small scenes below (9 lines).
+const BLOCK: &str = r#"[mesh]
+generate = { shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.01 }
+
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 5.0
+
+"#;
 #[test]
 fn bench_writes_the_documented_json_keys() {
     let dir = scratch_dir("bench");
@@ -211,18 +223,7 @@ fn run_takes_every_backend_and_refuses_unknown_ones() {
     let scene = dir.join("unsplit.toml");
     std::fs::write(
         &scene,
-        r#"[mesh]
-generate = { shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.01 }
-
-[material]
-young_pa = 5000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 5.0
-
-[simulation]
-backend = "hybrid"
-"#,
+        format!("{BLOCK}[simulation]\nbackend = \"hybrid\"\n"),
     )
     .unwrap();
     let out = Command::new(binary("sim-server"))
@@ -251,26 +252,19 @@ fn static_backends_refuse_a_force_their_responses_cannot_carry() {
     let scene = dir.join("interior.toml");
     std::fs::write(
         &scene,
-        r#"[mesh]
-generate = { shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.01 }
-
-[material]
-young_pa = 5000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 5.0
-
-[[fixed]]
-select = { box_m = [[-1, -1, -1], [0.0001, 1, 1]] }
+        format!(
+            r#"{BLOCK}[[fixed]]
+select = {{ box_m = [[-1, -1, -1], [0.0001, 1, 1]] }}
 
 # The centre of the block: an interior vertex.
 [[load]]
-select = { sphere_m = [0.02, 0.01, 0.01, 0.001] }
+select = {{ sphere_m = [0.02, 0.01, 0.01, 0.001] }}
 force_n = [0.0, 0.0, -0.01]
 
 [hybrid]
-select = { box_m = [[0.03, -1, -1], [1, 1, 1]] }
-"#,
+select = {{ box_m = [[0.03, -1, -1], [1, 1, 1]] }}
+"#
+        ),
     )
     .unwrap();
     for backend in ["precomputed", "hybrid"] {
