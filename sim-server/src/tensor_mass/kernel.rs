@@ -13,6 +13,14 @@
 use super::model::{CutChange, ElasticModel};
 use crate::math::{Mat3, Real};
 
+/// A block as its three row windows, in f64x4 (see [`Storage::rows`]).
+#[cfg(target_arch = "x86_64")]
+pub type Windows = (
+    std::arch::x86_64::__m256d,
+    std::arch::x86_64::__m256d,
+    std::arch::x86_64::__m256d,
+);
+
 /// Storage precision of the kernel's tensors. State (displacements, forces)
 /// is always `f64`.
 pub trait Storage: Copy + Default + Send + Sync + std::fmt::Debug + 'static {
@@ -29,13 +37,7 @@ pub trait Storage: Copy + Default + Send + Sync + std::fmt::Debug + 'static {
     /// # Safety
     /// The CPU must support AVX2.
     #[cfg(target_arch = "x86_64")]
-    unsafe fn rows(
-        k: &Block<Self>,
-    ) -> (
-        std::arch::x86_64::__m256d,
-        std::arch::x86_64::__m256d,
-        std::arch::x86_64::__m256d,
-    );
+    unsafe fn rows(k: &Block<Self>) -> Windows;
 }
 
 impl Storage for f32 {
@@ -50,13 +52,7 @@ impl Storage for f32 {
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn rows(
-        k: &Block<Self>,
-    ) -> (
-        std::arch::x86_64::__m256d,
-        std::arch::x86_64::__m256d,
-        std::arch::x86_64::__m256d,
-    ) {
+    unsafe fn rows(k: &Block<Self>) -> Windows {
         use std::arch::x86_64::*;
         // SAFETY: entries 0..4 and 3..7 are inside the 9; the last window
         // reads 6..9 only (the mask skips the fourth lane, and a masked lane
@@ -84,13 +80,7 @@ impl Storage for f64 {
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn rows(
-        k: &Block<Self>,
-    ) -> (
-        std::arch::x86_64::__m256d,
-        std::arch::x86_64::__m256d,
-        std::arch::x86_64::__m256d,
-    ) {
+    unsafe fn rows(k: &Block<Self>) -> Windows {
         use std::arch::x86_64::*;
         // SAFETY: as for f32: every unmasked lane is one of the 9 entries.
         unsafe {

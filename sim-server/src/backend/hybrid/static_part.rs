@@ -32,6 +32,8 @@ const NONE: u32 = u32::MAX;
 pub(super) struct StaticPart {
     /// Vertices of the part.
     n: usize,
+    /// Shared degrees of freedom (3 per shared vertex): S is dofs x dofs.
+    dofs: usize,
     /// Source index of each vertex (NONE: interior, fixed or shared).
     source_of: Vec<u32>,
     /// Vertex of each source (free surface vertex, not shared).
@@ -163,6 +165,7 @@ impl StaticPart {
         }
         Ok(Self {
             n,
+            dofs: m,
             source_of,
             sources,
             c0: all,
@@ -201,7 +204,7 @@ impl StaticPart {
     /// A proven bound on the largest eigenvalue of M^-1/2 S M^-1/2 for the
     /// shared vertices' masses `mass_kg` (Gershgorin on the scaled rows).
     pub fn condensed_lambda(&self, mass_kg: &[Real]) -> Real {
-        let m = self.schur_dim();
+        let m = self.dofs;
         (0..m)
             .map(|r| {
                 let row = &self.schur[r * m..(r + 1) * m];
@@ -248,12 +251,8 @@ impl StaticPart {
 
     /// H at source s, all shared degrees of freedom.
     fn lift_at(&self, s: u32) -> &[Vec3] {
-        let m = self.schur_dim();
+        let m = self.dofs;
         &self.lift_at_sources[s as usize * m..(s as usize + 1) * m]
-    }
-
-    fn schur_dim(&self) -> usize {
-        (self.schur.len() as f64).sqrt().round() as usize
     }
 
     /// Rebuilds the held-source list and factorizes C0_TT (when holds
