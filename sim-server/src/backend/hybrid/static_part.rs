@@ -346,15 +346,18 @@ impl StaticPart {
             d.copy_from_slice(&u.to_array());
         }
         let w = self.stride;
-        // No free shared vertex (the parts meet only at fixed ones): the
-        // part moves under its own forces alone.
-        out.fill(Vec3::ZERO);
-        for (o, r) in out.iter_mut().zip(self.lift.chunks_exact(3 * w.max(1))) {
-            *o = Vec3::new(
-                dot(&r[..w], &self.u_flat),
-                dot(&r[w..2 * w], &self.u_flat),
-                dot(&r[2 * w..], &self.u_flat),
-            );
+        if w == 0 {
+            // No free shared vertex (the parts meet only at fixed ones): the
+            // part moves under its own forces alone.
+            out.fill(Vec3::ZERO);
+        } else {
+            for (o, r) in out.iter_mut().zip(self.lift.chunks_exact(3 * w)) {
+                *o = Vec3::new(
+                    dot(&r[..w], &self.u_flat),
+                    dot(&r[w..2 * w], &self.u_flat),
+                    dot(&r[2 * w..], &self.u_flat),
+                );
+            }
         }
         for &(s, f) in &self.applied {
             for a in 0..3 {
