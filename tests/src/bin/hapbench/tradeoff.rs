@@ -125,17 +125,26 @@ const PROBE: [f64; 3] = [SIZE[0], SIZE[1] / 2.0, SIZE[2] / 2.0];
 fn reference() -> Result<Vec3> {
     let m = model(CELLS_M[CELLS_M.len() - 1] / 2.0)?;
     let (wall, loads) = boundary(&m);
+    let u = static_displacements(&m, &wall, &loads)?;
+    let probe = find(&m, PROBE).context("the probe is not a vertex of the reference mesh")?;
+    Ok(u[probe.idx()])
+}
+
+/// The static solution of `m` with `fixed` held and `loads` applied (m).
+fn static_displacements(
+    m: &ElasticModel,
+    fixed: &[VertexId],
+    loads: &[(VertexId, Vec3)],
+) -> Result<Vec<Vec3>> {
     let mut bc = Dirichlet::new(m.vertex_count());
-    for v in wall {
-        bc.fix(v);
+    for v in fixed {
+        bc.fix(*v);
     }
     let mut f = vec![Vec3::ZERO; m.vertex_count()];
     for (v, l) in loads {
-        f[v.idx()] = l;
+        f[v.idx()] = *l;
     }
-    let sol = solve_static(&m, &bc, &f)?;
-    let probe = find(&m, PROBE).context("the probe is not a vertex of the reference mesh")?;
-    Ok(sol.displacement_m[probe.idx()])
+    Ok(solve_static(m, &bc, &f)?.displacement_m)
 }
 
 /// The block on `cell_m` cells against the fine reference `u_ref`; the
@@ -201,15 +210,7 @@ fn scene_case(path: &std::path::Path) -> Result<Case> {
             .context("the scene has no free surface vertex")?;
         loads.push((top, Vec3::new(0.0, 0.0, -0.01)));
     }
-    let mut bc = Dirichlet::new(m.vertex_count());
-    for v in &fixed {
-        bc.fix(*v);
-    }
-    let mut f = vec![Vec3::ZERO; m.vertex_count()];
-    for (v, l) in &loads {
-        f[v.idx()] = *l;
-    }
-    let reference = solve_static(&m, &bc, &f)?.displacement_m;
+    let reference = static_displacements(&m, &fixed, &loads)?;
     let probe = (0..reference.len())
         .max_by(|a, b| reference[*a].length().total_cmp(&reference[*b].length()))
         .map(VertexId::from)
