@@ -7,6 +7,7 @@ use crate::material::Material;
 use crate::material_map::TetMaterials;
 use crate::math::{Real, Vec3};
 use crate::mesh::{BoxSpec, CellSize, GenerateError, rcm_order};
+use crate::tensor_mass::huge_pages::collect_huge;
 use crate::tensor_mass::{
     BoundMethod, DtPolicy, ElasticModel, Explicit, ExplicitConfig, ExplicitError, ModelError,
     Storage,
@@ -116,7 +117,9 @@ pub fn probe_bandwidth(threads: usize, bytes: usize) -> Result<Real, BenchError>
         .build()
         .map_err(|e| BenchError::Config(format!("cannot start {threads} threads: {e}")))?;
     let words = (bytes / 8).max(1 << 16);
-    let buf: Vec<u64> = pool.install(|| (0..words).into_par_iter().map(|i| i as u64).collect());
+    // Backed like the step's own buffers (huge pages where offered), so the
+    // probe and the step are measured under the same paging.
+    let buf: Vec<u64> = collect_huge(words, 0..words as u64);
     let chunk = words.div_ceil(threads.max(1) * 8);
     let mut best: Real = 0.0;
     for _ in 0..5 {

@@ -3,6 +3,7 @@
 //! with fixed and prescribed vertices, external forces, cutting, and a time
 //! step checked against the stability bound (refused, or split into sub-steps).
 
+use super::huge_pages::huge_vec;
 use super::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind};
 use super::model::{CutChange, CutError, ElasticModel};
 use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
@@ -196,12 +197,12 @@ impl<S: Storage> Explicit<S> {
             .collect();
         let mut sim = Self {
             kernel,
-            u: vec![[0.0; 3]; n],
-            next: vec![[0.0; 3]; n],
-            coef: vec![[0.0; 3]; n],
+            u: huge_vec(n, [0.0; 3]),
+            next: huge_vec(n, [0.0; 3]),
+            coef: huge_vec(n, [0.0; 3]),
             constraint: vec![kind::FREE; n],
-            kind: vec![kind::FREE; n],
-            target: vec![[0.0; 3]; n],
+            kind: huge_vec(n, kind::FREE),
+            target: huge_vec(n, [0.0; 3]),
             fext: Vec::new(),
             fmem,
             capsule_vertices,
@@ -329,7 +330,7 @@ impl<S: Storage> Explicit<S> {
     /// force array; a simulation without loads never reads one.
     pub fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
         if self.fext.is_empty() {
-            self.fext = vec![[0.0; 3]; self.u.len()];
+            self.fext = huge_vec(self.u.len(), [0.0; 3]);
         }
         self.fext[v.idx()] = f_n.to_array();
     }

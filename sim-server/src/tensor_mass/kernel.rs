@@ -10,6 +10,7 @@
 //! reach past its range: those contributions go to a per-thread spill buffer
 //! and the few rows they reach are finished after the join. No atomics.
 
+use super::huge_pages::collect_huge;
 use super::model::{CutChange, ElasticModel};
 use crate::math::{Mat3, Real};
 
@@ -189,16 +190,18 @@ impl<S: Storage> Kernel<S> {
             row_start[i + 1] += row_start[i];
         }
         Self {
-            diag: model.vertex_tensors().iter().map(pack).collect(),
+            diag: collect_huge(n, model.vertex_tensors().iter().map(pack)),
             row_start,
-            edges: edges
-                .iter()
-                .zip(model.edge_tensors())
-                .map(|([_, b], k)| EdgeBlock {
-                    k: pack(k),
-                    col: b.0,
-                })
-                .collect(),
+            edges: collect_huge(
+                edges.len(),
+                edges
+                    .iter()
+                    .zip(model.edge_tensors())
+                    .map(|([_, b], k)| EdgeBlock {
+                        k: pack(k),
+                        col: b.0,
+                    }),
+            ),
             span: edges
                 .iter()
                 .map(|[a, b]| (b.0 - a.0) as usize)

@@ -6,6 +6,7 @@
 mod avx2;
 pub mod element;
 pub mod explicit;
+pub mod huge_pages;
 pub mod kernel;
 pub mod model;
 pub mod stability;
