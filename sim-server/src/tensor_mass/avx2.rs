@@ -57,13 +57,34 @@ pub(super) unsafe fn run_part<S: Storage>(
     let (diag, row_start, edges) = kernel.parts();
     let mask = ring.len() - 1;
     assert!(
-        ring.len().is_power_of_two() && ring.len() > kernel.span() && spill.len() <= kernel.span()
+        ring.len().is_power_of_two()
+            && ring.len() > kernel.span() + 1
+            && spill.len() <= kernel.span()
     );
     let ring = &mut ring[..=mask];
     let u = inp.u;
     // Prefetch distances (edges ahead in the block stream, vertices past a
     // row's highest column), chosen by A/B runs at 1M tetrahedra.
     let ahead = edges.as_ptr().wrapping_add(96);
+    macro_rules! finish {
+        ($p:expr, $m:expr) => {{
+            let (p, [m0, m1, m2]) = ($p, $m);
+            let (a, b, c) = (lanes(m0), lanes(m1), lanes(m2));
+            let slot = &mut ring[p & mask];
+            let acc = [
+                slot[0] + (a[0] + a[1] + a[2]),
+                slot[1] + (b[0] + b[1] + b[2]),
+                slot[2] + (c[0] + c[1] + c[2]),
+            ];
+            *slot = [0.0; 4];
+            if p < deferred_end {
+                deferred[p - start] = acc;
+            } else {
+                inp.integrate(p, acc, &mut next[p - start]);
+            }
+        }};
+    }
+    let mut pending: Option<(usize, [__m256d; 3])> = None;
     for i in start..end {
         inp.prefetch_ahead(i);
         let ui = &u[i];
@@ -108,19 +129,19 @@ pub(super) unsafe fn run_part<S: Storage>(
                 _mm256_storeu_pd(slot.as_mut_ptr(), _mm256_add_pd(cur, kt));
             }
         }
-        let (a, b, c) = (lanes(m0), lanes(m1), lanes(m2));
-        let slot = &mut ring[i & mask];
-        let acc = [
-            slot[0] + (a[0] + a[1] + a[2]),
-            slot[1] + (b[0] + b[1] + b[2]),
-            slot[2] + (c[0] + c[1] + c[2]),
-        ];
-        *slot = [0.0; 4];
-        if i < deferred_end {
-            deferred[i - start] = acc;
-        } else {
-            inp.integrate(i, acc, &mut next[i - start]);
+        // Row i is finished after row i + 1's edges: its reduction and
+        // integration wait on the chain of adds through its edges, and
+        // issued here they would hold the reorder window while the next
+        // row's independent loads queue behind them. Row i + 1 scatters only
+        // to columns above i + 1, and the ring is longer than span + 1, so
+        // slot i is final and not aliased.
+        if let Some((p, m)) = pending {
+            finish!(p, m);
         }
+        pending = Some((i, [m0, m1, m2]));
+    }
+    if let Some((p, m)) = pending {
+        finish!(p, m);
     }
     for (r, sp) in spill.iter_mut().enumerate() {
         let slot = &mut ring[(end + r) & mask];

@@ -344,7 +344,7 @@ pub struct Part<'a> {
     /// finished after the join.
     pub deferred_end: usize,
     /// K U accumulators of the rows in flight, indexed by row modulo its
-    /// length (a power of two above the kernel's span): they stay in cache
+    /// length (a power of two above the kernel's span + 1): they stay in cache
     /// instead of streaming an n-long array. All zero on entry and exit.
     pub ring: &'a mut [R4],
     /// Final K U of the deferred rows (`start..deferred_end`), without the
@@ -379,9 +379,9 @@ fn prefetch_at<T>(slice: &[T], at: usize) {
 }
 
 impl<S: Storage> Kernel<S> {
-    /// The ring length the step needs: a power of two above the span.
+    /// The ring length the step needs: a power of two above span + 1 (the AVX2 pass finishes a row one row late).
     pub fn ring_len(&self) -> usize {
-        (self.span + 1).next_power_of_two()
+        (self.span + 2).next_power_of_two()
     }
 
     /// The fused pass over one part's rows.
