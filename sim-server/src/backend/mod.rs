@@ -22,6 +22,7 @@
 
 mod cache;
 mod explicit;
+mod holds;
 mod hybrid;
 mod implicit;
 mod precomputed;

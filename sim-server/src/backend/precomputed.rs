@@ -6,7 +6,8 @@
 //! - external forces: u = sum over loaded vertices of T_.s F_s;
 //! - imposed surface displacements (tool contact): the forces F_c on the d
 //!   constrained vertices solve the small 3d x 3d system T_cc F_c =
-//!   d_c - u_c, then u += sum_c T_.c F_c.
+//!   d_c - u_c (factorised when a hold begins or ends, [`super::holds`]),
+//!   then u += sum_c T_.c F_c.
 //!
 //! It is static (no inertia, no damping), so it is the fastest and the
 //! least dynamic backend. Cutting is refused: the responses assume the mesh
@@ -15,11 +16,11 @@
 
 use super::Backend;
 use super::cache::{key, read_cache, write_cache};
+use super::holds::Holds;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::static_solve::{Dirichlet, Factorized, StaticError};
 use crate::tensor_mass::{CutChange, CutError, ElasticModel};
-use nalgebra::{DMatrix, DVector};
 use std::path::{Path, PathBuf};
 
 const NONE: u32 = u32::MAX;
@@ -45,7 +46,9 @@ pub struct Precomputed {
     u: Vec<[Real; 3]>,
     held: Vec<Option<Vec3>>,
     fext: Vec<Vec3>,
-    constrained: Vec<(u32, Vec3)>,
+    holds: Holds,
+    /// Holding forces of this step: (surface index, force).
+    applied: Vec<(u32, Vec3)>,
     work: Vec<Vec3>,
     /// Whether the last load came from the disk cache.
     pub from_cache: bool,
@@ -119,7 +122,8 @@ impl Precomputed {
             u: vec![[0.0; 3]; n],
             held: vec![None; n],
             fext: vec![Vec3::ZERO; n],
-            constrained: Vec::new(),
+            holds: Holds::new(),
+            applied: Vec::new(),
             work: Vec::new(),
             from_cache,
         })
@@ -137,10 +141,14 @@ impl Precomputed {
     }
 
     fn response(&self, s: u32, a: usize) -> &[Vec3] {
-        let n = self.u.len();
-        let at = (3 * s as usize + a) * n;
-        &self.responses[at..at + n]
+        response(&self.responses, self.u.len(), s, a)
     }
+}
+
+/// The response of all `n` vertices to a unit force along `a` on surface vertex `s`.
+fn response(responses: &[Vec3], n: usize, s: u32, a: usize) -> &[Vec3] {
+    let at = (3 * s as usize + a) * n;
+    &responses[at..at + n]
 }
 
 impl Backend for Precomputed {
@@ -172,40 +180,29 @@ impl Backend for Precomputed {
                 }
             }
         }
-        self.constrained.clear();
-        for (v, h) in self.held.iter().enumerate() {
-            if let (Some(d), s) = (h, self.slot[v])
-                && s != NONE
-            {
-                self.constrained.push((s, *d));
-            }
+        let (surface, responses) = (&self.surface, &self.responses);
+        if self.holds.is_dirty() {
+            let slot = &self.slot;
+            let held = (self.held.iter().enumerate())
+                .filter(|(v, h)| h.is_some() && slot[*v] != NONE)
+                .map(|(v, _)| slot[v]);
+            self.holds.refresh(held, |i, j, b| {
+                response(responses, n, j, b)[surface[i as usize].idx()]
+            });
         }
-        let c = self.constrained.len();
-        if c > 0 {
-            let mut t = DMatrix::<Real>::zeros(3 * c, 3 * c);
-            let mut rhs = DVector::<Real>::zeros(3 * c);
-            for (i, &(si, di)) in self.constrained.iter().enumerate() {
-                let vi = self.surface[si as usize].idx();
-                for a in 0..3 {
-                    rhs[3 * i + a] = di[a] - u[vi][a];
-                }
-                for (j, &(sj, _)) in self.constrained.iter().enumerate() {
-                    for b in 0..3 {
-                        let r = self.response(sj, b)[vi];
-                        for a in 0..3 {
-                            t[(3 * i + a, 3 * j + b)] = r[a];
-                        }
-                    }
-                }
-            }
-            if let Some(forces) = t.lu().solve(&rhs) {
-                for (j, &(sj, _)) in self.constrained.iter().enumerate() {
-                    for b in 0..3 {
-                        let fb = forces[3 * j + b];
-                        for (o, r) in u.iter_mut().zip(self.response(sj, b)) {
-                            *o += fb * *r;
-                        }
-                    }
+        self.applied.clear();
+        let (held, applied) = (&self.held, &mut self.applied);
+        self.holds.solve(
+            |s| {
+                let v = surface[s as usize].idx();
+                held[v].unwrap_or(Vec3::ZERO) - u[v]
+            },
+            |s, f| applied.push((s, f)),
+        );
+        for &(s, f) in &self.applied {
+            for b in 0..3 {
+                for (o, r) in u.iter_mut().zip(response(responses, n, s, b)) {
+                    *o += f[b] * *r;
                 }
             }
         }
@@ -225,9 +222,15 @@ impl Backend for Precomputed {
         &self.u
     }
     fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        if self.held[v.idx()].is_none() && self.can_load(v) {
+            self.holds.changed();
+        }
         self.held[v.idx()] = Some(d_m);
     }
     fn release(&mut self, v: VertexId) {
+        if self.held[v.idx()].is_some() && self.can_load(v) {
+            self.holds.changed();
+        }
         self.held[v.idx()] = None;
     }
     fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {

@@ -19,11 +19,11 @@
 //! shared vertex) and cached on disk like the precomputed backend's.
 
 use super::super::cache::{key, read_cache, write_cache};
+use super::super::holds::Holds;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::static_solve::{Dirichlet, Factorized, StaticError};
 use crate::tensor_mass::ElasticModel;
-use nalgebra::{DMatrix, DVector, Dyn, LU};
 use std::path::Path;
 
 const NONE: u32 = u32::MAX;
@@ -62,11 +62,8 @@ pub(super) struct StaticPart {
     loaded: Vec<u32>,
     /// Imposed displacement per vertex (tool holds).
     held: Vec<Option<Vec3>>,
-    /// Held sources, and whether the list (and `lu`) must be rebuilt.
-    constrained: Vec<u32>,
-    constrained_dirty: bool,
-    lu: Option<LU<Real, Dyn, Dyn>>,
-    rhs: DVector<Real>,
+    /// Held sources and the factorisation of their mutual responses.
+    holds: Holds,
     /// Forces applied on the part this sub-step: (source, force).
     applied: Vec<(u32, Vec3)>,
     /// Whether the responses came from the disk cache.
@@ -187,10 +184,7 @@ impl StaticPart {
             fext: vec![Vec3::ZERO; ns],
             loaded: Vec::new(),
             held: vec![None; n],
-            constrained: Vec::new(),
-            constrained_dirty: false,
-            lu: None,
-            rhs: DVector::zeros(0),
+            holds: Holds::new(),
             applied: Vec::new(),
             from_cache,
         })
@@ -240,7 +234,7 @@ impl StaticPart {
         let was = self.held[v].is_some();
         self.held[v] = d_m;
         if was != d_m.is_some() && self.source_of[v] != NONE {
-            self.constrained_dirty = true;
+            self.holds.changed();
         }
     }
 
@@ -255,71 +249,49 @@ impl StaticPart {
         &self.lift_at_sources[s as usize * m..(s as usize + 1) * m]
     }
 
-    /// Rebuilds the held-source list and factorizes C0_TT (when holds
-    /// began or ended, not every step).
-    fn refresh_constrained(&mut self) {
-        self.constrained_dirty = false;
-        self.constrained.clear();
-        for (v, h) in self.held.iter().enumerate() {
-            if h.is_some() && self.source_of[v] != NONE {
-                self.constrained.push(self.source_of[v]);
-            }
-        }
-        let c = self.constrained.len();
-        self.rhs = DVector::zeros(3 * c);
-        self.lu = (c > 0).then(|| {
-            let mut t = DMatrix::<Real>::zeros(3 * c, 3 * c);
-            for (i, &si) in self.constrained.iter().enumerate() {
-                let vi = self.sources[si as usize] as usize;
-                for (j, &sj) in self.constrained.iter().enumerate() {
-                    for b in 0..3 {
-                        let r = self.c0(sj, b)[vi];
-                        for a in 0..3 {
-                            t[(3 * i + a, 3 * j + b)] = r[a];
-                        }
-                    }
-                }
-            }
-            t.lu()
-        });
-    }
-
     /// The forces on the part this sub-step (external loads plus the forces
     /// holding tool-held sources where `u_shared` puts the shared vertices),
     /// then the force the part exerts on each shared vertex, into `out`.
     pub fn shared_forces(&mut self, u_shared: &[Vec3], out: &mut [Vec3]) {
-        if self.constrained_dirty {
-            self.refresh_constrained();
+        let (n, dofs) = (self.n, self.dofs);
+        let (c0, sources) = (&self.c0, &self.sources);
+        let c0 = |s: u32, a: usize| {
+            let at = (3 * s as usize + a) * n;
+            &c0[at..at + n]
+        };
+        if self.holds.is_dirty() {
+            let source_of = &self.source_of;
+            let held = (self.held.iter().enumerate())
+                .filter(|(v, h)| h.is_some() && source_of[*v] != NONE)
+                .map(|(v, _)| source_of[v]);
+            self.holds
+                .refresh(held, |i, j, b| c0(j, b)[sources[i as usize] as usize]);
         }
         self.applied.clear();
         for &s in &self.loaded {
             self.applied.push((s, self.fext[s as usize]));
         }
-        if let Some(lu) = self.lu.take() {
-            for (k, &s) in self.constrained.iter().enumerate() {
-                let v = self.sources[s as usize] as usize;
+        let (loaded, fext, held, lift) =
+            (&self.loaded, &self.fext, &self.held, &self.lift_at_sources);
+        let applied = &mut self.applied;
+        self.holds.solve(
+            |s| {
+                let v = sources[s as usize] as usize;
                 let mut free = Vec3::ZERO;
-                for &(l, f) in &self.applied {
+                for &l in loaded {
+                    let f = fext[l as usize];
                     for a in 0..3 {
-                        free += f[a] * self.c0(l, a)[v];
+                        free += f[a] * c0(l, a)[v];
                     }
                 }
-                for (u, h) in u_shared.iter().zip(self.lift_at(s).chunks_exact(3)) {
+                let at = &lift[s as usize * dofs..(s as usize + 1) * dofs];
+                for (u, h) in u_shared.iter().zip(at.chunks_exact(3)) {
                     free += u.x * h[0] + u.y * h[1] + u.z * h[2];
                 }
-                let d = self.held[v].unwrap_or(Vec3::ZERO) - free;
-                for a in 0..3 {
-                    self.rhs[3 * k + a] = d[a];
-                }
-            }
-            if lu.solve_mut(&mut self.rhs) {
-                for (k, &s) in self.constrained.iter().enumerate() {
-                    let f = Vec3::new(self.rhs[3 * k], self.rhs[3 * k + 1], self.rhs[3 * k + 2]);
-                    self.applied.push((s, f));
-                }
-            }
-            self.lu = Some(lu);
-        }
+                held[v].unwrap_or(Vec3::ZERO) - free
+            },
+            |s, f| applied.push((s, f)),
+        );
         let m = 3 * u_shared.len();
         for (j, o) in out.iter_mut().enumerate() {
             for b in 0..3 {
