@@ -28,7 +28,7 @@ mod implicit;
 mod precomputed;
 
 pub use hybrid::{Hybrid, HybridConfig, HybridError};
-pub use implicit::{Implicit, ImplicitConfig, ImplicitError};
+pub use implicit::{Implicit, ImplicitConfig, ImplicitError, Preconditioner};
 pub use precomputed::{Precomputed, PrecomputedError};
 
 use crate::ids::{TetId, VertexId};

@@ -4,22 +4,31 @@
 //!
 //! (M + h C + h^2 K) v' = M v + h (f - K u),  u' = u + h v'
 //!
-//! solved for the new velocities v' by Jacobi-preconditioned conjugate
-//! gradients, warm-started from the previous velocities. Fixed and
-//! prescribed vertices are Dirichlet rows: their v' = (target - u) / h, and
-//! the solve runs on the free ones. Contact changes the constrained set
-//! every step, so a factorization would be rebuilt every step; the CG only
-//! needs products with K (one pass over the tensors per iteration) and the
-//! buffers are reused, so a step allocates nothing.
+//! solved for the new velocities v' by preconditioned conjugate gradients,
+//! warm-started from the previous velocities. Fixed and prescribed vertices
+//! are Dirichlet rows: their v' = (target - u) / h, and the solve runs on the
+//! free ones. The default preconditioner is a sparse Cholesky factor of A
+//! for the held set of the step it was built in ([`factor`]): exact while
+//! that set holds (one or two iterations, whatever the step or Poisson
+//! ratio), close when tools hold or release a few vertices or cuts change K
+//! (a few more iterations: each held or released vertex is a rank-3 change),
+//! and rebuilt once the iterations spent beyond one per step since it was
+//! built pass [`REFACTOR_BUDGET`], about what a factorisation costs.
+//! The Jacobi preconditioner (diagonal of A) needs no factor, for meshes
+//! too large to factorise, at hundreds of iterations at nu 0.45. The buffers
+//! are reused, so a step allocates nothing unless it refactorises.
 //!
 //! Cutting updates the same tensors as the explicit backend. A nonlinear
 //! membrane (eq 29) is not linear in u and is refused; the linear one is in K.
+
+mod factor;
 
 use super::Backend;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::membrane::MembraneModel;
 use crate::tensor_mass::{CutChange, CutError, ElasticModel};
+use factor::Factor;
 
 /// Solver settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,15 +39,35 @@ pub struct ImplicitConfig {
     pub tolerance: Real,
     /// CG iteration limit per step.
     pub max_iterations: usize,
+    /// How the CG is preconditioned.
+    pub preconditioner: Preconditioner,
 }
 
+/// The CG preconditioner of the implicit backend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preconditioner {
+    /// The diagonal of A: no set-up, many iterations on stiff or
+    /// nearly incompressible tissue.
+    Jacobi,
+    /// A sparse Cholesky factor of A (see the module doc); falls back to
+    /// Jacobi if it cannot be built.
+    Cholesky,
+}
+
+/// The Cholesky preconditioner is rebuilt once the CG iterations beyond one
+/// per step since it was built exceed this: one factorisation costs about
+/// 50 preconditioner solves on the meshes measured (README).
+pub const REFACTOR_BUDGET: usize = 50;
+
 impl ImplicitConfig {
-    /// Step `dt_s`, residual 1e-9, at most 1000 iterations.
+    /// Step `dt_s`, residual 1e-9, at most 1000 iterations, Cholesky
+    /// preconditioner.
     pub fn new(dt_s: Real) -> Self {
         Self {
             dt_s,
             tolerance: 1e-9,
             max_iterations: 1000,
+            preconditioner: Preconditioner::Cholesky,
         }
     }
 }
@@ -56,16 +85,14 @@ pub enum ImplicitError {
     NonlinearMembrane,
 }
 
-const FREE: u8 = 0;
-const HELD: u8 = 1;
-
 /// The backward-Euler backend.
 pub struct Implicit {
     model: ElasticModel,
     cfg: ImplicitConfig,
     u: Vec<[Real; 3]>,
     v: Vec<Vec3>,
-    kind: Vec<u8>,
+    /// Fixed, prescribed or orphaned (a Dirichlet row).
+    held: Vec<bool>,
     target: Vec<Vec3>,
     fext: Vec<Vec3>,
     // CG workspace, reused.
@@ -77,6 +104,11 @@ pub struct Implicit {
     p: Vec<Vec3>,
     ap: Vec<Vec3>,
     diag: Vec<Vec3>,
+    factor: Option<Factor>,
+    /// Build the Cholesky factor before the next step.
+    refactor: bool,
+    /// Iterations beyond one per step since the factor was built.
+    excess_iterations: usize,
     iterations: usize,
     residual: Real,
 }
@@ -100,7 +132,7 @@ impl Implicit {
             cfg,
             u: vec![[0.0; 3]; n],
             v: z.clone(),
-            kind: vec![FREE; n],
+            held: vec![false; n],
             target: z.clone(),
             fext: z.clone(),
             scratch: z.clone(),
@@ -111,6 +143,9 @@ impl Implicit {
             p: z.clone(),
             ap: z.clone(),
             diag: z,
+            factor: None,
+            refactor: cfg.preconditioner == Preconditioner::Cholesky,
+            excess_iterations: 0,
             iterations: 0,
             residual: 0.0,
         })
@@ -119,6 +154,28 @@ impl Implicit {
     /// CG iterations of the last step.
     pub fn iterations(&self) -> usize {
         self.iterations
+    }
+
+    /// The preconditioner in use: `"cholesky"`, or `"jacobi"` when asked
+    /// for or when no factor could be built.
+    pub fn preconditioner(&self) -> &'static str {
+        if self.factor.is_some() {
+            "cholesky"
+        } else {
+            "jacobi"
+        }
+    }
+
+    /// z = P r.
+    fn precondition(&mut self) {
+        match &mut self.factor {
+            Some(f) => f.apply(&self.r, &self.held, &self.diag, &mut self.z),
+            None => {
+                for ((z, r), d) in self.z.iter_mut().zip(&self.r).zip(&self.diag) {
+                    *z = *r / *d;
+                }
+            }
+        }
     }
 
     /// Relative residual reached by the last step.
@@ -155,7 +212,7 @@ impl Implicit {
         self.model.elastic_forces(x, &mut self.force);
         let (m, c) = (self.model.masses_kg(), self.model.damping_kg_s());
         for i in 0..x.len() {
-            out[i] = if self.kind[i] == HELD {
+            out[i] = if self.held[i] {
                 Vec3::ZERO
             } else {
                 (m[i] + h * c[i]) * x[i] - h * h * self.force[i]
@@ -182,6 +239,12 @@ impl Backend for Implicit {
     fn step(&mut self) {
         let h = self.cfg.dt_s;
         let n = self.u.len();
+        if self.refactor {
+            self.refactor = false;
+            self.excess_iterations = 0;
+            // A factor that cannot be built (memory) leaves the step on Jacobi.
+            self.factor = Factor::new(&self.model, h, &self.held).ok();
+        }
         let (m, c) = (self.model.masses_kg(), self.model.damping_kg_s());
         // b = M v + h (f - K u); held rows carry their known velocity.
         for (s, u) in self.scratch.iter_mut().zip(&self.u) {
@@ -192,7 +255,7 @@ impl Backend for Implicit {
         for i in 0..n {
             self.diag[i] = Vec3::splat(m[i] + h * c[i])
                 + h * h * Vec3::new(vk[i].x_axis.x, vk[i].y_axis.y, vk[i].z_axis.z);
-            if self.kind[i] == HELD {
+            if self.held[i] {
                 self.p[i] = (self.target[i] - self.scratch[i]) / h;
             } else {
                 self.b[i] = m[i] * self.v[i] + h * (self.fext[i] + self.force[i]);
@@ -205,17 +268,15 @@ impl Backend for Implicit {
         self.model.elastic_forces(&self.p, &mut self.force);
         for i in 0..n {
             self.v[i] = self.p[i];
-            self.r[i] = if self.kind[i] == HELD {
+            self.r[i] = if self.held[i] {
                 Vec3::ZERO
             } else {
                 self.b[i] - ((m[i] + h * c[i]) * self.p[i] - h * h * self.force[i])
             };
         }
         let norm_b = dot(&self.b, &self.b).sqrt().max(1e-300);
-        for i in 0..n {
-            self.z[i] = self.r[i] / self.diag[i];
-            self.p[i] = self.z[i];
-        }
+        self.precondition();
+        self.p.copy_from_slice(&self.z);
         let mut rz = dot(&self.r, &self.z);
         let mut iterations = 0;
         let mut residual = dot(&self.r, &self.r).sqrt() / norm_b;
@@ -230,21 +291,29 @@ impl Backend for Implicit {
             for i in 0..n {
                 self.v[i] += alpha * self.p[i];
                 self.r[i] -= alpha * self.ap[i];
-                self.z[i] = self.r[i] / self.diag[i];
             }
+            iterations += 1;
+            residual = dot(&self.r, &self.r).sqrt() / norm_b;
+            if residual <= self.cfg.tolerance {
+                // Converged: the next direction (a preconditioner solve) is not needed.
+                break;
+            }
+            self.precondition();
             let rz_new = dot(&self.r, &self.z);
             let beta = rz_new / rz;
             rz = rz_new;
             for i in 0..n {
                 self.p[i] = self.z[i] + beta * self.p[i];
             }
-            iterations += 1;
-            residual = dot(&self.r, &self.r).sqrt() / norm_b;
         }
         self.iterations = iterations;
         self.residual = residual;
+        if self.cfg.preconditioner == Preconditioner::Cholesky {
+            self.excess_iterations += iterations.saturating_sub(1);
+            self.refactor = self.excess_iterations > REFACTOR_BUDGET;
+        }
         for i in 0..n {
-            if self.kind[i] == HELD {
+            if self.held[i] {
                 self.u[i] = self.target[i].to_array();
             } else {
                 self.u[i] = (Vec3::from_array(self.u[i]) + h * self.v[i]).to_array();
@@ -259,11 +328,11 @@ impl Backend for Implicit {
         &self.u
     }
     fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
-        self.kind[v.idx()] = HELD;
+        self.held[v.idx()] = true;
         self.target[v.idx()] = d_m;
     }
     fn release(&mut self, v: VertexId) {
-        self.kind[v.idx()] = FREE;
+        self.held[v.idx()] = false;
     }
     fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
         self.fext[v.idx()] = f_n;
@@ -273,7 +342,7 @@ impl Backend for Implicit {
         for v in change.vertices {
             if self.model.topology().vertex_tet_count(v) == 0 {
                 // An orphan has no mass left: hold it where it is.
-                self.kind[v.idx()] = HELD;
+                self.held[v.idx()] = true;
                 self.target[v.idx()] = Vec3::from_array(self.u[v.idx()]);
                 self.v[v.idx()] = Vec3::ZERO;
             }
