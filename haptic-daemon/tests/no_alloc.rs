@@ -6,49 +6,7 @@
 
 use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
 use haptic_daemon::safety::{Safety, SafetyConfig, SafetyState, StopReason};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-struct Counting;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note() {
-    // `try_with`: the allocator may run while this thread's locals are
-    // being torn down; such allocations are outside any counted loop.
-    let _ = COUNTING.try_with(|on| {
-        if on.get() {
-            let _ = COUNT.try_with(|c| c.set(c.get() + 1));
-        }
-    });
-}
-
-// SAFETY: forwards to the system allocator; the bookkeeping touches only
-// const-initialised thread-locals, which never allocate.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use shared::alloc_count::{Counting, count};
 
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
@@ -82,45 +40,43 @@ fn ten_thousand_ticks_allocate_nothing() {
         let mut last_sample_t: Option<u64> = None;
         let mut max_out = 0.0f64;
 
-        COUNT.with(|c| c.set(0));
-        COUNTING.with(|c| c.set(true));
-        for k in 0..10_000u64 {
-            // A backward step of the clock now and then.
-            let now = if k % 1000 == 999 {
-                t0 + (k - 5) * MS
-            } else {
-                t0 + k * MS
-            };
-            // Samples every 3rd tick, except for a 100 ms gap (stale).
-            if k.is_multiple_of(3) && !(3000..3100).contains(&k) {
-                e.push(&sample(k, now));
-                last_sample_t = Some(now);
-            }
-            let x = k as f64 * 1e-3;
-            let position = [
-                0.0,
-                0.0,
-                if k.is_multiple_of(211) {
-                    f64::INFINITY
+        let ((), allocations) = count(|| {
+            for k in 0..10_000u64 {
+                // A backward step of the clock now and then.
+                let now = if k % 1000 == 999 {
+                    t0 + (k - 5) * MS
                 } else {
-                    0.05 - x.sin() * 0.012
-                },
-            ];
-            let mut requested = e.force(now, position);
-            if k.is_multiple_of(1234) {
-                requested[1] = f64::NAN;
+                    t0 + k * MS
+                };
+                // Samples every 3rd tick, except for a 100 ms gap (stale).
+                if k.is_multiple_of(3) && !(3000..3100).contains(&k) {
+                    e.push(&sample(k, now));
+                    last_sample_t = Some(now);
+                }
+                let x = k as f64 * 1e-3;
+                let position = [
+                    0.0,
+                    0.0,
+                    if k.is_multiple_of(211) {
+                        f64::INFINITY
+                    } else {
+                        0.05 - x.sin() * 0.012
+                    },
+                ];
+                let mut requested = e.force(now, position);
+                if k.is_multiple_of(1234) {
+                    requested[1] = f64::NAN;
+                }
+                let age = last_sample_t.map(|t| now.saturating_sub(t));
+                let alive = !(6000..6050).contains(&k);
+                if k == 9_900 {
+                    safety.shutdown(now);
+                }
+                let out = safety.filter(now, requested, age, alive);
+                max_out = max_out.max(out.iter().fold(0.0, |m, v| m.max(v.abs())));
+                std::hint::black_box(out);
             }
-            let age = last_sample_t.map(|t| now.saturating_sub(t));
-            let alive = !(6000..6050).contains(&k);
-            if k == 9_900 {
-                safety.shutdown(now);
-            }
-            let out = safety.filter(now, requested, age, alive);
-            max_out = max_out.max(out.iter().fold(0.0, |m, v| m.max(v.abs())));
-            std::hint::black_box(out);
-        }
-        COUNTING.with(|c| c.set(false));
-        let allocations = COUNT.with(Cell::get);
+        });
 
         assert_eq!(
             allocations,
@@ -135,17 +91,4 @@ fn ten_thousand_ticks_allocate_nothing() {
         );
         assert_eq!(safety.state(), SafetyState::Stopped(StopReason::Shutdown));
     }
-}
-
-#[test]
-fn the_counter_counts() {
-    COUNT.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
-    let v = std::hint::black_box(vec![1u8; 16]);
-    COUNTING.with(|c| c.set(false));
-    drop(v);
-    assert!(
-        COUNT.with(Cell::get) >= 1,
-        "the counting allocator must see a Vec"
-    );
 }

@@ -7,41 +7,10 @@ use haptic_daemon::daemon::{RtLoop, Shared};
 use haptic_daemon::device::{HandModel, Path, Simulated};
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::safety::SafetyConfig;
+use shared::alloc_count::{Counting, count};
 use shared::protocol::{CONTACT, ForceMsg, PROTOCOL_VERSION};
 use shared::{SessionName, services};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::sync::Arc;
-
-struct Counting;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<u64> = const { Cell::new(0) };
-}
-
-// SAFETY: forwards to the system allocator; the bookkeeping touches only
-// const-initialised thread-locals, which never allocate.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
@@ -96,11 +65,7 @@ fn ten_thousand_ticks_allocate_nothing() {
                 msg.tools[0].flags = CONTACT;
                 publisher.send_copy(msg).unwrap();
             }
-            COUNT.with(|c| c.set(0));
-            COUNTING.with(|c| c.set(true));
-            rt.tick(now, 0);
-            COUNTING.with(|c| c.set(false));
-            allocations += COUNT.with(Cell::get);
+            allocations += count(|| rt.tick(now, 0)).1;
             // Keep the telemetry queue from filling (the I/O thread's job).
             while shared.telemetry.pop().is_some() {}
         }

@@ -13,6 +13,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod alloc_count;
 mod clock;
 pub mod protocol;
 pub mod services;

@@ -1,0 +1,111 @@
+//! A backend step allocates nothing once it is running: a counting global
+//! allocator counts allocations on this thread over 200 steps of each
+//! backend, with loads and a tool hold that moves every step (the hold set
+//! is unchanged, so the implicit backend's Cholesky factor and the static
+//! backends' hold systems are reused, not rebuilt). The one exception is
+//! the multi-threaded tensor-mass step: handing the step to its rayon pool
+//! goes through rayon's job injector, a queue that allocates one block per
+//! 63 jobs; that is bounded here, not zero.
+
+use shared::alloc_count::{Counting, count};
+use sim_server::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
+use sim_server::prelude::*;
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
+
+fn model() -> ElasticModel {
+    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0).unwrap();
+    let materials = TetMaterials::uniform(tissue, mesh.tet_count());
+    ElasticModel::new(mesh, materials).unwrap()
+}
+
+#[test]
+fn two_hundred_steps_of_each_backend_allocate_nothing() {
+    let m = model();
+    let p = m.mesh().positions_m().to_vec();
+    let wall: Vec<VertexId> = (0..p.len())
+        .filter(|&v| p[v].x < 1e-9)
+        .map(VertexId::from)
+        .collect();
+    let end: Vec<VertexId> = (0..p.len())
+        .filter(|&v| p[v].x > SIZE[0] - 1e-9)
+        .map(VertexId::from)
+        .collect();
+    // A top-face vertex in the middle: on the precomputed part of the hybrid.
+    let held = VertexId::from(
+        (0..p.len())
+            .find(|&v| (p[v] - Vec3::new(0.015, 0.01, SIZE[2])).length() < 1e-9)
+            .unwrap(),
+    );
+    let bound = sim_server::tensor_mass::element_bound(&m).dt_max_s;
+    let cuttable: Vec<TetId> = (0..m.mesh().tet_count())
+        .map(TetId::from)
+        .filter(|t| m.mesh().tet_points(*t).iter().all(|q| q.x >= 0.02))
+        .collect();
+    let mut threaded = ExplicitConfig::new(0.9 * bound);
+    threaded.threads = 2;
+    // (backend, allocations allowed in 200 steps)
+    let sims: Vec<(Box<dyn Backend>, u64)> = vec![
+        (
+            Box::new(Explicit::<f32>::new(m.clone(), ExplicitConfig::new(0.9 * bound)).unwrap()),
+            0,
+        ),
+        (
+            Box::new(Explicit::<f64>::new(m.clone(), threaded).unwrap()),
+            200 / 63 + 1,
+        ),
+        (
+            Box::new(Implicit::new(m.clone(), ImplicitConfig::new(10.0 * bound)).unwrap()),
+            0,
+        ),
+        (
+            Box::new(Precomputed::new(m.clone(), &wall, 10.0 * bound, None, |_, _| {}).unwrap()),
+            0,
+        ),
+        (
+            Box::new(
+                Hybrid::new(
+                    m.clone(),
+                    &wall,
+                    &cuttable,
+                    HybridConfig::new(10.0 * bound),
+                    |_, _| {},
+                )
+                .unwrap(),
+            ),
+            0,
+        ),
+    ];
+    for (mut sim, allowed) in sims {
+        for &v in &wall {
+            sim.fix(v);
+        }
+        for &v in &end {
+            sim.set_external_force(v, Vec3::new(0.0, 0.0, -0.01 / end.len() as f64));
+        }
+        sim.prescribe(held, Vec3::new(0.0, 0.0, -1e-4));
+        // Warm-up: first-step set-up (factors, hold systems) may allocate.
+        for _ in 0..3 {
+            sim.step();
+        }
+        let ((), allocations) = count(|| {
+            for k in 0..200 {
+                // The hold moves (same set): the right side changes only.
+                sim.prescribe(held, Vec3::new(0.0, 0.0, -1e-4 * (1.0 + k as f64 * 1e-3)));
+                sim.step();
+            }
+        });
+        assert!(
+            allocations <= allowed,
+            "{}: {allocations} allocations in 200 steps (at most {allowed})",
+            sim.name()
+        );
+        assert!(sim.displacement(held).z < -1e-4);
+    }
+}
