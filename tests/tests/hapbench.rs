@@ -180,18 +180,14 @@ fn hapbench_tradeoff_sweeps_every_backend_and_errors_fall_with_the_mesh() {
     assert!(dir.join("tradeoff.svg").exists());
 }
 
-/// `--scene`: every backend on the embedded liver (it declares a hybrid
-/// split), against the scene's own static solution, which the static
-/// precomputed backend reproduces exactly.
+/// `--scene default`: every backend on the embedded liver (it declares a
+/// hybrid split), against the scene's own static solution, which the
+/// static precomputed backend reproduces exactly.
 #[test]
 fn hapbench_tradeoff_runs_every_backend_on_a_scene() {
     let dir = scratch_dir("hapbench-trade-scene");
-    let scene = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../sim-server/scenes/liver.toml"
-    );
     let v = hapbench(
-        &["tradeoff", "--scene", scene, "--duration-s", "0.3"],
+        &["tradeoff", "--scene", "default", "--duration-s", "0.3"],
         &dir.join("t.json"),
         None,
     );

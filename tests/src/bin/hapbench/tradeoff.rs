@@ -37,7 +37,8 @@ pub struct Args {
     /// Write the Pareto plot here.
     #[arg(long)]
     pub plot: Option<PathBuf>,
-    /// Sweep the backends on this scene instead of the generated block.
+    /// Sweep the backends on this scene instead of the generated block
+    /// ("default" = the embedded scene).
     #[arg(long)]
     pub scene: Option<PathBuf>,
 }
@@ -174,7 +175,12 @@ fn block_case(cell_m: f64, u_ref: Vec3) -> Result<Case> {
 /// A scene file as a case: its reference is its own static solution.
 fn scene_case(path: &std::path::Path) -> Result<Case> {
     use sim_server::scene::{SceneSource, build_scene};
-    let src = SceneSource::read(path)?;
+    // "default" is the embedded scene, as for `sim-server run --scene`.
+    let src = if path.as_os_str() == "default" {
+        SceneSource::embedded()
+    } else {
+        SceneSource::read(path)?
+    };
     let scene = build_scene(&src, &src.parse()?)
         .with_context(|| format!("cannot build scene {}", src.name))?;
     anyhow::ensure!(
