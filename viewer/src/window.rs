@@ -2,14 +2,15 @@
 //! mouse and keyboard, and, when no daemon is in the session, the mouse
 //! driving a tool.
 //!
-//! Controls: right drag orbits, wheel zooms, R resets the view, F toggles
-//! fibres, V force vectors, O the overlay. Driving (no daemon): the tool tip
-//! follows the cursor on the plane through the tip facing the camera, W/S
-//! push it in and pull it out, the left button closes the jaws (grip), X
-//! held closes them fully (cut), 1-4 pick the tool.
+//! Controls: right drag orbits, wheel zooms; the keys and the left button
+//! are [`crate::controls`] (R resets the view, F/V/O layers; driving, when
+//! no daemon is in the session: the tip follows the cursor on the plane
+//! through the organ's centre facing the camera, W/S push it in and out,
+//! left button grips, X held cuts, 1-4 pick the tool).
 
 use crate::camera::{View, bounds, framing, tip_under_cursor};
-use crate::drive::{Driver, JAW_CUT, JAW_GRIP};
+use crate::controls::{Controls, Request};
+use crate::drive::Driver;
 use crate::overlay;
 use crate::render::{Layers, Renderer};
 use crate::scene_info::SceneInfo;
@@ -19,7 +20,7 @@ use shared::monotonic_ns;
 use three_d::*;
 
 /// Opens the window and runs until it is closed.
-pub fn run(mut session: Session, info: SceneInfo, mut layers: Layers) -> anyhow::Result<()> {
+pub fn run(mut session: Session, info: SceneInfo, layers: Layers) -> anyhow::Result<()> {
     let window = Window::new(WindowSettings {
         title: format!("hapsim viewer - {}", info.name),
         max_size: None,
@@ -40,8 +41,7 @@ pub fn run(mut session: Session, info: SceneInfo, mut layers: Layers) -> anyhow:
         [centre.x as f64, centre.y as f64, hi.z as f64],
     );
     let mut cursor: Option<PhysicalPoint> = None;
-    let mut depth_m = 0.0f32;
-    let (mut gripping, mut cutting) = (false, false);
+    let mut controls = Controls::new(size, info.tools.len(), layers);
     let mut shown_frames = u64::MAX;
     window.render_loop(move |mut frame| {
         let now = monotonic_ns();
@@ -82,53 +82,32 @@ pub fn run(mut session: Session, info: SceneInfo, mut layers: Layers) -> anyhow:
                 Event::MousePress {
                     button: MouseButton::Left,
                     ..
-                } => gripping = true,
+                } => controls.grip(true),
                 Event::MouseRelease {
                     button: MouseButton::Left,
                     ..
-                } => gripping = false,
-                Event::KeyPress { kind, .. } => match kind {
-                    Key::W => depth_m += size * 0.01,
-                    Key::S => depth_m -= size * 0.01,
-                    Key::X => cutting = true,
-                    Key::F => layers.fibres = !layers.fibres,
-                    Key::V => layers.forces = !layers.forces,
-                    Key::O => layers.overlay = !layers.overlay,
-                    Key::R => camera = framing(frame.viewport, lo, hi, View::Iso),
-                    Key::Num1 | Key::Num2 | Key::Num3 | Key::Num4 => {
-                        let k = match kind {
-                            Key::Num1 => 0,
-                            Key::Num2 => 1,
-                            Key::Num3 => 2,
-                            _ => 3,
-                        };
-                        if k < info.tools.len() {
-                            driver.tool = k;
-                        }
-                    }
-                    _ => {}
+                } => controls.grip(false),
+                Event::KeyPress { kind, .. } => match controls.key_press(*kind) {
+                    Request::ResetView => camera = framing(frame.viewport, lo, hi, View::Iso),
+                    Request::None => {}
                 },
-                Event::KeyRelease { kind: Key::X, .. } => cutting = false,
+                Event::KeyRelease { kind, .. } => controls.key_release(*kind),
                 _ => {}
             }
         }
         // The tip: under the cursor, on the plane through the organ's centre
         // facing the camera, moved along the view by W/S.
         if let Some(tip) =
-            cursor.and_then(|p| tip_under_cursor(&camera, p, (lo + hi) * 0.5, depth_m))
+            cursor.and_then(|p| tip_under_cursor(&camera, p, (lo + hi) * 0.5, controls.depth_m))
         {
             driver.tip_m = [tip.x as f64, tip.y as f64, tip.z as f64];
         }
-        driver.jaw_opening = if cutting {
-            JAW_CUT
-        } else if gripping {
-            JAW_GRIP
-        } else {
-            1.0
-        };
+        driver.tool = controls.tool;
+        driver.jaw_opening = controls.jaw_opening();
         driver.update(&session);
         let driving = driver.active().then_some(driver.tool);
         let driven = driving.map(|k| (k, driver.tip_m));
+        let layers = controls.layers;
         renderer.set_tools(&tool_shapes(&session, &info, driven), layers.forces);
         renderer.set_overlay(&overlay::render(&overlay_lines(
             &session, &info, now, driving,
