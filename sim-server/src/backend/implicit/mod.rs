@@ -242,8 +242,12 @@ impl Backend for Implicit {
         if self.refactor {
             self.refactor = false;
             self.excess_iterations = 0;
-            // A factor that cannot be built (memory) leaves the step on Jacobi.
+            // A factor that cannot be built (memory) leaves the backend on
+            // Jacobi for good rather than retrying every step.
             self.factor = Factor::new(&self.model, h, &self.held).ok();
+            if self.factor.is_none() {
+                self.cfg.preconditioner = Preconditioner::Jacobi;
+            }
         }
         let (m, c) = (self.model.masses_kg(), self.model.damping_kg_s());
         // b = M v + h (f - K u); held rows carry their known velocity.
