@@ -5,7 +5,9 @@
 //! backends' hold systems are reused, not rebuilt). The one exception is
 //! the multi-threaded tensor-mass step: handing the step to its rayon pool
 //! goes through rayon's job injector, a queue that allocates one block per
-//! 63 jobs; that is bounded here, not zero.
+//! 63 jobs; that is bounded here, not zero. (The count sees the calling
+//! thread only, so that row checks the hand-off; the pass itself is the
+//! same code the single-thread row runs on the counted thread.)
 
 use shared::alloc_count::{Counting, count};
 use sim_server::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};

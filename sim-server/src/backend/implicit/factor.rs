@@ -35,7 +35,13 @@ impl Factor {
     /// not `held`. `Err` names what failed (the backend then stays on Jacobi).
     pub fn new(model: &ElasticModel, h: Real, held: &[bool]) -> Result<Self, String> {
         let n = model.vertex_count();
-        let mut index = vec![NOT_FREE; 3 * n];
+        // Every buffer that grows with the mesh is reserved fallibly: a mesh
+        // too large to factorise gets an Err (and Jacobi), not an abort.
+        let mut index = Vec::new();
+        index
+            .try_reserve_exact(3 * n)
+            .map_err(|e| format!("index: {e}"))?;
+        index.resize(3 * n, NOT_FREE);
         let mut nf = 0;
         for (v, &is_held) in held.iter().enumerate() {
             if !is_held {
@@ -46,7 +52,11 @@ impl Factor {
             }
         }
         let (m, c) = (model.masses_kg(), model.damping_kg_s());
-        let mut triplets = Vec::with_capacity(9 * (n + 2 * model.edge_tensors().len()));
+        // Lower triangle: 6 entries per vertex block, 9 per edge block.
+        let mut triplets = Vec::new();
+        triplets
+            .try_reserve(6 * n + 9 * model.edge_tensors().len())
+            .map_err(|e| format!("assembly: {e}"))?;
         let mut push = |a: usize, b: usize, k: &crate::math::Mat3, shift: Real| {
             for r in 0..3 {
                 let fr = index[3 * a + r];
@@ -75,7 +85,11 @@ impl Factor {
             Default::default(),
         )
         .map_err(|e| format!("ordering: {e:?}"))?;
-        let mut values = vec![0.0; symbolic.len_val()];
+        let mut values = Vec::new();
+        values
+            .try_reserve_exact(symbolic.len_val())
+            .map_err(|e| format!("factor of {} values: {e}", symbolic.len_val()))?;
+        values.resize(symbolic.len_val(), 0.0);
         let mut factor_scratch = MemBuffer::try_new(
             symbolic.factorize_numeric_llt_scratch::<Real>(Par::Seq, Default::default()),
         )

@@ -261,6 +261,8 @@ impl Backend for Implicit {
                 + h * h * Vec3::new(vk[i].x_axis.x, vk[i].y_axis.y, vk[i].z_axis.z);
             if self.held[i] {
                 self.p[i] = (self.target[i] - self.scratch[i]) / h;
+                // Not part of the system: kept out of |b| (the stopping test).
+                self.b[i] = Vec3::ZERO;
             } else {
                 self.b[i] = m[i] * self.v[i] + h * (self.fext[i] + self.force[i]);
                 // Warm start from the previous velocity.
