@@ -6,21 +6,18 @@
 //! twice, the probe once on its tensor-mass part and once on its
 //! precomputed part.
 
+mod common;
+
 use sim_server::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
 use sim_server::contact::{ToolInput, Tools};
 use sim_server::prelude::*;
 use sim_server::scene::ToolDecl;
 use sim_server::scene::spec::ToolKind;
 
-const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
+const SIZE: [f64; 3] = common::BLOCK_M;
 
 fn model() -> ElasticModel {
-    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
-        .generate()
-        .unwrap();
-    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0).unwrap();
-    let materials = TetMaterials::uniform(tissue, mesh.tet_count());
-    ElasticModel::new(mesh, materials).unwrap()
+    common::block(0.005)
 }
 
 fn wall(model: &ElasticModel) -> Vec<VertexId> {

@@ -4,20 +4,17 @@
 //! conjugate gradients at one or two iterations whenever the held set is the
 //! one it was built for, and is rebuilt when it falls behind.
 
+mod common;
+
 use sim_server::backend::{Backend, Implicit, ImplicitConfig, Preconditioner};
 use sim_server::prelude::*;
 
-const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
+const SIZE: [f64; 3] = common::BLOCK_M;
 const STEPS: usize = 170;
 
 fn model() -> ElasticModel {
-    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.004))
-        .generate()
-        .unwrap();
     // Nearly incompressible: where Jacobi needs hundreds of iterations.
-    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0).unwrap();
-    let materials = TetMaterials::uniform(tissue, mesh.tet_count());
-    ElasticModel::new(mesh, materials).unwrap()
+    common::block(0.004)
 }
 
 fn vertex_at(m: &ElasticModel, p: Vec3) -> VertexId {

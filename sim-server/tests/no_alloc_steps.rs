@@ -9,6 +9,8 @@
 //! thread only, so that row checks the hand-off; the pass itself is the
 //! same code the single-thread row runs on the counted thread.)
 
+mod common;
+
 use shared::alloc_count::{Counting, count};
 use sim_server::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
 use sim_server::prelude::*;
@@ -16,15 +18,10 @@ use sim_server::prelude::*;
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
 
-const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
+const SIZE: [f64; 3] = common::BLOCK_M;
 
 fn model() -> ElasticModel {
-    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
-        .generate()
-        .unwrap();
-    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0).unwrap();
-    let materials = TetMaterials::uniform(tissue, mesh.tet_count());
-    ElasticModel::new(mesh, materials).unwrap()
+    common::block(0.005)
 }
 
 #[test]

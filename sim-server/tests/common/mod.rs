@@ -104,3 +104,16 @@ pub fn sym_eigenvalues(n: usize, rowmajor: &[f64]) -> Vec<f64> {
     ev.sort_by(f64::total_cmp);
     ev
 }
+
+/// The 4 x 2 x 2 cm block of the backend tests (nu 0.45, 30 /s damping).
+pub const BLOCK_M: [f64; 3] = [0.04, 0.02, 0.02];
+
+/// [`BLOCK_M`] meshed with cells of `cell_m`.
+pub fn block(cell_m: f64) -> ElasticModel {
+    let mesh = BoxSpec::new(Vec3::from_array(BLOCK_M), CellSize::EdgeM(cell_m))
+        .generate()
+        .unwrap();
+    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0).unwrap();
+    let materials = TetMaterials::uniform(tissue, mesh.tet_count());
+    ElasticModel::new(mesh, materials).unwrap()
+}
