@@ -39,4 +39,18 @@ impl<S: Storage> Backend for Explicit<S> {
     fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         Explicit::remove_tet(self, t)
     }
+    fn integrates_contact(&self) -> bool {
+        true
+    }
+    fn set_contact_bound(&mut self, omega2: Real) -> Result<(), String> {
+        Explicit::set_contact_bound(self, omega2).map_err(|e| e.to_string())
+    }
+    fn step_with_contact(
+        &mut self,
+        field: &mut crate::contact::ContactField,
+        resample_every_s: Real,
+        resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+    ) {
+        Explicit::step_with_contact(self, field, resample_every_s, resample);
+    }
 }

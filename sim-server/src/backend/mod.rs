@@ -76,6 +76,33 @@ pub trait Backend {
     fn dynamic(&self) -> bool {
         true
     }
+    /// Whether [`Backend::step_with_contact`] evaluates the penalty contact
+    /// at every sub-step (the penalty law needs it).
+    fn integrates_contact(&self) -> bool {
+        false
+    }
+    /// Makes the stable step include contact springs adding up to
+    /// `omega2` (rad^2/s^2) to omega_max^2; why not, if the step policy
+    /// refuses. Backends that do not integrate contact ignore it.
+    fn set_contact_bound(&mut self, omega2: Real) -> Result<(), String> {
+        let _ = omega2;
+        Ok(())
+    }
+    /// One step with the penalty contact `field`, calling `resample` to
+    /// select its points again every `resample_every_s` of simulated time
+    /// within the step; a backend that does not integrate contact steps
+    /// without it.
+    fn step_with_contact(
+        &mut self,
+        field: &mut crate::contact::ContactField,
+        resample_every_s: Real,
+        resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+    ) where
+        Self: Sized,
+    {
+        let _ = (field, resample_every_s, resample);
+        self.step();
+    }
 }
 
 /// How much of the body `sim` can cut: (cuttable, live) tetrahedra.

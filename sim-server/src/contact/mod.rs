@@ -84,17 +84,22 @@
 
 mod adjacency;
 mod claims;
+mod config;
+pub mod field;
 mod geometry;
 mod reaction;
+mod sampling;
 mod surface_index;
 mod tool;
 mod tools;
 
+pub use config::{ContactConfig, ContactLaw};
+pub use field::ContactField;
 pub use geometry::{Plane, Segment, ToolPose};
 pub use reaction::Reaction;
 pub use surface_index::SurfaceIndex;
 pub use tool::ToolContact;
-pub use tools::{ToolInput, Tools};
+pub use tools::{ContactError, ToolInput, Tools};
 
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};

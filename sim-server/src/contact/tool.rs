@@ -4,6 +4,8 @@
 
 use super::adjacency::Adjacency;
 use super::claims::Claims;
+use super::config::ContactLaw;
+use super::field::{ContactField, PartSweep};
 use super::geometry::{Plane, Segment, ToolPose};
 use super::reaction::{Reaction, along};
 use super::surface_index::SurfaceIndex;
@@ -32,8 +34,15 @@ enum Part {
 pub struct ToolContact {
     decl: ToolDecl,
     slot: usize,
+    law: ContactLaw,
+    max_speed_m_s: Real,
     direction: Vec3,
     pose: Option<ToolPose>,
+    /// The pose of the update before (the start of the penalty sweep).
+    prev_pose: Option<ToolPose>,
+    /// Vertices the tip touched in the last step (what the jaws grip).
+    touched: Vec<VertexId>,
+    jaw: Real,
     constraints: Vec<Constraint>,
     previous: Vec<Constraint>,
     /// Per vertex: among this pass's hits or kept vertices.
@@ -52,11 +61,22 @@ pub struct ToolContact {
 
 impl ToolContact {
     /// Tool number `slot` over `model`, touching nothing.
-    pub(super) fn new(decl: &ToolDecl, slot: usize, model: &ElasticModel) -> Self {
+    pub(super) fn new(
+        decl: &ToolDecl,
+        slot: usize,
+        model: &ElasticModel,
+        law: ContactLaw,
+        max_speed_m_s: Real,
+    ) -> Self {
         let n = model.vertex_count();
         Self {
             decl: decl.clone(),
             slot,
+            law,
+            max_speed_m_s,
+            prev_pose: None,
+            touched: Vec::new(),
+            jaw: 1.0,
             // Used only while the tip sits on the fulcrum: point down.
             direction: Vec3::NEG_Z,
             pose: None,
@@ -108,12 +128,31 @@ impl ToolContact {
         self.constraints.clear();
         self.removed = 0;
         self.cut_refused = None;
+        self.prev_pose = self.pose;
         let Some((tip_m, jaw)) = input else {
             self.pose = None;
             self.gripped.clear();
+            self.touched.clear();
             self.gripping = false;
             self.armed = false;
             return;
+        };
+        self.jaw = jaw;
+        let tip_m = match (self.law, self.prev_pose) {
+            // The proxy: under the penalty law the simulated tool follows
+            // the requested pose at a bounded speed, so a pose that jumps
+            // (a device glitch) drags it, at most this far per step,
+            // instead of teleporting it through or into the tissue.
+            (ContactLaw::Penalty, Some(prev)) => {
+                let max_m = self.max_speed_m_s * sim.dt_s();
+                let d = tip_m - prev.end_m;
+                if d.length() > max_m {
+                    prev.end_m + d * (max_m / d.length())
+                } else {
+                    tip_m
+                }
+            }
+            _ => tip_m,
         };
         let pose = ToolPose::new(&self.decl, tip_m, self.direction);
         self.direction = pose.direction;
@@ -146,6 +185,9 @@ impl ToolContact {
         claims: &mut Claims,
     ) {
         let Some(pose) = self.pose else { return };
+        if self.law == ContactLaw::Penalty {
+            return;
+        }
         if self.decl.kind != ToolKind::Cavitron {
             self.plane_pass(sim, index, adj, claims, &pose.tip, Part::Tip);
         }
@@ -167,13 +209,17 @@ impl ToolContact {
                 sim.release(c.vertex);
             }
         }
-        let mut touching = false;
+        if self.law == ContactLaw::Projection {
+            self.touched.clear();
+        }
         for c in &self.constraints {
             let rest_m = sim.model().mesh().positions_m()[c.vertex.idx()];
             sim.prescribe(c.vertex, c.target_m - rest_m);
-            touching |= matches!(c.kind, ConstraintKind::Tip(_));
+            if matches!(c.kind, ConstraintKind::Tip(_)) {
+                self.touched.push(c.vertex);
+            }
         }
-        self.armed = touching && jaw > GRIP_BELOW;
+        self.armed = !self.touched.is_empty() && jaw > GRIP_BELOW;
         ContactReport {
             contact: !self.constraints.is_empty(),
             gripping: self.gripping,
@@ -185,9 +231,18 @@ impl ToolContact {
 
     /// The force on the tool and the contact stiffness after the step, from
     /// the vertices the last update imposed (see the module documentation).
-    pub(super) fn reaction<B: Backend + ?Sized>(&self, sim: &B, adj: &Adjacency) -> Reaction {
+    pub(super) fn reaction<B: Backend + ?Sized>(
+        &self,
+        sim: &B,
+        adj: &Adjacency,
+        field: &ContactField,
+    ) -> Reaction {
         let model = sim.model();
         let mut out = Reaction::NONE;
+        if self.law == ContactLaw::Penalty {
+            out.force_n = field.force_n(self.slot);
+            out.stiffness_n_per_m = field.spring_stiffness(self.slot);
+        }
         for c in &self.constraints {
             let v = c.vertex;
             out.force_n += adj.elastic_force_n(model, v, |w| sim.displacement(w));
@@ -198,6 +253,58 @@ impl ToolContact {
             };
         }
         out
+    }
+
+    /// The parts the penalty law samples this step, each swept from the
+    /// previous update's pose (or standing still when the tool or the
+    /// part just appeared): the tip unless the jaws grip or the tool is a
+    /// cavitron (whose tip burns), and the inserted shaft.
+    pub(super) fn sweeps(&self) -> [Option<PartSweep>; 2] {
+        let Some(pose) = self.pose else {
+            return [None, None];
+        };
+        let prev = self.prev_pose.unwrap_or(pose);
+        let sweep = |to: Segment, from: Option<Segment>, tip: bool| PartSweep {
+            tool: self.slot,
+            tip,
+            from: from.unwrap_or(to),
+            to,
+            radius_m: pose.radius_m,
+        };
+        let tip = (self.decl.kind != ToolKind::Cavitron && !self.gripping)
+            .then(|| sweep(pose.tip, Some(prev.tip), true));
+        let shaft = pose.shaft.map(|s| sweep(s, prev.shaft, false));
+        [tip, shaft]
+    }
+
+    /// After a penalty step: the vertices of the triangles the tip pressed
+    /// (`mark` is all false on entry and on exit).
+    pub(super) fn after_step(&mut self, field: &ContactField, mark: &mut [bool]) -> bool {
+        if self.law != ContactLaw::Penalty {
+            return !self.constraints.is_empty();
+        }
+        self.touched.clear();
+        let mut contact = false;
+        for (p, depth) in field.points().iter().zip(field.penetrations_m()) {
+            let part = &field.parts()[p.part as usize];
+            if *depth <= 0.0 || part.tool != self.slot {
+                continue;
+            }
+            contact = true;
+            if part.tip {
+                for v in p.vertices {
+                    if !mark[v as usize] {
+                        mark[v as usize] = true;
+                        self.touched.push(VertexId(v));
+                    }
+                }
+            }
+        }
+        for v in &self.touched {
+            mark[v.idx()] = false;
+        }
+        self.armed = !self.touched.is_empty() && self.jaw > GRIP_BELOW;
+        contact || !self.constraints.is_empty()
     }
 
     fn push(&mut self, claims: &mut Claims, v: VertexId, kind: ConstraintKind, target_m: Vec3) {
@@ -329,10 +436,8 @@ impl ToolContact {
             self.gripping = false;
         } else if !self.gripping && jaw < GRIP_BELOW && self.armed {
             self.gripped.clear();
-            for c in &self.previous {
-                if matches!(c.kind, ConstraintKind::Tip(_)) {
-                    self.gripped.push((c.vertex, sim.position(c.vertex)));
-                }
+            for &v in &self.touched {
+                self.gripped.push((v, sim.position(v)));
             }
             self.gripping = !self.gripped.is_empty();
             self.grip_end_m = pose.end_m;

@@ -3,6 +3,9 @@
 
 use super::adjacency::Adjacency;
 use super::claims::Claims;
+use super::config::{ContactConfig, ContactLaw};
+use super::field::ContactField;
+use super::sampling::Sampler;
 use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
 use super::{ContactReport, Reaction};
@@ -11,6 +14,10 @@ use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::scene::ToolDecl;
 use crate::tensor_mass::ElasticModel;
+
+/// Simulated time between two selections of the contact points within a
+/// step (s).
+const RESAMPLE_EVERY_S: Real = 1e-3;
 
 /// Where a tool is this step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,15 +42,104 @@ pub struct Tools {
     adjacency: Adjacency,
     claims: Claims,
     reports: Vec<ContactReport>,
+    law: ContactLaw,
+    field: ContactField,
+    sampler: Option<Sampler>,
+    mark: Vec<bool>,
+}
+
+/// Why contact cannot run as the scene asks.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ContactError {
+    /// The scene asks for the penalty law on a backend that cannot
+    /// integrate it.
+    #[error(
+        "[contact] law = \"penalty\" needs a backend that integrates it at every sub-step (tensor-mass); the {backend} backend has only the projection law (law = \"projection\")"
+    )]
+    PenaltyUnsupported {
+        /// The backend's name.
+        backend: &'static str,
+    },
+    /// A contact constant is out of range.
+    #[error("[contact] {key} must be a positive finite number, got {value}")]
+    BadConstant {
+        /// The key.
+        key: &'static str,
+        /// Its value.
+        value: Real,
+    },
+    /// The contact springs make the step unstable and the policy refuses.
+    #[error("with contact springs: {0}")]
+    Unstable(String),
 }
 
 impl Tools {
-    /// The tools `decls` over `model`, touching nothing.
+    /// The tools `decls` over `model` with the paper's projection law,
+    /// touching nothing.
     pub fn new(decls: &[ToolDecl], model: &ElasticModel) -> Self {
+        Self::build(
+            decls,
+            model,
+            ContactLaw::Projection,
+            &ContactConfig::default(),
+        )
+    }
+
+    /// The tools `decls` on `sim` as `config` says: the penalty law
+    /// (unless the scene asks for projection or the backend cannot
+    /// integrate it), with `sim`'s stable step made to include the contact
+    /// springs (more sub-steps).
+    pub fn with_config<B: Backend + ?Sized>(
+        decls: &[ToolDecl],
+        sim: &mut B,
+        config: &ContactConfig,
+    ) -> Result<Self, ContactError> {
+        for (key, value) in [
+            ("stiffness_factor", config.stiffness_factor),
+            ("point_spacing", config.point_spacing),
+            ("max_tool_speed_m_s", config.max_tool_speed_m_s),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(ContactError::BadConstant { key, value });
+            }
+        }
+        if !(config.damping_s_per_m.is_finite() && config.damping_s_per_m >= 0.0) {
+            return Err(ContactError::BadConstant {
+                key: "damping_s_per_m",
+                value: config.damping_s_per_m,
+            });
+        }
+        let law = match config.law {
+            Some(ContactLaw::Penalty) if !sim.integrates_contact() => {
+                return Err(ContactError::PenaltyUnsupported {
+                    backend: sim.name(),
+                });
+            }
+            Some(law) => law,
+            None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
+            None => ContactLaw::Projection,
+        };
+        let mut tools = Self::build(decls, sim.model(), law, config);
+        if law == ContactLaw::Penalty {
+            let sampler = Sampler::new(sim.model(), config.stiffness_factor, config.point_spacing);
+            sim.set_contact_bound(sampler.omega2_bound(sim.model()))
+                .map_err(ContactError::Unstable)?;
+
+            tools.sampler = Some(sampler);
+        }
+        Ok(tools)
+    }
+
+    fn build(
+        decls: &[ToolDecl],
+        model: &ElasticModel,
+        law: ContactLaw,
+        config: &ContactConfig,
+    ) -> Self {
         let tools: Vec<ToolContact> = decls
             .iter()
             .enumerate()
-            .map(|(i, d)| ToolContact::new(d, i, model))
+            .map(|(i, d)| ToolContact::new(d, i, model, law, config.max_tool_speed_m_s))
             .collect();
         // A leaf is updated once its vertex has moved half the smallest
         // tool radius: few leaves per step, few false candidates per query.
@@ -59,7 +155,47 @@ impl Tools {
             index: SurfaceIndex::new(model, margin_m),
             adjacency: Adjacency::new(model),
             claims: Claims::new(model.vertex_count()),
+            law,
+            field: ContactField::new(decls.len(), config.damping_s_per_m),
+            sampler: None,
+            mark: vec![false; model.vertex_count()],
         }
+    }
+
+    /// The contact law in force.
+    pub fn law(&self) -> ContactLaw {
+        self.law
+    }
+
+    /// The penalty contact field of the last step.
+    pub fn field(&self) -> &ContactField {
+        &self.field
+    }
+
+    /// Advances `sim` one step with the contact the last
+    /// [`Tools::update`] set up, and completes each tool's report (whether
+    /// it touched tissue during the step). Use instead of `sim.step()`.
+    pub fn step<B: Backend>(&mut self, sim: &mut B) -> &[ContactReport] {
+        if let (ContactLaw::Penalty, Some(sampler)) = (self.law, &mut self.sampler) {
+            let (index, adj) = (&mut self.index, &self.adjacency);
+            // A long step (a slow simulation) re-selects the points from
+            // the current positions every millisecond of simulated time:
+            // tissue can move further than the margin in one long step.
+            let mut resample = |sim: &B, field: &mut ContactField| {
+                index.refit(sim);
+                field.clear_points();
+                for part in 0..field.parts().len() {
+                    sampler.sample(sim, index, adj, part as u16, field);
+                }
+            };
+            sim.step_with_contact(&mut self.field, RESAMPLE_EVERY_S, &mut resample);
+        } else {
+            sim.step();
+        }
+        for (t, r) in self.tools.iter_mut().zip(&mut self.reports) {
+            r.contact = t.after_step(&self.field, &mut self.mark);
+        }
+        &self.reports
     }
 
     /// No tool ever imposes nor releases `v` (a vertex the scene fixes or
@@ -127,6 +263,15 @@ impl Tools {
         for t in &mut self.tools {
             t.detect(sim, &self.index, &self.adjacency, &mut self.claims);
         }
+        self.field.clear();
+        if let Some(sampler) = &mut self.sampler {
+            for t in &self.tools {
+                for sweep in t.sweeps().into_iter().flatten() {
+                    let part = self.field.add_part(sweep);
+                    sampler.sample(sim, &self.index, &self.adjacency, part, &mut self.field);
+                }
+            }
+        }
         for (i, t) in self.tools.iter_mut().enumerate() {
             let jaw = input(i).map_or(1.0, |p| p.jaw_opening);
             self.reports[i] = t.commit(sim, &self.claims, jaw);
@@ -136,6 +281,6 @@ impl Tools {
 
     /// The force on tool `i` and its contact stiffness after the step.
     pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
-        self.tools[i].reaction(sim, &self.adjacency)
+        self.tools[i].reaction(sim, &self.adjacency, &self.field)
     }
 }

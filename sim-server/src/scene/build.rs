@@ -96,6 +96,8 @@ pub struct BuiltScene {
     pub hybrid_tets: Option<Vec<TetId>>,
     /// Settings.
     pub settings: SimSettings,
+    /// Contact law and constants.
+    pub contact: crate::contact::ContactConfig,
     /// Summary.
     pub report: SceneReport,
 }
@@ -520,7 +522,9 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         });
     }
     let settings = settings(src, spec)?;
+    let contact = contact_config(src, spec)?;
     Ok(BuiltScene {
+        contact,
         model,
         fixed,
         prescribed,
@@ -534,6 +538,59 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
 
 /// Why a scene cannot run on the hybrid backend.
 pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] section naming its tensor-mass (cuttable) part, e.g. [hybrid] select = { sphere_m = [x, y, z, r] }; the rest is precomputed";
+
+fn contact_config(
+    src: &SceneSource,
+    spec: &SceneSpec,
+) -> Result<crate::contact::ContactConfig, SceneError> {
+    use crate::contact::{ContactConfig, ContactLaw};
+    use crate::scene::spec::ContactLawName;
+    let mut c = ContactConfig::default();
+    let Some(section) = &spec.contact else {
+        return Ok(c);
+    };
+    let s = section.get_ref();
+    c.law = s.law.as_ref().map(|l| match l.get_ref() {
+        ContactLawName::Penalty => ContactLaw::Penalty,
+        ContactLawName::Projection => ContactLaw::Projection,
+    });
+    let pos = |v: &Option<toml::Spanned<Real>>, key: &str, default: Real| {
+        v.as_ref().map_or(Ok(default), |x| {
+            positive(src, x, &format!("[contact] {key}"))
+        })
+    };
+    c.stiffness_factor = pos(&s.stiffness_factor, "stiffness_factor", c.stiffness_factor)?;
+    c.point_spacing = pos(&s.point_spacing, "point_spacing", c.point_spacing)?;
+    c.max_tool_speed_m_s = pos(
+        &s.max_tool_speed_m_s,
+        "max_tool_speed_m_s",
+        c.max_tool_speed_m_s,
+    )?;
+    if let Some(d) = &s.damping_s_per_m {
+        let x = *d.get_ref();
+        if !(x.is_finite() && x >= 0.0) {
+            return Err(src.error(
+                d.span(),
+                format!("[contact] damping_s_per_m must be a finite number >= 0, got {x}"),
+            ));
+        }
+        c.damping_s_per_m = x;
+    }
+    if c.point_spacing > 1.0 {
+        let span = s
+            .point_spacing
+            .as_ref()
+            .map_or(section.span(), |x| x.span());
+        return Err(src.error(
+            span,
+            format!(
+                "[contact] point_spacing is a fraction of the tool radius and must be at most 1 (points further apart than the radius miss the tool), got {}",
+                c.point_spacing
+            ),
+        ));
+    }
+    Ok(c)
+}
 
 fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneError> {
     let mut s = SimSettings {

@@ -35,6 +35,8 @@ pub struct SceneSpec {
     pub tool: Vec<Spanned<ToolSpec>>,
     /// `[simulation]`: backend, step and threads.
     pub simulation: Option<Spanned<SimulationSpec>>,
+    /// `[contact]`: the tool-tissue contact law and its constants.
+    pub contact: Option<Spanned<ContactSpec>>,
     /// `[hybrid]`: the split of the hybrid backend.
     pub hybrid: Option<Spanned<HybridSpec>>,
 }
@@ -334,6 +336,33 @@ pub struct ToolSpec {
     pub radius_m: Spanned<f64>,
     /// Tip segment length (m).
     pub tip_length_m: Spanned<f64>,
+}
+
+/// Contact laws by name.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ContactLawName {
+    /// Compliant Hunt-Crossley contact on points of the surface triangles.
+    Penalty,
+    /// The paper's: touched vertices projected on a plane tangent to the tool.
+    Projection,
+}
+
+/// `[contact]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSpec {
+    /// The law (default: penalty where the backend integrates it, else
+    /// projection).
+    pub law: Option<Spanned<ContactLawName>>,
+    /// Penalty springs relative to the tissue's own vertex stiffness (default 64).
+    pub stiffness_factor: Option<Spanned<f64>>,
+    /// Hunt-Crossley damping alpha (s/m, default 3; 0 for none).
+    pub damping_s_per_m: Option<Spanned<f64>>,
+    /// Contact point spacing as a fraction of the tool radius (default 0.25).
+    pub point_spacing: Option<Spanned<f64>>,
+    /// Speed limit of the simulated tool following the device (m/s, default 2).
+    pub max_tool_speed_m_s: Option<Spanned<f64>>,
 }
 
 /// Backends by name.

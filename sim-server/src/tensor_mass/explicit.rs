@@ -138,6 +138,9 @@ pub struct Explicit<S: Storage> {
     buffers: Vec<PartBuffers>,
     pool: Option<rayon::ThreadPool>,
     stable: StableStep,
+    /// The bound of the elastic model alone (before contact springs).
+    elastic_stable: StableStep,
+    policy: DtPolicy,
     dt_s: Real,
     substeps: usize,
     steps: u64,
@@ -210,6 +213,8 @@ impl<S: Storage> Explicit<S> {
             buffers,
             pool,
             stable,
+            elastic_stable: stable,
+            policy: config.policy,
             dt_s,
             substeps,
             steps: 0,
@@ -246,13 +251,75 @@ impl<S: Storage> Explicit<S> {
         self.steps += 1;
     }
 
+    /// Advances by `dt_s` with the penalty contact `field` evaluated at
+    /// every sub-step (the tools swept across the step), its forces added
+    /// to the elastic ones; `resample` selects the field's points again
+    /// every `resample_every_s` of simulated time within the step. The
+    /// first contact allocates one force array.
+    pub fn step_with_contact(
+        &mut self,
+        field: &mut crate::contact::ContactField,
+        resample_every_s: Real,
+        resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+    ) {
+        if field.is_idle() {
+            self.step();
+            return;
+        }
+        if self.fmem.len() != self.u.len() {
+            self.fmem = huge_vec(self.u.len(), [0.0; 3]);
+        }
+        let h = self.dt_s / self.substeps as Real;
+        let every = ((resample_every_s / h).floor() as usize).max(1);
+        for k in 0..self.substeps {
+            if k > 0 && k % every == 0 {
+                resample(self, field);
+            }
+            // Before the membrane (which zeroes and writes its own vertices).
+            field.zero(&mut self.fmem);
+            self.membrane_step();
+            let s = (k + 1) as Real / self.substeps as Real;
+            let rest = self.model.mesh().positions_m();
+            let at = crate::contact::field::SubStep {
+                h_s: h,
+                step_s: self.dt_s,
+                s,
+            };
+            field.add_forces(rest, &self.u, &self.next, at, &mut self.fmem);
+            self.kernel_step();
+        }
+        self.steps += 1;
+    }
+
+    /// Raises omega_max^2 of the stable step by `omega2` (the contact
+    /// springs' share) and re-plans the sub-steps under the policy. Call
+    /// before stepping.
+    pub fn set_contact_bound(&mut self, omega2: Real) -> Result<(), ExplicitError> {
+        let lambda = self.elastic_stable.omega_max_rad_s.powi(2) + omega2.max(0.0);
+        let stable = StableStep::from_lambda(lambda, self.elastic_stable.method);
+        self.substeps = substeps_for(self.dt_s, &stable, self.policy)?;
+        self.stable = stable;
+        for v in 0..self.u.len() {
+            self.refresh_vertex(v);
+        }
+        Ok(())
+    }
+
     fn substep(&mut self) {
+        self.membrane_step();
+        self.kernel_step();
+    }
+
+    fn membrane_step(&mut self) {
         if !self.capsule_vertices.is_empty() {
             for &v in &self.capsule_vertices {
                 self.fmem[v as usize] = [0.0; 3];
             }
             self.model.membrane_forces(&self.u, &mut self.fmem);
         }
+    }
+
+    fn kernel_step(&mut self) {
         let Self {
             kernel,
             u,

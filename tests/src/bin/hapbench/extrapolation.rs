@@ -53,6 +53,10 @@ pub struct Args {
     /// Write SVG plots here.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Write the per-tick series here (CSV: time, hand position, the
+    /// truth's force, then each method's force).
+    #[arg(long)]
+    pub series: Option<PathBuf>,
 }
 
 /// One method's figures.
@@ -114,8 +118,8 @@ fn simulate(
             tip_m: Vec3::from_array(tip),
             jaw_opening: jaw,
         });
-        let contact = p.tools.update(&mut p.sim, &inputs)[0].contact;
-        p.sim.step();
+        p.tools.update(&mut p.sim, &inputs);
+        let contact = p.tools.step(&mut p.sim)[0].contact;
         let r = p.tools.reaction(0, &p.sim);
         anyhow::ensure!(
             r.force_n.is_finite(),
@@ -159,6 +163,42 @@ fn figures(rendered: &[[f64; 3]], truth: &[[f64; 3]], hand: &[[f64; 3]]) -> Meth
         p99_jump_n: p99,
         net_energy_j: energy,
     }
+}
+
+/// The per-tick CSV of `--series`.
+fn write_series(
+    path: &Path,
+    h: f64,
+    hand: &[[f64; 3]],
+    truth: &[[f64; 3]],
+    methods: &[(&str, Vec<[f64; 3]>)],
+) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut s = String::from("t_s,x_m,y_m,z_m,truth_fx_n,truth_fy_n,truth_fz_n");
+    for (name, _) in methods {
+        write!(s, ",{name}_fx_n,{name}_fy_n,{name}_fz_n")?;
+    }
+    s.push('\n');
+    for (k, f) in truth.iter().enumerate() {
+        let p = hand[k];
+        write!(
+            s,
+            "{:.4},{},{},{},{},{},{}",
+            k as f64 * h,
+            p[0],
+            p[1],
+            p[2],
+            f[0],
+            f[1],
+            f[2]
+        )?;
+        for (_, r) in methods {
+            let r = r[k];
+            write!(s, ",{},{},{}", r[0], r[1], r[2])?;
+        }
+        s.push('\n');
+    }
+    std::fs::write(path, s).with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// Runs the benchmark.
@@ -256,6 +296,9 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if let Some(path) = &args.series {
+        write_series(path, h, &hand, &truth_f, &rendered_all)?;
     }
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;

@@ -209,7 +209,7 @@ fn run_case(
             jaw_opening: 1.0,
         });
         p.tools.update(&mut p.sim, &inputs);
-        p.sim.step();
+        p.tools.step(&mut p.sim);
         let u_max = p
             .sim
             .displacements()

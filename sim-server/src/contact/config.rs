@@ -1,0 +1,58 @@
+//! How the tools touch the tissue: the contact law and its constants, from
+//! the scene's `[contact]` section.
+
+use crate::math::Real;
+
+/// The contact law of the sliding contact (grips hold by prescribed
+/// displacements under either law).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ContactLaw {
+    /// Compliant Hunt-Crossley contact between the tool capsules and points
+    /// on the surface triangles, evaluated every integrator sub-step
+    /// ([`super::field`]): continuous in the tool pose. Needs a backend that
+    /// integrates it (tensor-mass).
+    Penalty,
+    /// The paper's law (4.1-4.2): the touched vertices are prescribed on a
+    /// plane tangent to the tool. Exact non-penetration at vertices, but
+    /// switches with the contact set (see [`crate::contact`]).
+    Projection,
+}
+
+impl ContactLaw {
+    /// The scene name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Penalty => "penalty",
+            Self::Projection => "projection",
+        }
+    }
+}
+
+/// Contact settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactConfig {
+    /// The law; `None`: penalty where the backend integrates it, else
+    /// projection.
+    pub law: Option<ContactLaw>,
+    /// Penalty springs relative to the tissue's own vertex stiffness.
+    pub stiffness_factor: Real,
+    /// Hunt-Crossley alpha (s/m).
+    pub damping_s_per_m: Real,
+    /// Contact point spacing, as a fraction of the tool radius.
+    pub point_spacing: Real,
+    /// The simulated tool (proxy) follows the requested pose at most this
+    /// fast (m/s): a glitch in the pose cannot throw it through the tissue.
+    pub max_tool_speed_m_s: Real,
+}
+
+impl Default for ContactConfig {
+    fn default() -> Self {
+        Self {
+            law: None,
+            stiffness_factor: 64.0,
+            damping_s_per_m: 3.0,
+            point_spacing: 0.25,
+            max_tool_speed_m_s: 2.0,
+        }
+    }
+}

@@ -1,0 +1,345 @@
+//! The penalty contact field: compliant, frictionless contact between the
+//! tool capsules and points spread over the surface triangles, evaluated at
+//! every integrator sub-step (not once per step), so that its stiffness can
+//! be far above what a force held for a whole step would tolerate.
+//!
+//! Each contact point p sits on a surface triangle at barycentric weights
+//! w (its position x = sum w_j x_j, its velocity likewise). Against a tool
+//! part (a capsule: segment S, radius r) its gap is g = |x - c| - r, with c
+//! the closest point of S; the normal n = (x - c) / |x - c| is the distance
+//! field's gradient. While g < 0 (penetration d = -g) the point feels the
+//! Hunt-Crossley force (Hunt and Crossley 1975; the compliant-contact model
+//! of haptics and of e.g. MuJoCo's soft contacts)
+//!
+//! ```text
+//! f = k_p d (1 + alpha d')+      d' = rate of penetration
+//! ```
+//!
+//! spread to the triangle's vertices by w, and the tool feels -f n. It is
+//! continuous in the tool pose (zero at zero gap), never sticky (the factor
+//! is clamped to [0, 2]: the damping never pulls and never more than
+//! doubles the spring), and frictionless (along n only). The point
+//! stiffness is k_p = kappa a_p, a foundation modulus times the point's
+//! share of the rest area, so the total over a surface does not depend on
+//! how finely it is sampled.
+//!
+//! The tool moves during the step: each part is swept linearly from its
+//! pose at the previous step to the new one across the sub-steps, so a
+//! fast tool pushes the tissue ahead of it instead of jumping through it.
+//!
+//! The force on the tool reported for a step is the mean over its
+//! sub-steps (the momentum the contact exchanged divided by dt).
+
+use super::geometry::Segment;
+use crate::math::{Mat3, Real, Vec3, outer};
+
+/// One contact point: a triangle's vertices, its barycentric weights, the
+/// tool part it faces and its stiffness.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactPoint {
+    /// The triangle's vertices.
+    pub vertices: [u32; 3],
+    /// Barycentric weights (sum 1).
+    pub weights: [Real; 3],
+    /// Index of the tool part (see [`ContactField::add_part`]).
+    pub part: u16,
+    /// k_p (N/m).
+    pub stiffness_n_per_m: Real,
+}
+
+/// A tool part swept through one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PartSweep {
+    /// The tool this part belongs to.
+    pub tool: usize,
+    /// Whether it is the tip (false: the shaft).
+    pub tip: bool,
+    /// The segment at the start of the step.
+    pub from: Segment,
+    /// The segment at the end of the step.
+    pub to: Segment,
+    /// The capsule radius (m).
+    pub radius_m: Real,
+}
+
+impl PartSweep {
+    /// The segment at fraction `s` of the step.
+    fn at(&self, s: Real) -> Segment {
+        Segment {
+            a_m: self.from.a_m.lerp(self.to.a_m, s),
+            b_m: self.from.b_m.lerp(self.to.b_m, s),
+        }
+    }
+}
+
+/// Closest point of `seg` to `x`, and its parameter along the segment.
+pub(crate) fn closest(seg: &Segment, x: Vec3) -> (Vec3, Real) {
+    let d = seg.b_m - seg.a_m;
+    let len2 = d.length_squared();
+    let t = if len2 > 0.0 {
+        ((x - seg.a_m).dot(d) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (seg.a_m + d * t, t)
+}
+
+/// Where in a step an evaluation is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SubStep {
+    /// The sub-step (s): `u` and `u_prev` are this far apart.
+    pub h_s: Real,
+    /// The whole step (s): the tools sweep across it.
+    pub step_s: Real,
+    /// The fraction of the step the tools have swept (0 to 1).
+    pub s: Real,
+}
+
+/// The contact points of one step and what they did.
+#[derive(Clone, Debug, Default)]
+pub struct ContactField {
+    points: Vec<ContactPoint>,
+    parts: Vec<PartSweep>,
+    /// Hunt-Crossley alpha (s/m).
+    damping_s_per_m: Real,
+    /// Vertices written by the last evaluation (zeroed before the next).
+    dirty: Vec<u32>,
+    /// Per tool: the sum over sub-steps of the force on the tool (N).
+    force_sum_n: Vec<Vec3>,
+    /// Per tool: the sum over sub-steps of the active points' stiffness
+    /// along their normals (N/m).
+    stiffness_sum: Vec<Mat3>,
+    evaluations: usize,
+    /// Per point: the penetration of the last evaluation (m, 0 if none).
+    penetration_m: Vec<Real>,
+}
+
+impl ContactField {
+    /// An empty field for `tools` tools with Hunt-Crossley `damping_s_per_m`.
+    pub fn new(tools: usize, damping_s_per_m: Real) -> Self {
+        Self {
+            damping_s_per_m,
+            force_sum_n: vec![Vec3::ZERO; tools],
+            stiffness_sum: vec![Mat3::ZERO; tools],
+            ..Self::default()
+        }
+    }
+
+    /// Starts a new step: no points, no parts, reactions cleared (the
+    /// vertices written last are remembered, to be zeroed).
+    pub fn clear(&mut self) {
+        self.points.clear();
+        self.parts.clear();
+        self.penetration_m.clear();
+        self.evaluations = 0;
+        self.force_sum_n.fill(Vec3::ZERO);
+        self.stiffness_sum.fill(Mat3::ZERO);
+    }
+
+    /// Drops the points (within a step, before they are selected again);
+    /// the parts and the step's reactions stay.
+    pub fn clear_points(&mut self) {
+        self.points.clear();
+        self.penetration_m.clear();
+    }
+
+    /// Adds a swept tool part; returns its index for [`ContactField::push`].
+    pub fn add_part(&mut self, part: PartSweep) -> u16 {
+        self.parts.push(part);
+        (self.parts.len() - 1) as u16
+    }
+
+    /// Adds a contact point.
+    pub fn push(&mut self, p: ContactPoint) {
+        self.points.push(p);
+        self.penetration_m.push(0.0);
+    }
+
+    /// Whether there is nothing to evaluate and nothing to zero.
+    pub fn is_idle(&self) -> bool {
+        self.points.is_empty() && self.dirty.is_empty()
+    }
+
+    /// The points of this step.
+    pub fn points(&self) -> &[ContactPoint] {
+        &self.points
+    }
+
+    /// The parts of this step.
+    pub fn parts(&self) -> &[PartSweep] {
+        &self.parts
+    }
+
+    /// Per point: its penetration at the last evaluation (m; 0: no contact).
+    pub fn penetrations_m(&self) -> &[Real] {
+        &self.penetration_m
+    }
+
+    /// Zeroes the forces the last evaluation wrote in `out`.
+    pub fn zero(&mut self, out: &mut [[Real; 3]]) {
+        for &v in &self.dirty {
+            out[v as usize] = [0.0; 3];
+        }
+        self.dirty.clear();
+    }
+
+    /// Adds to `out` the contact forces at fraction `s` of the step, for
+    /// displacements `u` and the previous sub-step's `u_prev` (`h_s` apart)
+    /// over rest positions `rest_m`. Call [`ContactField::zero`] first.
+    pub fn add_forces(
+        &mut self,
+        rest_m: &[Vec3],
+        u: &[[Real; 3]],
+        u_prev: &[[Real; 3]],
+        at: SubStep,
+        out: &mut [[Real; 3]],
+    ) {
+        let SubStep { h_s, step_s, s } = at;
+        self.evaluations += 1;
+        let alpha = self.damping_s_per_m;
+        for (i, p) in self.points.iter().enumerate() {
+            let sweep = &self.parts[p.part as usize];
+            let seg = sweep.at(s);
+            let mut x = Vec3::ZERO;
+            let mut vel = Vec3::ZERO;
+            for k in 0..3 {
+                let j = p.vertices[k] as usize;
+                let (uj, pj) = (Vec3::from_array(u[j]), Vec3::from_array(u_prev[j]));
+                x += p.weights[k] * (rest_m[j] + uj);
+                vel += p.weights[k] * (uj - pj) / h_s;
+            }
+            let (c, t) = closest(&seg, x);
+            let gap = x - c;
+            let dist = gap.length();
+            let depth = sweep.radius_m - dist;
+            if depth <= 0.0 || dist <= 1e-12 * sweep.radius_m {
+                self.penetration_m[i] = 0.0;
+                continue;
+            }
+            self.penetration_m[i] = depth;
+            let n = gap / dist;
+            let tool_vel = ((sweep.to.a_m - sweep.from.a_m)
+                + ((sweep.to.b_m - sweep.from.b_m) - (sweep.to.a_m - sweep.from.a_m)) * t)
+                / step_s;
+            let rate = (tool_vel - vel).dot(n);
+            let factor = (1.0 + alpha * rate).clamp(0.0, 2.0);
+            let f = p.stiffness_n_per_m * depth * factor;
+            for k in 0..3 {
+                let j = p.vertices[k] as usize;
+                let w = p.weights[k] * f;
+                let o = &mut out[j];
+                o[0] += w * n.x;
+                o[1] += w * n.y;
+                o[2] += w * n.z;
+                self.dirty.push(p.vertices[k]);
+            }
+            self.force_sum_n[sweep.tool] -= n * f;
+            self.stiffness_sum[sweep.tool] += outer(n, n) * p.stiffness_n_per_m;
+        }
+        // A vertex of several points is listed several times: harmless
+        // (zeroing twice), and the list stays bounded by 3 x points.
+    }
+
+    /// The mean force on tool `i` over the last step's evaluations (N).
+    pub fn force_n(&self, i: usize) -> Vec3 {
+        match (self.force_sum_n.get(i), self.evaluations) {
+            (Some(f), n) if n > 0 => *f / n as Real,
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// The mean over the last step's evaluations of the active points'
+    /// penalty stiffness along their normals on tool `i` (N/m): the
+    /// stiffness of the contact springs alone, before the tissue behind
+    /// them (see [`super::stiffness`]).
+    pub fn spring_stiffness(&self, i: usize) -> Mat3 {
+        match (self.stiffness_sum.get(i), self.evaluations) {
+            (Some(k), n) if n > 0 => *k / n as Real,
+            _ => Mat3::ZERO,
+        }
+    }
+
+    /// Evaluates once (no motion) for forces at `u`, without damping: for
+    /// quasi-static checks and the stiffness probe.
+    pub fn static_forces(&mut self, rest_m: &[Vec3], u: &[[Real; 3]], out: &mut [[Real; 3]]) {
+        let alpha = std::mem::replace(&mut self.damping_s_per_m, 0.0);
+        self.zero(out);
+        let at = SubStep {
+            h_s: 1.0,
+            step_s: 1.0,
+            s: 1.0,
+        };
+        self.add_forces(rest_m, u, u, at, out);
+        self.damping_s_per_m = alpha;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(tip_z: Real) -> (ContactField, Vec<Vec3>) {
+        let rest = vec![
+            Vec3::new(-0.01, -0.01, 0.0),
+            Vec3::new(0.01, -0.01, 0.0),
+            Vec3::new(0.0, 0.01, 0.0),
+        ];
+        let mut f = ContactField::new(1, 0.0);
+        let seg = Segment {
+            a_m: Vec3::new(0.0, 0.0, tip_z + 0.01),
+            b_m: Vec3::new(0.0, 0.0, tip_z),
+        };
+        let part = f.add_part(PartSweep {
+            tool: 0,
+            tip: true,
+            from: seg,
+            to: seg,
+            radius_m: 0.002,
+        });
+        f.push(ContactPoint {
+            vertices: [0, 1, 2],
+            weights: [0.25, 0.25, 0.5],
+            part,
+            stiffness_n_per_m: 100.0,
+        });
+        (f, rest)
+    }
+
+    #[test]
+    fn force_is_zero_at_zero_gap_and_grows_linearly_inside() {
+        // The point is at (0, 0, 0); the tip end at height z: gap = z - r.
+        for (z, expect) in [(0.0021, 0.0), (0.002, 0.0), (0.0015, 0.05), (0.001, 0.1)] {
+            let (mut f, rest) = field(z);
+            let u = vec![[0.0; 3]; 3];
+            let mut out = vec![[0.0; 3]; 3];
+            f.static_forces(&rest, &u, &mut out);
+            let tool = f.force_n(0);
+            assert!((tool.z - expect).abs() < 1e-12, "z {z}: {tool}");
+            // The tissue gets the opposite, spread by the weights.
+            let sum: Real = out.iter().map(|o| o[2]).sum();
+            assert!((sum + tool.z).abs() < 1e-12);
+            assert!((out[2][2] + 0.5 * tool.z).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn damping_never_pulls() {
+        let (mut f, rest) = field(0.0015);
+        f.damping_s_per_m = 10.0;
+        let u = vec![[0.0; 3]; 3];
+        // The tissue moves away from the tool fast (down, u_prev above u):
+        // the penetration shrinks, the factor would be negative; it is
+        // clamped to zero, not a pull.
+        let up = vec![[0.0, 0.0, 0.01]; 3];
+        let mut out = vec![[0.0; 3]; 3];
+        f.zero(&mut out);
+        let at = SubStep {
+            h_s: 1e-3,
+            step_s: 1e-3,
+            s: 1.0,
+        };
+        f.add_forces(&rest, &u, &up, at, &mut out);
+        assert!(f.force_n(0).z >= 0.0);
+        assert_eq!(f.force_n(0).z, 0.0);
+    }
+}
