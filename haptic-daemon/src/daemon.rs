@@ -1,13 +1,38 @@
-//! The real-time loop: read device -> publish pose -> drain force samples ->
-//! extrapolate -> safety -> write device -> telemetry. Everything it needs is
+//! The real-time loop: read device -> plausibility -> publish pose -> drain
+//! force samples (live ones only) -> extrapolate -> safety (with passivity)
+//! -> write device -> telemetry. Everything it needs is
 //! allocated in [`RtLoop::new`]; [`RtLoop::tick`] allocates nothing, takes
 //! no lock, and makes no system call other than what the device needs
 //! (iceoryx2's `receive` is allocation-free; publishing happens on the I/O
 //! thread, because iceoryx2 0.10's `loan` allocates).
+//!
+//! The daemon's own checks ([`ChainConfig`]):
+//!
+//! - [`crate::plausible`]: a device sample no hand could produce (or a NaN)
+//!   is rejected and the last good pose held for the simulation, the
+//!   extrapolator and the safety filter; after a run longer than its bound
+//!   the new pose becomes the reference and the force ramps in from what it
+//!   was ([`Safety::ramp_in_from_output`]). A non-finite run that long, or a
+//!   failed read, stops the force (as a non-finite request).
+//! - [`crate::live`]: a force sample whose simulated time runs faster than
+//!   wall time (a simulation fast-forwarding after a stall) is not rendered;
+//!   the extrapolator keeps the last live sample (so the safety filter's age
+//!   watchdog ramps the force down if that lasts) and the force ramps in
+//!   again from what it was when live samples resume. A gap in samples
+//!   longer than the sample-age bound already ramps down and in again.
+//! - The local model's stiffness is capped at the device's renderable
+//!   maximum, and the safety filter's passivity observer/controller sees the
+//!   device position.
+//!
+//! Counts of what these rejected land in [`Shared`] for the summary (the
+//! telemetry tick is a protocol struct and has no field for them).
 
 use crate::device::{Device, DeviceError, DeviceState};
 use crate::extrapolate::{Extrapolator, ForceSample, Method};
-use crate::safety::{Safety, SafetyConfig, SafetyState};
+use crate::live::{Live, LiveConfig, LiveError, LiveGuard};
+use crate::math::is_finite;
+use crate::plausible::{Plausible, PlausibleConfig, PlausibleError, Verdict};
+use crate::safety::{PassivityConfig, PassivityError, Safety, SafetyConfig, SafetyState};
 use crate::slots::{Flags, PoseSlot};
 use crossbeam_queue::ArrayQueue;
 use iceoryx2::port::subscriber::Subscriber;
@@ -15,6 +40,7 @@ use shared::protocol::{ForceMsg, PROTOCOL_VERSION, TelemetryTick};
 use shared::services::Ipc;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use thiserror::Error;
 
 /// What the threads share.
 pub struct Shared {
@@ -28,6 +54,16 @@ pub struct Shared {
     pub telemetry_dropped: AtomicU64,
     /// Force samples accepted.
     pub samples: AtomicU64,
+    /// Device samples rejected as implausible or non-finite.
+    pub poses_rejected: AtomicU64,
+    /// Device poses taken as a new reference after a long rejection run.
+    pub pose_rereferences: AtomicU64,
+    /// Force samples not rendered because they ran faster than wall time.
+    pub samples_not_live: AtomicU64,
+    /// Ticks on which the passivity controller added damping.
+    pub passivity_ticks: AtomicU64,
+    /// Energy the passivity controller set out to dissipate (J, f64 bits).
+    pub passivity_dissipated_j_bits: AtomicU64,
 }
 
 impl Shared {
@@ -39,7 +75,64 @@ impl Shared {
             telemetry: ArrayQueue::new(queue.max(1)),
             telemetry_dropped: AtomicU64::new(0),
             samples: AtomicU64::new(0),
+            poses_rejected: AtomicU64::new(0),
+            pose_rereferences: AtomicU64::new(0),
+            samples_not_live: AtomicU64::new(0),
+            passivity_ticks: AtomicU64::new(0),
+            passivity_dissipated_j_bits: AtomicU64::new(0f64.to_bits()),
         }
+    }
+
+    /// [`Shared::passivity_dissipated_j_bits`] as joules.
+    pub fn passivity_dissipated_j(&self) -> f64 {
+        f64::from_bits(self.passivity_dissipated_j_bits.load(Ordering::Relaxed))
+    }
+}
+
+/// The daemon's checks between the device, the simulation and the safety
+/// filter (see the module documentation), all on by default.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ChainConfig {
+    /// Device pose plausibility.
+    pub plausible: PlausibleConfig,
+    /// Force samples at real rate only.
+    pub live: LiveConfig,
+    /// The safety filter's passivity observer/controller.
+    pub passivity: PassivityConfig,
+    /// Cap on the local model's stiffness (N/m); `None`: the device's
+    /// `max_stiffness_n_per_m`.
+    pub max_stiffness_n_per_m: Option<f64>,
+}
+
+/// A [`ChainConfig`] that cannot work.
+#[derive(Clone, Copy, Debug, Error, PartialEq)]
+pub enum ChainError {
+    /// The pose plausibility limits.
+    #[error(transparent)]
+    Plausible(#[from] PlausibleError),
+    /// The live-sample limits.
+    #[error(transparent)]
+    Live(#[from] LiveError),
+    /// The passivity observer/controller.
+    #[error(transparent)]
+    Passivity(#[from] PassivityError),
+    /// The stiffness cap is not a positive finite number.
+    #[error("the stiffness cap must be a positive finite number of N/m, got {0}")]
+    MaxStiffness(f64),
+}
+
+impl ChainConfig {
+    /// Validates every part.
+    pub fn validate(&self) -> Result<(), ChainError> {
+        self.plausible.validate()?;
+        self.live.validate()?;
+        self.passivity.validate()?;
+        if let Some(k) = self.max_stiffness_n_per_m
+            && !(k.is_finite() && k > 0.0)
+        {
+            return Err(ChainError::MaxStiffness(k));
+        }
+        Ok(())
     }
 }
 
@@ -64,6 +157,8 @@ pub struct RtLoop<D: Device> {
     device: D,
     extrapolator: Extrapolator,
     safety: Safety,
+    plausible: Plausible,
+    live: LiveGuard,
     method: Method,
     subscriber: Option<Subscriber<Ipc, ForceMsg, ()>>,
     shared: Arc<Shared>,
@@ -75,7 +170,8 @@ pub struct RtLoop<D: Device> {
 
 impl<D: Device> RtLoop<D> {
     /// Everything allocated here, before the loop. `subscriber` None runs
-    /// without a simulation (tests, device checks).
+    /// without a simulation (tests, device checks). The checks of
+    /// [`ChainConfig::default`].
     pub fn new(
         device: D,
         method: Method,
@@ -83,10 +179,34 @@ impl<D: Device> RtLoop<D> {
         subscriber: Option<Subscriber<Ipc, ForceMsg, ()>>,
         shared: Arc<Shared>,
     ) -> Self {
+        Self::with_chain(
+            device,
+            method,
+            safety,
+            ChainConfig::default(),
+            subscriber,
+            shared,
+        )
+    }
+
+    /// [`RtLoop::new`] with the checks of `chain`.
+    pub fn with_chain(
+        device: D,
+        method: Method,
+        safety: SafetyConfig,
+        chain: ChainConfig,
+        subscriber: Option<Subscriber<Ipc, ForceMsg, ()>>,
+        shared: Arc<Shared>,
+    ) -> Self {
+        let max_stiffness = chain
+            .max_stiffness_n_per_m
+            .unwrap_or(device.specs().max_stiffness_n_per_m);
         Self {
             device,
-            extrapolator: Extrapolator::new(method),
-            safety: Safety::new(safety),
+            extrapolator: Extrapolator::new(method).with_max_stiffness(max_stiffness),
+            safety: Safety::new(safety).with_passivity(chain.passivity),
+            plausible: Plausible::new(chain.plausible),
+            live: LiveGuard::new(chain.live),
             method,
             subscriber,
             shared,
@@ -113,15 +233,25 @@ impl<D: Device> RtLoop<D> {
         let read = self.device.read(now_ns);
         let mut poisoned = false;
         match read {
-            Ok(s)
-                if s.position_m
-                    .iter()
-                    .chain(&s.velocity_m_s)
-                    .all(|x| x.is_finite()) =>
-            {
-                self.last = s
+            Ok(s) => {
+                // A non-finite velocity makes the whole sample non-finite.
+                let p = if is_finite(s.velocity_m_s) {
+                    s.position_m
+                } else {
+                    [f64::NAN; 3]
+                };
+                match self.plausible.check(now_ns, p) {
+                    Verdict::Accept => self.last = s,
+                    Verdict::Rereference => {
+                        self.last = s;
+                        self.safety.rebase_motion();
+                        self.safety.ramp_in_from_output(now_ns);
+                    }
+                    Verdict::Reject => {}
+                    Verdict::Lost => poisoned = true,
+                }
             }
-            _ => poisoned = true,
+            Err(_) => poisoned = true,
         }
         // 2. Pose for the simulation (published by the I/O thread).
         self.shared.pose.write(
@@ -130,7 +260,9 @@ impl<D: Device> RtLoop<D> {
             self.last.gripper,
             self.last.buttons,
         );
-        // 3. Force samples: drain, newest wins (the extrapolator keeps two).
+        // 3. Force samples: drain, newest wins (the extrapolator keeps two);
+        // samples faster than wall time are not rendered.
+        let mut resumed = false;
         if let Some(sub) = &self.subscriber {
             while let Ok(Some(sample)) = sub.receive() {
                 if sample.version != PROTOCOL_VERSION {
@@ -153,6 +285,12 @@ impl<D: Device> RtLoop<D> {
                 // rather than ignore it until its seq passes the old one.
                 if self.extrapolator.latest().is_some_and(|l| fs.seq < l.seq) {
                     self.extrapolator.reset();
+                    self.live.reset();
+                }
+                match self.live.observe(now_ns, sample.sim_time_ns) {
+                    Live::NotLive => continue,
+                    Live::Resumed => resumed = true,
+                    Live::Live => {}
                 }
                 self.extrapolator.push(&fs);
                 self.shared.samples.fetch_add(1, Ordering::Relaxed);
@@ -168,12 +306,18 @@ impl<D: Device> RtLoop<D> {
         }
         let age = self.last_sample_t_ns.map(|t| now_ns.saturating_sub(t));
         let alive = self.shared.flags.peer_alive.load(Ordering::Relaxed);
-        let out = self.safety.filter(now_ns, requested, age, alive);
+        if resumed {
+            self.safety.ramp_in_from_output(now_ns);
+        }
+        let out = self
+            .safety
+            .filter_at(now_ns, requested, self.last.position_m, age, alive);
         // 6. Device. A refused command is a fault: the next ticks ramp down.
         if self.device.write_force(out, now_ns).is_err() {
             self.safety.shutdown(now_ns);
         }
         self.last_force_n = out;
+        self.publish_counts();
         // 7. Telemetry (dropped, and counted, if the I/O thread is behind).
         let tick = TelemetryTick {
             t_ns: now_ns,
@@ -191,6 +335,26 @@ impl<D: Device> RtLoop<D> {
                 .fetch_add(1, Ordering::Relaxed);
         }
         self.tick += 1;
+    }
+
+    /// The checks' counters, for the main thread's summary.
+    fn publish_counts(&self) {
+        let s = &self.shared;
+        let p = self.safety.passivity();
+        s.poses_rejected
+            .store(self.plausible.rejected(), Ordering::Relaxed);
+        s.pose_rereferences
+            .store(self.plausible.rereferences(), Ordering::Relaxed);
+        s.samples_not_live
+            .store(self.live.not_live(), Ordering::Relaxed);
+        s.passivity_ticks.store(p.active_ticks(), Ordering::Relaxed);
+        s.passivity_dissipated_j_bits
+            .store(p.dissipated_j().to_bits(), Ordering::Relaxed);
+    }
+
+    /// The pose the loop uses (the last plausible one, m).
+    pub fn position_m(&self) -> [f64; 3] {
+        self.last.position_m
     }
 
     /// Begins the ramp to zero (stop requested).

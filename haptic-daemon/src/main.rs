@@ -1,8 +1,9 @@
 //! `haptic-daemon run`: the hard-real-time haptic loop.
 
 use anyhow::{Context, Result, bail};
+use chain_args::ChainArgs;
 use clap::{Parser, Subcommand};
-use haptic_daemon::daemon::{RtLoop, Shared};
+use haptic_daemon::daemon::{ChainConfig, RtLoop, Shared};
 use haptic_daemon::device::{
     Device, HandModel, Haply, Path, Plugin, Replay, Simulated, Trajectory,
 };
@@ -10,12 +11,16 @@ use haptic_daemon::extrapolate::Method;
 use haptic_daemon::io::{Stats, run_io};
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
+use record_cmd::{RecordArgs, record_main};
 use serde::Serialize;
 use shared::{SessionName, monotonic_ns, services};
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+
+mod chain_args;
+mod record_cmd;
 
 /// Prints to stderr, ignoring failures: a closed pipe must never panic the
 /// process while the real-time thread is commanding a device.
@@ -55,63 +60,6 @@ enum Command {
 }
 
 #[derive(clap::Args)]
-struct RecordArgs {
-    /// Session to record.
-    #[arg(long, default_value = "default")]
-    session: String,
-    /// Force samples CSV (one row per tool per simulation step).
-    #[arg(long)]
-    forces: Option<PathBuf>,
-    /// Telemetry CSV (one row per haptic tick, the `run --record` columns).
-    #[arg(long)]
-    telemetry: Option<PathBuf>,
-    /// Stop after this many seconds.
-    #[arg(long)]
-    duration_s: Option<f64>,
-    /// Write the counts (received, gaps, lost, restarts per stream) as JSON here.
-    #[arg(long)]
-    json: Option<PathBuf>,
-}
-
-fn record_main(args: RecordArgs) -> Result<()> {
-    if args.forces.is_none() && args.telemetry.is_none() && args.json.is_none() {
-        bail!("nothing to record: give --forces FILE, --telemetry FILE or --json FILE");
-    }
-    if let Some(d) = args.duration_s
-        && !(d.is_finite() && d > 0.0)
-    {
-        bail!("--duration-s must be a positive number of seconds");
-    }
-    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(sig, stop.clone())?;
-    }
-    let cfg = haptic_daemon::record::RecordConfig {
-        session: SessionName::new(&args.session)?,
-        forces: args.forces,
-        telemetry: args.telemetry,
-        duration_s: args.duration_s,
-    };
-    let s = haptic_daemon::record::record(&cfg, &stop)?;
-    eprintln!(
-        "recorded {} force samples ({} gaps, {} lost, {} restarts), {} ticks ({} gaps, {} lost, {} restarts)",
-        s.forces.received,
-        s.forces.gaps,
-        s.forces.lost,
-        s.forces.restarts,
-        s.telemetry.received,
-        s.telemetry.gaps,
-        s.telemetry.lost,
-        s.telemetry.restarts
-    );
-    if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&s)? + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
-    }
-    Ok(())
-}
-
-#[derive(clap::Args)]
 struct RunArgs {
     /// simulated (a hand poking along z), simulated:FILE.csv (a hand following a
     /// trajectory), replay:FILE.csv (open-loop positions), plugin:LIB.so[:ARGS]
@@ -129,6 +77,10 @@ struct RunArgs {
     /// Force limit (N); at most the device's own.
     #[arg(long)]
     max_force: Option<f64>,
+    /// The daemon's checks (pose plausibility, live samples, stiffness
+    /// cap, passivity).
+    #[command(flatten)]
+    chain: ChainArgs,
     /// Session name shared with the simulation.
     #[arg(long, default_value = "default")]
     session: String,
@@ -175,7 +127,14 @@ struct Summary {
     force_limit_n: f64,
     extrapolation: &'static str,
     device: String,
+    max_stiffness_n_per_m: f64,
     samples_received: u64,
+    samples_not_live: u64,
+    poses_rejected: u64,
+    pose_rereferences: u64,
+    passivity: bool,
+    passivity_active_ticks: u64,
+    passivity_dissipated_j: f64,
     telemetry_dropped: u64,
     overruns: u64,
     recorded_rows: u64,
@@ -238,12 +197,12 @@ enum DeviceChoice {
 }
 
 impl DeviceChoice {
-    fn max_force_n(&self) -> f64 {
+    fn specs(&self) -> haptic_daemon::device::DeviceSpecs {
         match self {
-            DeviceChoice::Simulated(d) => d.specs().max_force_n,
-            DeviceChoice::Replay(d) => d.specs().max_force_n,
-            DeviceChoice::Plugin(d) => d.specs().max_force_n,
-            DeviceChoice::Haply(d) => d.specs().max_force_n,
+            DeviceChoice::Simulated(d) => d.specs(),
+            DeviceChoice::Replay(d) => d.specs(),
+            DeviceChoice::Plugin(d) => d.specs(),
+            DeviceChoice::Haply(d) => d.specs(),
         }
     }
 }
@@ -268,7 +227,7 @@ fn main() -> Result<()> {
     })?;
     let session = SessionName::new(&args.session)?;
     let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N)?;
-    let device_max = device.max_force_n();
+    let device_max = device.specs().max_force_n;
     let limit = match args.max_force {
         Some(f) if !(f.is_finite() && f > 0.0) => {
             bail!("--max-force must be a positive number of newtons")
@@ -280,6 +239,10 @@ fn main() -> Result<()> {
         None => device_max,
     };
     let safety = SafetyConfig::new(limit)?;
+    let chain = args.chain.config(device.specs().max_stiffness_n_per_m)?;
+    let stiffness_cap = chain
+        .max_stiffness_n_per_m
+        .unwrap_or(device.specs().max_stiffness_n_per_m);
     let shared = Arc::new(Shared::new(1 << 16));
     let stop_signal = Arc::new(std::sync::atomic::AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -324,18 +287,46 @@ fn main() -> Result<()> {
                     services::FORCE_BUFFER_LATEST,
                 )?;
                 let result = match device {
-                    DeviceChoice::Simulated(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
-                    }
-                    DeviceChoice::Replay(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
-                    }
-                    DeviceChoice::Plugin(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
-                    }
-                    DeviceChoice::Haply(d) => {
-                        run_loop(d, method, safety, sub, shared.clone(), period_ns, spin_ns)
-                    }
+                    DeviceChoice::Simulated(d) => run_loop(
+                        d,
+                        method,
+                        safety,
+                        chain,
+                        sub,
+                        shared.clone(),
+                        period_ns,
+                        spin_ns,
+                    ),
+                    DeviceChoice::Replay(d) => run_loop(
+                        d,
+                        method,
+                        safety,
+                        chain,
+                        sub,
+                        shared.clone(),
+                        period_ns,
+                        spin_ns,
+                    ),
+                    DeviceChoice::Plugin(d) => run_loop(
+                        d,
+                        method,
+                        safety,
+                        chain,
+                        sub,
+                        shared.clone(),
+                        period_ns,
+                        spin_ns,
+                    ),
+                    DeviceChoice::Haply(d) => run_loop(
+                        d,
+                        method,
+                        safety,
+                        chain,
+                        sub,
+                        shared.clone(),
+                        period_ns,
+                        spin_ns,
+                    ),
                 };
                 shared.flags.rt_done.store(true, Ordering::Release);
                 result
@@ -368,13 +359,16 @@ fn main() -> Result<()> {
             };
             let f = s.last_force_n;
             say!(
-                "{rate:7.0} Hz | lateness p50 {:.0} us p99 {:.0} us max {:.0} us | sample age {age} | force {:+.3} {:+.3} {:+.3} N | {}",
+                "{rate:7.0} Hz | lateness p50 {:.0} us p99 {:.0} us max {:.0} us | sample age {age} | force {:+.3} {:+.3} {:+.3} N | rejected {} poses, {} samples | passivity {} ticks | {}",
                 s.lateness.quantile_us(0.5),
                 s.lateness.quantile_us(0.99),
                 s.lateness.max_us(),
                 f[0],
                 f[1],
                 f[2],
+                shared.poses_rejected.load(Ordering::Relaxed),
+                shared.samples_not_live.load(Ordering::Relaxed),
+                shared.passivity_ticks.load(Ordering::Relaxed),
                 if shared.flags.peer_alive.load(Ordering::Relaxed) {
                     "sim connected"
                 } else {
@@ -414,14 +408,21 @@ fn main() -> Result<()> {
         force_limit_n: limit,
         extrapolation: method.name(),
         device: args.device.clone(),
+        max_stiffness_n_per_m: stiffness_cap,
         samples_received: shared.samples.load(Ordering::Relaxed),
+        samples_not_live: shared.samples_not_live.load(Ordering::Relaxed),
+        poses_rejected: shared.poses_rejected.load(Ordering::Relaxed),
+        pose_rereferences: shared.pose_rereferences.load(Ordering::Relaxed),
+        passivity: chain.passivity.enabled,
+        passivity_active_ticks: shared.passivity_ticks.load(Ordering::Relaxed),
+        passivity_dissipated_j: shared.passivity_dissipated_j(),
         telemetry_dropped: shared.telemetry_dropped.load(Ordering::Relaxed),
         overruns,
         recorded_rows: s.recorded,
         warnings,
     };
     out!(
-        "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples",
+        "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples ({} not live) | {} poses rejected ({} new references) | passivity damped {} ticks",
         summary.ticks,
         summary.rate_hz,
         summary.target_rate_hz,
@@ -431,7 +432,11 @@ fn main() -> Result<()> {
         summary.lateness_us.max,
         summary.max_force_n,
         summary.force_limit_n,
-        summary.samples_received
+        summary.samples_received,
+        summary.samples_not_live,
+        summary.poses_rejected,
+        summary.pose_rereferences,
+        summary.passivity_active_ticks
     );
     for w in &summary.warnings {
         say!("warning: {w}");
@@ -446,16 +451,18 @@ fn main() -> Result<()> {
 /// The loop on the RT thread: ticks until stop, then ramps the force to zero
 /// and disables the device. A panic inside is caught so the device is still
 /// zeroed and disabled. Returns (ticks, overruns).
+#[allow(clippy::too_many_arguments)] // the loop's whole configuration, passed once
 fn run_loop<D: Device>(
     device: D,
     method: Method,
     safety: SafetyConfig,
+    chain: ChainConfig,
     sub: iceoryx2::port::subscriber::Subscriber<services::Ipc, shared::protocol::ForceMsg, ()>,
     shared: Arc<Shared>,
     period_ns: u64,
     spin_ns: u64,
 ) -> Result<(u64, u64)> {
-    let mut rt = RtLoop::new(device, method, safety, Some(sub), shared.clone());
+    let mut rt = RtLoop::with_chain(device, method, safety, chain, Some(sub), shared.clone());
     let start = monotonic_ns();
     rt.enable(start)?;
     let mut pacer = Pacer::new(period_ns, start).with_spin(spin_ns);

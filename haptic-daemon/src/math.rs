@@ -114,6 +114,51 @@ pub fn step_toward(from: V3, to: V3, max_step: f64) -> V3 {
     add(from, scale(d, max_step / n))
 }
 
+/// Frobenius norm of a matrix (an upper bound of its spectral norm, at most
+/// `sqrt(3)` times it for a 3x3 matrix). NaN or inf for non-finite entries.
+pub fn frobenius(m: &M3) -> f64 {
+    let rows = [norm(m[0]), norm(m[1]), norm(m[2])];
+    norm(rows)
+}
+
+/// Spectral norm (largest singular value) of a 3x3 matrix: the largest
+/// gain `|m a| / |a|`, equal to the largest `|eigenvalue|` of a symmetric
+/// matrix. Closed form (the largest eigenvalue of the symmetric `m^T m` by
+/// the trigonometric method), clamped into `[|m|_F / sqrt(3), |m|_F]`, the
+/// bounds any 3x3 matrix satisfies, so rounding can never make it exceed
+/// the conservative Frobenius norm. NaN or inf for non-finite entries.
+pub fn spectral_norm(m: &M3) -> f64 {
+    let f = frobenius(m);
+    if !f.is_finite() || f == 0.0 {
+        return f;
+    }
+    // Work on m / |m|_F so that m^T m cannot overflow or underflow.
+    let a: M3 = std::array::from_fn(|i| scale(m[i], 1.0 / f));
+    // b = a^T a (symmetric, positive semi-definite, trace 1).
+    let b: M3 =
+        std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[k][i] * a[k][j]).sum()));
+    let p1 = b[0][1].powi(2) + b[0][2].powi(2) + b[1][2].powi(2);
+    let q = (b[0][0] + b[1][1] + b[2][2]) / 3.0;
+    let p2 = (b[0][0] - q).powi(2) + (b[1][1] - q).powi(2) + (b[2][2] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    let lambda_max = if p <= 1e-300 {
+        q
+    } else {
+        // c = (b - q I) / p; r = det(c) / 2 lies in [-1, 1] up to rounding.
+        let c: M3 = std::array::from_fn(|i| {
+            std::array::from_fn(|j| (b[i][j] - if i == j { q } else { 0.0 }) / p)
+        });
+        let det = c[0][0] * (c[1][1] * c[2][2] - c[1][2] * c[2][1])
+            - c[0][1] * (c[1][0] * c[2][2] - c[1][2] * c[2][0])
+            + c[0][2] * (c[1][0] * c[2][1] - c[1][1] * c[2][0]);
+        let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+        q + 2.0 * p * phi.cos()
+    };
+    // lambda_max of a^T a is sigma_max^2 / |m|_F^2, in [1/3, 1].
+    let ratio = lambda_max.clamp(1.0 / 3.0, 1.0).sqrt();
+    f * ratio
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -136,6 +181,32 @@ mod tests {
         assert!((n / 1e200 - 3f64.sqrt()).abs() < 1e-12);
         assert!(norm([f64::NAN, 0.0, 0.0]).is_nan());
         assert_eq!(norm([f64::NEG_INFINITY, 0.0, 0.0]), f64::INFINITY);
+    }
+
+    #[test]
+    fn matrix_norms() {
+        let d = [[100.0, 0.0, 0.0], [0.0, -300.0, 0.0], [0.0, 0.0, 200.0]];
+        assert!((spectral_norm(&d) - 300.0).abs() < 1e-9);
+        assert!((frobenius(&d) - (14e4f64).sqrt()).abs() < 1e-9);
+        // Rank one k n n^T: both norms are k.
+        let n = [0.6, 0.0, 0.8];
+        let r: M3 = std::array::from_fn(|i| scale(n, 500.0 * n[i]));
+        assert!((spectral_norm(&r) - 500.0).abs() < 1e-9);
+        assert!((frobenius(&r) - 500.0).abs() < 1e-9);
+        // Isotropic: the Frobenius norm is sqrt(3) too large.
+        let i3 = [[7.0, 0.0, 0.0], [0.0, 7.0, 0.0], [0.0, 0.0, 7.0]];
+        assert!((spectral_norm(&i3) - 7.0).abs() < 1e-9);
+        // Non-symmetric: [[0, 10, 0], 0, 0] maps y to 10 x.
+        let s = [[0.0, 10.0, 0.0], [0.0; 3], [0.0; 3]];
+        assert!((spectral_norm(&s) - 10.0).abs() < 1e-9);
+        // A rotation-like shear: singular values of [[1, 1], [0, 1]] are
+        // the golden ratio and its inverse.
+        let sh = [[1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]];
+        assert!((spectral_norm(&sh) - (1.0 + 5f64.sqrt()) / 2.0).abs() < 1e-9);
+        assert_eq!(spectral_norm(&[[0.0; 3]; 3]), 0.0);
+        assert!(spectral_norm(&[[f64::NAN; 3]; 3]).is_nan());
+        let huge = [[1e300; 3]; 3];
+        assert!(spectral_norm(&huge).is_finite());
     }
 
     #[test]

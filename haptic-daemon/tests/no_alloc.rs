@@ -1,11 +1,16 @@
-//! `Extrapolator::push`/`force` and `Safety::filter`/`shutdown` allocate
+//! `Extrapolator::push`/`force` (with a stiffness cap),
+//! `Safety::filter_at`/`shutdown`/`ramp_in_from_output` (with the passivity
+//! controller), `Plausible::check` and `LiveGuard::observe` allocate
 //! nothing: a counting global allocator counts allocations made on this
 //! thread during 10,000 ticks per method (samples every 3rd tick, NaN
 //! samples and requests, stale and dead-peer spells, backward clock steps,
-//! and a shutdown at the end).
+//! device glitches and a re-home, a fast-forward burst, and a shutdown at
+//! the end).
 
 use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
-use haptic_daemon::safety::{Safety, SafetyConfig, SafetyState, StopReason};
+use haptic_daemon::live::{Live, LiveConfig, LiveGuard};
+use haptic_daemon::plausible::{Plausible, PlausibleConfig, Verdict};
+use haptic_daemon::safety::{PassivityConfig, Safety, SafetyConfig, SafetyState, StopReason};
 use shared::alloc_count::{Counting, count};
 
 #[global_allocator]
@@ -34,8 +39,13 @@ fn sample(k: u64, now: u64) -> ForceSample {
 #[test]
 fn ten_thousand_ticks_allocate_nothing() {
     for method in Method::ALL {
-        let mut e = Extrapolator::new(method);
-        let mut safety = Safety::new(SafetyConfig::new(5.0).unwrap());
+        let mut e = Extrapolator::new(method).with_max_stiffness(400.0);
+        let mut safety =
+            Safety::new(SafetyConfig::new(5.0).unwrap()).with_passivity(PassivityConfig::default());
+        let mut plausible = Plausible::new(PlausibleConfig::default());
+        let mut live = LiveGuard::new(LiveConfig::default());
+        let mut held = [0.0; 3];
+        let mut sim_ns = 0u64;
         let t0 = 1_000 * MS;
         let mut last_sample_t: Option<u64> = None;
         let mut max_out = 0.0f64;
@@ -48,10 +58,24 @@ fn ten_thousand_ticks_allocate_nothing() {
                 } else {
                     t0 + k * MS
                 };
-                // Samples every 3rd tick, except for a 100 ms gap (stale).
+                // Samples every 3rd tick, except for a 100 ms gap (stale),
+                // and a fast-forward burst (20 ms of simulated time each).
                 if k.is_multiple_of(3) && !(3000..3100).contains(&k) {
-                    e.push(&sample(k, now));
-                    last_sample_t = Some(now);
+                    sim_ns += if (7000..7300).contains(&k) {
+                        20 * MS
+                    } else {
+                        3 * MS
+                    };
+                    match live.observe(now, sim_ns) {
+                        Live::NotLive => {}
+                        v => {
+                            if v == Live::Resumed {
+                                safety.ramp_in_from_output(now);
+                            }
+                            e.push(&sample(k, now));
+                            last_sample_t = Some(now);
+                        }
+                    }
                 }
                 let x = k as f64 * 1e-3;
                 let position = [
@@ -63,7 +87,27 @@ fn ten_thousand_ticks_allocate_nothing() {
                         0.05 - x.sin() * 0.012
                     },
                 ];
-                let mut requested = e.force(now, position);
+                // Device glitches (1 m away for 5 ticks), NaN, and a re-home.
+                let mut device = position;
+                if k % 1000 < 5 {
+                    device[0] += 1.0;
+                }
+                if k % 777 == 3 {
+                    device[1] = f64::NAN;
+                }
+                if k >= 8000 {
+                    device[0] += 0.2;
+                }
+                match plausible.check(now, device) {
+                    Verdict::Accept => held = device,
+                    Verdict::Rereference => {
+                        held = device;
+                        safety.rebase_motion();
+                        safety.ramp_in_from_output(now);
+                    }
+                    Verdict::Reject | Verdict::Lost => {}
+                }
+                let mut requested = e.force(now, held);
                 if k.is_multiple_of(1234) {
                     requested[1] = f64::NAN;
                 }
@@ -72,7 +116,7 @@ fn ten_thousand_ticks_allocate_nothing() {
                 if k == 9_900 {
                     safety.shutdown(now);
                 }
-                let out = safety.filter(now, requested, age, alive);
+                let out = safety.filter_at(now, requested, held, age, alive);
                 max_out = max_out.max(out.iter().fold(0.0, |m, v| m.max(v.abs())));
                 std::hint::black_box(out);
             }
@@ -90,5 +134,7 @@ fn ten_thousand_ticks_allocate_nothing() {
             method.name()
         );
         assert_eq!(safety.state(), SafetyState::Stopped(StopReason::Shutdown));
+        assert!(plausible.rejected() > 0 && plausible.rereferences() > 0);
+        assert!(live.not_live() > 0);
     }
 }

@@ -1,10 +1,14 @@
 //! The real-time tick allocates nothing: a counting global allocator counts
 //! allocations made on this thread while `RtLoop::tick` runs, over 10,000
 //! ticks per extrapolation method, with force samples arriving through a
-//! real iceoryx2 subscriber (published between ticks, outside the count).
+//! real iceoryx2 subscriber (published between ticks, outside the count),
+//! a fast-forward burst among them, and a device that glitches, reports NaN
+//! and is re-homed.
 
 use haptic_daemon::daemon::{RtLoop, Shared};
-use haptic_daemon::device::{HandModel, Path, Simulated};
+use haptic_daemon::device::{
+    Device, DeviceError, DeviceSpecs, DeviceState, HandModel, Path, Simulated,
+};
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::safety::SafetyConfig;
 use shared::alloc_count::{Counting, count};
@@ -14,6 +18,40 @@ use std::sync::Arc;
 
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
+
+/// The simulated hand with glitches: 1 m away for 5 ticks every second,
+/// NaN every 777th tick, and re-homed 20 cm aside from tick 8000.
+struct Glitchy(Simulated, u64);
+
+impl Device for Glitchy {
+    fn specs(&self) -> DeviceSpecs {
+        self.0.specs()
+    }
+    fn enable(&mut self, now_ns: u64) -> Result<(), DeviceError> {
+        self.0.enable(now_ns)
+    }
+    fn disable(&mut self) {
+        self.0.disable()
+    }
+    fn read(&mut self, now_ns: u64) -> Result<DeviceState, DeviceError> {
+        let mut s = self.0.read(now_ns)?;
+        let k = self.1;
+        self.1 += 1;
+        if k % 1000 < 5 {
+            s.position_m[0] += 1.0;
+        }
+        if k % 777 == 3 {
+            s.position_m[1] = f64::NAN;
+        }
+        if k >= 8000 {
+            s.position_m[0] += 0.2;
+        }
+        Ok(s)
+    }
+    fn write_force(&mut self, force_n: [f64; 3], now_ns: u64) -> Result<(), DeviceError> {
+        self.0.write_force(force_n, now_ns)
+    }
+}
 
 #[test]
 fn ten_thousand_ticks_allocate_nothing() {
@@ -27,15 +65,18 @@ fn ten_thousand_ticks_allocate_nothing() {
             .flags
             .peer_alive
             .store(true, std::sync::atomic::Ordering::Relaxed);
-        let device = Simulated::new(
-            Path::Poke {
-                start_m: [0.0, 0.0, 0.05],
-                direction: [0.0, 0.0, -1.0],
-                depth_m: 0.02,
-                period_s: 1.0,
-            },
-            HandModel::default(),
-            8.0,
+        let device = Glitchy(
+            Simulated::new(
+                Path::Poke {
+                    start_m: [0.0, 0.0, 0.05],
+                    direction: [0.0, 0.0, -1.0],
+                    depth_m: 0.02,
+                    period_s: 1.0,
+                },
+                HandModel::default(),
+                8.0,
+            ),
+            0,
         );
         let sub = services::subscriber(&factory).unwrap();
         let mut rt = RtLoop::new(
@@ -48,14 +89,18 @@ fn ten_thousand_ticks_allocate_nothing() {
         let t0 = 1_000_000_000u64;
         rt.enable(t0).unwrap();
         let mut allocations = 0;
+        let mut sim_ns = 0u64;
         for k in 0..10_000u64 {
             let now = t0 + k * 1_000_000;
             if k % 3 == 0 {
+                // A fast-forward burst: 20 ms of simulated time per 3 ms.
+                sim_ns += if (6000..6300).contains(&k) { 20 } else { 3 } * 1_000_000;
                 let mut msg = ForceMsg {
                     version: PROTOCOL_VERSION,
                     tool_count: 1,
                     seq: k,
                     t_ns: now,
+                    sim_time_ns: sim_ns,
                     ..ForceMsg::default()
                 };
                 msg.tools[0].force_n = [0.0, 0.0, (k as f64 * 1e-3).sin()];
@@ -75,7 +120,11 @@ fn ten_thousand_ticks_allocate_nothing() {
             "{}: {allocations} allocations in 10,000 ticks",
             method.name()
         );
-        assert!(shared.samples.load(std::sync::atomic::Ordering::Relaxed) > 3000);
+        let load = |a: &std::sync::atomic::AtomicU64| a.load(std::sync::atomic::Ordering::Relaxed);
+        assert!(load(&shared.samples) > 3000);
+        assert!(load(&shared.samples_not_live) > 0);
+        assert!(load(&shared.poses_rejected) > 0);
+        assert!(load(&shared.pose_rereferences) > 0);
         let f = rt.last_force_n();
         assert!(f.iter().all(|x| x.is_finite()));
     }

@@ -20,6 +20,34 @@ pub use trajectory::{Trajectory, TrajectoryError};
 use crate::math::V3;
 use thiserror::Error;
 
+/// Largest stiffness a 3D Systems Touch (Phantom Omni class) renders
+/// stably (N/m). Its data sheet gives 1-2.3 N/mm per axis for the device's
+/// own servo loop; behind a simulation, extrapolation and a 1 kHz loop,
+/// about 400 N/m renders without buzz.
+pub const TOUCH_MAX_STIFFNESS_N_PER_M: f64 = 400.0;
+/// Largest stiffness a Novint Falcon renders stably (N/m), about 3 N/mm,
+/// under the same conditions.
+pub const FALCON_MAX_STIFFNESS_N_PER_M: f64 = 3000.0;
+/// Largest stiffness a Force Dimension omega.x renders stably (N/m), about
+/// 5 N/mm under the same conditions (its closed-loop stiffness on its own
+/// controller is higher).
+pub const OMEGA_MAX_STIFFNESS_N_PER_M: f64 = 5000.0;
+/// The simulated and replayed devices' stiffness limit (N/m): a Falcon-class
+/// device, the middle of the range above, so that what runs on them would
+/// also run on common hardware.
+pub const SIMULATED_MAX_STIFFNESS_N_PER_M: f64 = FALCON_MAX_STIFFNESS_N_PER_M;
+
+/// The stiffness limit of a named device class (`touch`, `falcon`, `omega`;
+/// N/m), for the command line.
+pub fn max_stiffness_preset(name: &str) -> Option<f64> {
+    match name {
+        "touch" => Some(TOUCH_MAX_STIFFNESS_N_PER_M),
+        "falcon" => Some(FALCON_MAX_STIFFNESS_N_PER_M),
+        "omega" => Some(OMEGA_MAX_STIFFNESS_N_PER_M),
+        _ => None,
+    }
+}
+
 /// What a device can do, from its specifications.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DeviceSpecs {
@@ -27,7 +55,8 @@ pub struct DeviceSpecs {
     pub name: &'static str,
     /// Largest force it may be commanded (N).
     pub max_force_n: f64,
-    /// Largest stiffness it renders stably (N/m).
+    /// Largest stiffness it renders stably (N/m); the local model's
+    /// stiffness is capped at it.
     pub max_stiffness_n_per_m: f64,
     /// Workspace bounds (m).
     pub workspace_min_m: V3,

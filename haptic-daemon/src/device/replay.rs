@@ -29,7 +29,7 @@ impl Device for Replay {
         DeviceSpecs {
             name: "replay",
             max_force_n: self.max_force_n,
-            max_stiffness_n_per_m: 2000.0,
+            max_stiffness_n_per_m: super::SIMULATED_MAX_STIFFNESS_N_PER_M,
             workspace_min_m: [-1.0; 3],
             workspace_max_m: [1.0; 3],
         }

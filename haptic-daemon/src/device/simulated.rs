@@ -130,7 +130,7 @@ impl Device for Simulated {
         DeviceSpecs {
             name: "simulated",
             max_force_n: self.max_force_n,
-            max_stiffness_n_per_m: 3000.0,
+            max_stiffness_n_per_m: super::SIMULATED_MAX_STIFFNESS_N_PER_M,
             workspace_min_m: [-0.3; 3],
             workspace_max_m: [0.3; 3],
         }

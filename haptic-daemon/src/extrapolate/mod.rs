@@ -25,8 +25,11 @@
 //!   gives `F_n`; the factor is clamped to `[-2, 2]` (signed) or `[0, 2]`
 //!   (paper) ([`MAX_POSITION_FACTOR`]).
 //! - Local model: a sample not in contact counts as zero stiffness, i.e.
-//!   `F_n`. The displacement is not capped (the model is linear; the safety
-//!   filter clamps the magnitude).
+//!   `F_n`. The stiffness is capped at [`Extrapolator::with_max_stiffness`]
+//!   (the device's renderable maximum; no cap by default) and the result is
+//!   made unilateral ([`local`]): it never pulls along the contact normal
+//!   `F_n / |F_n|` and releases to exactly zero when the tool leaves. The
+//!   displacement is not capped (the safety filter clamps the magnitude).
 //! - Any method whose result is not finite (a NaN or infinite query
 //!   position, or an overflow from huge but finite samples) gives `F_n`,
 //!   which is finite because only finite samples are stored. Hence
@@ -34,14 +37,18 @@
 //!
 //! Bound: with `|factor| <= 2`, the two-sample methods give
 //! `|F| <= 3 |F_n| + 2 |F_n-1|`, and the local model
-//! `|F| <= |F_n| + |K|_Frobenius |P_n - P|`.
+//! `|F| <= |F_n| + min(|K|_2, cap) |P_n - P|` (the unilateral projection
+//! only shortens the force).
 
 mod formulas;
+pub mod local;
 
 pub use formulas::{
     MAX_POSITION_FACTOR, MAX_TIME_FACTOR, MIN_STEP_M, linear, local_model, paper_position_factor,
     signed_position_factor, time_factor,
 };
+
+pub use local::{MIN_NORMAL_FORCE_N, cap_stiffness, local_model_unilateral, unilateral};
 
 use crate::math::{M3, V3, ZERO, is_finite, is_finite_m3};
 
@@ -117,18 +124,38 @@ impl Method {
 #[derive(Clone, Copy, Debug)]
 pub struct Extrapolator {
     method: Method,
+    /// Cap on the local model's stiffness (N/m; infinite: none).
+    max_stiffness_n_per_m: f64,
     prev: Option<ForceSample>,
     last: Option<ForceSample>,
 }
 
 impl Extrapolator {
-    /// No sample yet.
+    /// No sample yet, no stiffness cap.
     pub fn new(method: Method) -> Self {
         Self {
             method,
+            max_stiffness_n_per_m: f64::INFINITY,
             prev: None,
             last: None,
         }
+    }
+
+    /// The same with the local model's stiffness capped at
+    /// `max_stiffness_n_per_m` (N/m, spectral norm; see [`cap_stiffness`]).
+    /// A cap that is not a positive number means no cap.
+    pub fn with_max_stiffness(mut self, max_stiffness_n_per_m: f64) -> Self {
+        self.max_stiffness_n_per_m = if max_stiffness_n_per_m > 0.0 {
+            max_stiffness_n_per_m
+        } else {
+            f64::INFINITY
+        };
+        self
+    }
+
+    /// The local model's stiffness cap (N/m; infinite: none).
+    pub fn max_stiffness_n_per_m(&self) -> f64 {
+        self.max_stiffness_n_per_m
     }
 
     /// The method.
@@ -172,9 +199,13 @@ impl Extrapolator {
         let f_n = last.force_n;
         let f = match (self.method, self.prev.as_ref()) {
             (Method::Constant, _) => f_n,
-            (Method::LocalModel, _) if last.in_contact => {
-                local_model(f_n, &last.stiffness_n_per_m, last.position_m, position_m)
-            }
+            (Method::LocalModel, _) if last.in_contact => local_model_unilateral(
+                f_n,
+                &last.stiffness_n_per_m,
+                self.max_stiffness_n_per_m,
+                last.position_m,
+                position_m,
+            ),
             (Method::LocalModel, _) => f_n,
             (_, None) => f_n,
             (Method::LinearTime, Some(prev)) => time_factor(prev.t_ns, last.t_ns, now_ns)

@@ -42,8 +42,33 @@
 //!
 //! A [`SafetyConfig`] that fails validation (its fields are public) makes
 //! the filter output zero force forever: the limit is taken as 0 N.
+//!
+//! # Ramping in again while active
+//!
+//! [`Safety::ramp_in_from_output`] restarts the ramp-in from the current
+//! output instead of from zero: over `ramp_in_ns` the output blends from
+//! that force to the request (`F_from (1 - g) + g F_request`, the ordinary
+//! ramp-in being the case `F_from = 0`), clamped and slew-limited as
+//! always. The daemon calls it when its inputs jump for a reason it knows
+//! (the device pose was re-referenced after implausible samples, force
+//! samples are live again after a fast-forward), so the jump reaches the
+//! hand as a ramp, not a step. In any other state it does nothing (those
+//! ramp in from zero by themselves).
+//!
+//! # Passivity
+//!
+//! [`Safety::filter_at`] also takes the device position: the passivity
+//! observer/controller ([`passivity`], Hannaford and Ryu 2002) watches the
+//! energy the output puts into the hand and, in `RampingIn` / `Active`,
+//! adds damping along the motion while the environment has generated more
+//! than its tolerance. The damping goes through the same clamp and slew
+//! limit, so every invariant above still holds. [`Safety::filter`] (no
+//! position) leaves it out.
 
 mod config;
+pub mod passivity;
+#[cfg(test)]
+mod passivity_tests;
 #[cfg(test)]
 mod tests;
 
@@ -52,7 +77,9 @@ pub use config::{
     SafetyConfig, SafetyError,
 };
 
-use crate::math::{V3, ZERO, clamp_norm, is_finite, scale, step_toward};
+pub use passivity::{Passivity, PassivityConfig, PassivityError};
+
+use crate::math::{V3, ZERO, add, clamp_norm, is_finite, scale, step_toward};
 
 /// Why the force was (or is being) brought to zero.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -138,6 +165,10 @@ pub struct Safety {
     ramp_start_ns: u64,
     /// The output when the current ramp-down began.
     ramp_from_n: V3,
+    /// The force the current ramp-in starts from (zero unless restarted by
+    /// [`Safety::ramp_in_from_output`]).
+    ramp_in_from_n: V3,
+    passivity: Passivity,
 }
 
 impl Safety {
@@ -156,6 +187,36 @@ impl Safety {
             clock_ns: None,
             ramp_start_ns: 0,
             ramp_from_n: ZERO,
+            ramp_in_from_n: ZERO,
+            passivity: Passivity::new(PassivityConfig::OFF),
+        }
+    }
+
+    /// The same with the passivity observer/controller configured (off by
+    /// default in [`Safety::new`]; the daemon turns it on).
+    pub fn with_passivity(mut self, cfg: PassivityConfig) -> Self {
+        self.passivity = Passivity::new(cfg);
+        self
+    }
+
+    /// The passivity observer/controller.
+    pub fn passivity(&self) -> &Passivity {
+        &self.passivity
+    }
+
+    /// Forgets the previous device position (the pose was re-referenced:
+    /// its jump is not motion under the force).
+    pub fn rebase_motion(&mut self) {
+        self.passivity.rebase();
+    }
+
+    /// Restarts the ramp-in from the current output (see the module
+    /// documentation); only in `RampingIn` and `Active`.
+    pub fn ramp_in_from_output(&mut self, now_ns: u64) {
+        if matches!(self.state, SafetyState::RampingIn | SafetyState::Active) {
+            self.state = SafetyState::RampingIn;
+            self.ramp_start_ns = self.clock_ns.map_or(now_ns, |c| c.max(now_ns));
+            self.ramp_in_from_n = self.out_n;
         }
     }
 
@@ -184,9 +245,42 @@ impl Safety {
         sample_age_ns: Option<u64>,
         peer_alive: bool,
     ) -> V3 {
+        self.filter_inner(now_ns, requested_n, None, sample_age_ns, peer_alive)
+    }
+
+    /// [`Safety::filter`] with the device position at `now_ns` (m), for the
+    /// passivity observer/controller (see the module documentation).
+    pub fn filter_at(
+        &mut self,
+        now_ns: u64,
+        requested_n: V3,
+        position_m: V3,
+        sample_age_ns: Option<u64>,
+        peer_alive: bool,
+    ) -> V3 {
+        self.filter_inner(
+            now_ns,
+            requested_n,
+            Some(position_m),
+            sample_age_ns,
+            peer_alive,
+        )
+    }
+
+    fn filter_inner(
+        &mut self,
+        now_ns: u64,
+        requested_n: V3,
+        position_m: Option<V3>,
+        sample_age_ns: Option<u64>,
+        peer_alive: bool,
+    ) -> V3 {
         let t = self.clock_ns.map_or(now_ns, |c| c.max(now_ns));
         let dt_ns = self.clock_ns.map_or(0, |c| t - c);
         self.clock_ns = Some(t);
+        if let Some(x) = position_m {
+            self.passivity.observe(x, dt_ns, self.out_n, requested_n);
+        }
         let fault = fault_of(
             requested_n,
             sample_age_ns,
@@ -203,6 +297,7 @@ impl Safety {
                 None => {
                     self.state = SafetyState::RampingIn;
                     self.ramp_start_ns = t;
+                    self.ramp_in_from_n = ZERO;
                 }
             },
             SafetyState::RampingIn | SafetyState::Active => {
@@ -238,8 +333,23 @@ impl Safety {
                 if gain >= 1.0 {
                     self.state = SafetyState::Active;
                 }
-                // No fault, so the request is finite here.
-                let target = scale(clamp_norm(requested_n, self.limit_n), gain);
+                if self.state == SafetyState::Active {
+                    self.ramp_in_from_n = ZERO;
+                }
+                // No fault, so the request is finite here. From zero the
+                // blend is exactly `gain * request`.
+                let request = clamp_norm(requested_n, self.limit_n);
+                let blend = if self.ramp_in_from_n == ZERO {
+                    scale(request, gain)
+                } else {
+                    add(scale(self.ramp_in_from_n, 1.0 - gain), scale(request, gain))
+                };
+                let damping = if position_m.is_some() {
+                    self.passivity.damping_n(dt_ns)
+                } else {
+                    ZERO
+                };
+                let target = clamp_norm(add(blend, damping), self.limit_n);
                 let max_step_n = self.cfg.max_slew_n_per_s * (dt_ns as f64 / 1e9);
                 step_toward(self.out_n, target, max_step_n)
             }
