@@ -94,6 +94,30 @@ pub fn local_model_unilateral(
     unilateral(model, f_last_n)
 }
 
+/// The local model along the contact normal only, `F_n + n k_n n.(P_n -
+/// P)` with `n = F_n / |F_n|` and `k_n = n^T K_c n` (`K_c` capped), made
+/// unilateral: a virtual plane through the sample's contact, the
+/// intermediate representation of Adachi et al. (1995) and Mark et al.
+/// (1996) with the simulation's normal stiffness. With no usable normal,
+/// `F_n`.
+pub fn local_normal_unilateral(
+    f_last_n: V3,
+    k_n_per_m: &M3,
+    max_stiffness_n_per_m: f64,
+    p_last_m: V3,
+    p_m: V3,
+) -> V3 {
+    let load = norm(f_last_n);
+    if !(load > MIN_NORMAL_FORCE_N && load.is_finite()) {
+        return f_last_n;
+    }
+    let n = scale(f_last_n, 1.0 / load);
+    let k = cap_stiffness(k_n_per_m, max_stiffness_n_per_m);
+    let k_n = dot(n, mat_vec(&k, n)).max(0.0);
+    let model = add(f_last_n, scale(n, k_n * dot(n, sub(p_last_m, p_m))));
+    unilateral(model, f_last_n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -175,6 +199,29 @@ mod tests {
         // Pressing 1 mm into a 20 kN/m contact capped at 400 N/m: 0.4 N more.
         let f = local_model_unilateral([0.0, 0.0, 1.0], &stiff, 400.0, ZERO, [0.0, 0.0, -0.001]);
         assert!(close(f, [0.0, 0.0, 1.4]), "{f:?}");
+    }
+
+    #[test]
+    fn the_normal_model_ignores_sliding_and_follows_the_normal() {
+        let k = [
+            [300.0, 50.0, 100.0],
+            [50.0, 300.0, 0.0],
+            [100.0, 0.0, 200.0],
+        ];
+        let fs = [0.0, 0.0, 1.0];
+        // Sliding 5 mm along the surface: unchanged.
+        let f = local_normal_unilateral(fs, &k, 1e4, ZERO, [0.005, -0.003, 0.0]);
+        assert!(close(f, fs), "{f:?}");
+        // Pressing 1 mm: k_n = K_zz = 200 N/m, along n only.
+        let f = local_normal_unilateral(fs, &k, 1e4, ZERO, [0.002, 0.0, -0.001]);
+        assert!(close(f, [0.0, 0.0, 1.2]), "{f:?}");
+        // Withdrawing past 5 mm: released, exactly zero.
+        let f = local_normal_unilateral(fs, &k, 1e4, ZERO, [0.0, 0.0, 0.0051]);
+        assert_eq!(f, ZERO);
+        // A tilted normal: the force stays along it.
+        let fs = [0.0, 0.6, 0.8];
+        let f = local_normal_unilateral(fs, &K300, 1e4, ZERO, [0.0, -0.0006, -0.0008]);
+        assert!(close(f, [0.0, 0.6 * 1.3, 0.8 * 1.3]), "{f:?}");
     }
 
     #[test]

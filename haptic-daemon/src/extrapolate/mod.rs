@@ -48,7 +48,9 @@ pub use formulas::{
     signed_position_factor, time_factor,
 };
 
-pub use local::{MIN_NORMAL_FORCE_N, cap_stiffness, local_model_unilateral, unilateral};
+pub use local::{
+    MIN_NORMAL_FORCE_N, cap_stiffness, local_model_unilateral, local_normal_unilateral, unilateral,
+};
 
 use crate::math::{M3, V3, ZERO, is_finite, is_finite_m3};
 
@@ -91,16 +93,23 @@ pub enum Method {
     LinearPositionSigned,
     /// `F = F_n + K (P_n - P)` with the sample's contact stiffness.
     LocalModel,
+    /// The local model along the contact normal only (a virtual plane):
+    /// `F = F_n + n (n^T K n) n.(P_n - P)`, `n = F_n / |F_n|`. Sliding
+    /// along the surface changes nothing (frictionless contact keeps its
+    /// force while the dimple travels with the tool), pressing and
+    /// withdrawing follow the contact's true normal stiffness.
+    LocalNormal,
 }
 
 impl Method {
     /// Every method, in telemetry code order.
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 6] = [
         Method::Constant,
         Method::LinearTime,
         Method::LinearPosition,
         Method::LinearPositionSigned,
         Method::LocalModel,
+        Method::LocalNormal,
     ];
 
     /// The command-line name.
@@ -111,6 +120,7 @@ impl Method {
             Method::LinearPosition => "linear-position",
             Method::LinearPositionSigned => "linear-position-signed",
             Method::LocalModel => "local-model",
+            Method::LocalNormal => "local-normal",
         }
     }
 
@@ -207,6 +217,14 @@ impl Extrapolator {
                 position_m,
             ),
             (Method::LocalModel, _) => f_n,
+            (Method::LocalNormal, _) if last.in_contact => local_normal_unilateral(
+                f_n,
+                &last.stiffness_n_per_m,
+                self.max_stiffness_n_per_m,
+                last.position_m,
+                position_m,
+            ),
+            (Method::LocalNormal, _) => f_n,
             (_, None) => f_n,
             (Method::LinearTime, Some(prev)) => time_factor(prev.t_ns, last.t_ns, now_ns)
                 .map_or(f_n, |k| linear(prev.force_n, f_n, k)),

@@ -38,7 +38,8 @@ fn names_round_trip() {
             "linear-time",
             "linear-position",
             "linear-position-signed",
-            "local-model"
+            "local-model",
+            "local-normal"
         ]
     );
     for m in Method::ALL {

@@ -43,6 +43,8 @@ pub struct ContactConfig {
     /// The simulated tool (proxy) follows the requested pose at most this
     /// fast (m/s): a glitch in the pose cannot throw it through the tissue.
     pub max_tool_speed_m_s: Real,
+    /// ... and changes its velocity at most this fast (m/s^2).
+    pub max_tool_accel_m_s2: Real,
 }
 
 impl Default for ContactConfig {
@@ -52,7 +54,8 @@ impl Default for ContactConfig {
             stiffness_factor: 64.0,
             damping_s_per_m: 3.0,
             point_spacing: 0.25,
-            max_tool_speed_m_s: 2.0,
+            max_tool_speed_m_s: 1.0,
+            max_tool_accel_m_s2: 100.0,
         }
     }
 }

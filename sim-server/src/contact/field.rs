@@ -72,6 +72,25 @@ impl PartSweep {
     }
 }
 
+/// The first this fraction of the radius of penetration is a quadratic
+/// onset: a point's force then grows from zero with zero slope, so the
+/// total force stays smooth (C1) as points enter contact one by one.
+pub const ONSET_OF_RADIUS: Real = 0.02;
+
+/// A point's spring force (N) at penetration `depth_m` and its slope
+/// (N/m): `k d^2 / (2 d0)` below the onset depth d0, `k (d - d0/2)` above.
+pub fn spring(k_n_per_m: Real, depth_m: Real, radius_m: Real) -> (Real, Real) {
+    let d0 = ONSET_OF_RADIUS * radius_m;
+    if depth_m < d0 {
+        (
+            k_n_per_m * depth_m * depth_m / (2.0 * d0),
+            k_n_per_m * depth_m / d0,
+        )
+    } else {
+        (k_n_per_m * (depth_m - 0.5 * d0), k_n_per_m)
+    }
+}
+
 /// Closest point of `seg` to `x`, and its parameter along the segment.
 pub(crate) fn closest(seg: &Segment, x: Vec3) -> (Vec3, Real) {
     let d = seg.b_m - seg.a_m;
@@ -106,12 +125,13 @@ pub struct ContactField {
     dirty: Vec<u32>,
     /// Per tool: the sum over sub-steps of the force on the tool (N).
     force_sum_n: Vec<Vec3>,
-    /// Per tool: the sum over sub-steps of the active points' stiffness
-    /// along their normals (N/m).
-    stiffness_sum: Vec<Mat3>,
     evaluations: usize,
     /// Per point: the penetration of the last evaluation (m, 0 if none).
     penetration_m: Vec<Real>,
+    /// Per point: the Hessian of its contact energy with respect to its
+    /// position relative to the tool at the last evaluation (zero if not
+    /// in contact).
+    hessians: Vec<Mat3>,
 }
 
 impl ContactField {
@@ -120,7 +140,6 @@ impl ContactField {
         Self {
             damping_s_per_m,
             force_sum_n: vec![Vec3::ZERO; tools],
-            stiffness_sum: vec![Mat3::ZERO; tools],
             ..Self::default()
         }
     }
@@ -131,9 +150,9 @@ impl ContactField {
         self.points.clear();
         self.parts.clear();
         self.penetration_m.clear();
+        self.hessians.clear();
         self.evaluations = 0;
         self.force_sum_n.fill(Vec3::ZERO);
-        self.stiffness_sum.fill(Mat3::ZERO);
     }
 
     /// Drops the points (within a step, before they are selected again);
@@ -141,6 +160,7 @@ impl ContactField {
     pub fn clear_points(&mut self) {
         self.points.clear();
         self.penetration_m.clear();
+        self.hessians.clear();
     }
 
     /// Adds a swept tool part; returns its index for [`ContactField::push`].
@@ -153,6 +173,7 @@ impl ContactField {
     pub fn push(&mut self, p: ContactPoint) {
         self.points.push(p);
         self.penetration_m.push(0.0);
+        self.hessians.push(Mat3::ZERO);
     }
 
     /// Whether there is nothing to evaluate and nothing to zero.
@@ -173,6 +194,17 @@ impl ContactField {
     /// Per point: its penetration at the last evaluation (m; 0: no contact).
     pub fn penetrations_m(&self) -> &[Real] {
         &self.penetration_m
+    }
+
+    /// Per point: the Hessian (N/m) of its spring energy 1/2 k d^2 with
+    /// respect to its position relative to the tool, at the last
+    /// evaluation: k n n^T - (f / r_p) P, with r_p its distance to the
+    /// axis and P the projector on the directions that turn the normal
+    /// (perpendicular to n, and to the axis where the closest point is
+    /// inside the segment): moving sideways against a round tool turns the
+    /// force as much as it changes its size. Zero if not in contact.
+    pub fn hessians(&self) -> &[Mat3] {
+        &self.hessians
     }
 
     /// Zeroes the forces the last evaluation wrote in `out`.
@@ -218,12 +250,21 @@ impl ContactField {
             }
             self.penetration_m[i] = depth;
             let n = gap / dist;
+            let turn = Mat3::IDENTITY - outer(n, n);
+            let axis = (seg.b_m - seg.a_m).normalize_or_zero();
+            let turn = if t > 0.0 && t < 1.0 {
+                turn - outer(axis, axis)
+            } else {
+                turn
+            };
+            let (spring, slope) = spring(p.stiffness_n_per_m, depth, sweep.radius_m);
+            self.hessians[i] = outer(n, n) * slope - turn * (spring / dist);
             let tool_vel = ((sweep.to.a_m - sweep.from.a_m)
                 + ((sweep.to.b_m - sweep.from.b_m) - (sweep.to.a_m - sweep.from.a_m)) * t)
                 / step_s;
             let rate = (tool_vel - vel).dot(n);
             let factor = (1.0 + alpha * rate).clamp(0.0, 2.0);
-            let f = p.stiffness_n_per_m * depth * factor;
+            let f = spring * factor;
             for k in 0..3 {
                 let j = p.vertices[k] as usize;
                 let w = p.weights[k] * f;
@@ -234,7 +275,6 @@ impl ContactField {
                 self.dirty.push(p.vertices[k]);
             }
             self.force_sum_n[sweep.tool] -= n * f;
-            self.stiffness_sum[sweep.tool] += outer(n, n) * p.stiffness_n_per_m;
         }
         // A vertex of several points is listed several times: harmless
         // (zeroing twice), and the list stays bounded by 3 x points.
@@ -245,17 +285,6 @@ impl ContactField {
         match (self.force_sum_n.get(i), self.evaluations) {
             (Some(f), n) if n > 0 => *f / n as Real,
             _ => Vec3::ZERO,
-        }
-    }
-
-    /// The mean over the last step's evaluations of the active points'
-    /// penalty stiffness along their normals on tool `i` (N/m): the
-    /// stiffness of the contact springs alone, before the tissue behind
-    /// them (see [`super::stiffness`]).
-    pub fn spring_stiffness(&self, i: usize) -> Mat3 {
-        match (self.stiffness_sum.get(i), self.evaluations) {
-            (Some(k), n) if n > 0 => *k / n as Real,
-            _ => Mat3::ZERO,
         }
     }
 
@@ -308,7 +337,14 @@ mod tests {
     #[test]
     fn force_is_zero_at_zero_gap_and_grows_linearly_inside() {
         // The point is at (0, 0, 0); the tip end at height z: gap = z - r.
-        for (z, expect) in [(0.0021, 0.0), (0.002, 0.0), (0.0015, 0.05), (0.001, 0.1)] {
+        let d0 = ONSET_OF_RADIUS * 0.002;
+        for (z, expect) in [
+            (0.0021, 0.0),
+            (0.002, 0.0),
+            (0.002 - d0 / 2.0, 100.0 * d0 / 8.0),
+            (0.0015, 100.0 * (0.0005 - d0 / 2.0)),
+            (0.001, 100.0 * (0.001 - d0 / 2.0)),
+        ] {
             let (mut f, rest) = field(z);
             let u = vec![[0.0; 3]; 3];
             let mut out = vec![[0.0; 3]; 3];
@@ -319,6 +355,20 @@ mod tests {
             let sum: Real = out.iter().map(|o| o[2]).sum();
             assert!((sum + tool.z).abs() < 1e-12);
             assert!((out[2][2] + 0.5 * tool.z).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn the_spring_is_smooth_at_the_onset() {
+        let r = 0.002;
+        let d0 = ONSET_OF_RADIUS * r;
+        let (f, s) = spring(100.0, d0, r);
+        assert!((f - 100.0 * d0 / 2.0).abs() < 1e-15 && (s - 100.0).abs() < 1e-12);
+        // The slope is the derivative of the force, on both sides.
+        for d in [0.3 * d0, d0 * 0.999, d0 * 1.001, 3.0 * d0] {
+            let h = 1e-9;
+            let fd = (spring(100.0, d + h, r).0 - spring(100.0, d - h, r).0) / (2.0 * h);
+            assert!((fd - spring(100.0, d, r).1).abs() < 1e-4, "{d}");
         }
     }
 

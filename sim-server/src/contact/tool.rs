@@ -7,6 +7,7 @@ use super::claims::Claims;
 use super::config::ContactLaw;
 use super::field::{ContactField, PartSweep};
 use super::geometry::{Plane, Segment, ToolPose};
+use super::proxy::Proxy;
 use super::reaction::{Reaction, along};
 use super::surface_index::SurfaceIndex;
 use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
@@ -35,7 +36,7 @@ pub struct ToolContact {
     decl: ToolDecl,
     slot: usize,
     law: ContactLaw,
-    max_speed_m_s: Real,
+    proxy: Proxy,
     direction: Vec3,
     pose: Option<ToolPose>,
     /// The pose of the update before (the start of the penalty sweep).
@@ -66,14 +67,14 @@ impl ToolContact {
         slot: usize,
         model: &ElasticModel,
         law: ContactLaw,
-        max_speed_m_s: Real,
+        proxy: Proxy,
     ) -> Self {
         let n = model.vertex_count();
         Self {
             decl: decl.clone(),
             slot,
             law,
-            max_speed_m_s,
+            proxy,
             prev_pose: None,
             touched: Vec::new(),
             jaw: 1.0,
@@ -131,6 +132,7 @@ impl ToolContact {
         self.prev_pose = self.pose;
         let Some((tip_m, jaw)) = input else {
             self.pose = None;
+            self.proxy.reset();
             self.gripped.clear();
             self.touched.clear();
             self.gripping = false;
@@ -138,21 +140,18 @@ impl ToolContact {
             return;
         };
         self.jaw = jaw;
-        let tip_m = match (self.law, self.prev_pose) {
+        let tip_m = match self.law {
             // The proxy: under the penalty law the simulated tool follows
             // the requested pose at a bounded speed, so a pose that jumps
             // (a device glitch) drags it, at most this far per step,
-            // instead of teleporting it through or into the tissue.
-            (ContactLaw::Penalty, Some(prev)) => {
-                let max_m = self.max_speed_m_s * sim.dt_s();
-                let d = tip_m - prev.end_m;
-                if d.length() > max_m {
-                    prev.end_m + d * (max_m / d.length())
-                } else {
-                    tip_m
-                }
+            // instead of teleporting it through or into the tissue. A tool
+            // that appears starts at its fulcrum (the trocar, outside the
+            // organ) and comes in from there.
+            ContactLaw::Penalty => {
+                let fulcrum = Vec3::from_array(self.decl.fulcrum_m);
+                self.proxy.follow(tip_m, fulcrum, sim.dt_s())
             }
-            _ => tip_m,
+            ContactLaw::Projection => tip_m,
         };
         let pose = ToolPose::new(&self.decl, tip_m, self.direction);
         self.direction = pose.direction;
@@ -236,12 +235,13 @@ impl ToolContact {
         sim: &B,
         adj: &Adjacency,
         field: &ContactField,
+        penalty_stiffness: crate::math::Mat3,
     ) -> Reaction {
         let model = sim.model();
         let mut out = Reaction::NONE;
         if self.law == ContactLaw::Penalty {
             out.force_n = field.force_n(self.slot);
-            out.stiffness_n_per_m = field.spring_stiffness(self.slot);
+            out.stiffness_n_per_m = penalty_stiffness;
         }
         for c in &self.constraints {
             let v = c.vertex;

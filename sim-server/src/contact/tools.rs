@@ -5,13 +5,15 @@ use super::adjacency::Adjacency;
 use super::claims::Claims;
 use super::config::{ContactConfig, ContactLaw};
 use super::field::ContactField;
+use super::proxy::Proxy;
 use super::sampling::Sampler;
+use super::stiffness::ContactStiffness;
 use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
 use super::{ContactReport, Reaction};
 use crate::backend::Backend;
 use crate::ids::VertexId;
-use crate::math::{Real, Vec3};
+use crate::math::{Mat3, Real, Vec3};
 use crate::scene::ToolDecl;
 use crate::tensor_mass::ElasticModel;
 
@@ -45,6 +47,9 @@ pub struct Tools {
     law: ContactLaw,
     field: ContactField,
     sampler: Option<Sampler>,
+    stiffness: Option<ContactStiffness>,
+    /// Per tool: the penalty contact stiffness after the last step.
+    stiffness_n_per_m: Vec<Mat3>,
     mark: Vec<bool>,
 }
 
@@ -88,16 +93,20 @@ impl Tools {
     /// The tools `decls` on `sim` as `config` says: the penalty law
     /// (unless the scene asks for projection or the backend cannot
     /// integrate it), with `sim`'s stable step made to include the contact
-    /// springs (more sub-steps).
+    /// springs (more sub-steps). The scene holds `held` (fixed or
+    /// prescribed): no tool takes them ([`Tools::reserve`]), and the
+    /// contact stiffness sees them fixed.
     pub fn with_config<B: Backend + ?Sized>(
         decls: &[ToolDecl],
         sim: &mut B,
         config: &ContactConfig,
+        held: &[VertexId],
     ) -> Result<Self, ContactError> {
         for (key, value) in [
             ("stiffness_factor", config.stiffness_factor),
             ("point_spacing", config.point_spacing),
             ("max_tool_speed_m_s", config.max_tool_speed_m_s),
+            ("max_tool_accel_m_s2", config.max_tool_accel_m_s2),
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(ContactError::BadConstant { key, value });
@@ -126,6 +135,10 @@ impl Tools {
                 .map_err(ContactError::Unstable)?;
 
             tools.sampler = Some(sampler);
+            tools.stiffness = Some(ContactStiffness::new(sim.model(), held));
+        }
+        for v in held {
+            tools.reserve(*v);
         }
         Ok(tools)
     }
@@ -139,7 +152,10 @@ impl Tools {
         let tools: Vec<ToolContact> = decls
             .iter()
             .enumerate()
-            .map(|(i, d)| ToolContact::new(d, i, model, law, config.max_tool_speed_m_s))
+            .map(|(i, d)| {
+                let proxy = Proxy::new(config.max_tool_speed_m_s, config.max_tool_accel_m_s2);
+                ToolContact::new(d, i, model, law, proxy)
+            })
             .collect();
         // A leaf is updated once its vertex has moved half the smallest
         // tool radius: few leaves per step, few false candidates per query.
@@ -158,6 +174,8 @@ impl Tools {
             law,
             field: ContactField::new(decls.len(), config.damping_s_per_m),
             sampler: None,
+            stiffness: None,
+            stiffness_n_per_m: vec![Mat3::ZERO; decls.len()],
             mark: vec![false; model.vertex_count()],
         }
     }
@@ -194,6 +212,11 @@ impl Tools {
         }
         for (t, r) in self.tools.iter_mut().zip(&mut self.reports) {
             r.contact = t.after_step(&self.field, &mut self.mark);
+        }
+        if let Some(k) = &mut self.stiffness {
+            for (i, out) in self.stiffness_n_per_m.iter_mut().enumerate() {
+                *out = k.stiffness(sim.model(), &self.field, i);
+            }
         }
         &self.reports
     }
@@ -281,6 +304,6 @@ impl Tools {
 
     /// The force on tool `i` and its contact stiffness after the step.
     pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
-        self.tools[i].reaction(sim, &self.adjacency, &self.field)
+        self.tools[i].reaction(sim, &self.adjacency, &self.field, self.stiffness_n_per_m[i])
     }
 }

@@ -566,6 +566,11 @@ fn contact_config(
         "max_tool_speed_m_s",
         c.max_tool_speed_m_s,
     )?;
+    c.max_tool_accel_m_s2 = pos(
+        &s.max_tool_accel_m_s2,
+        "max_tool_accel_m_s2",
+        c.max_tool_accel_m_s2,
+    )?;
     if let Some(d) = &s.damping_s_per_m {
         let x = *d.get_ref();
         if !(x.is_finite() && x >= 0.0) {

@@ -361,8 +361,10 @@ pub struct ContactSpec {
     pub damping_s_per_m: Option<Spanned<f64>>,
     /// Contact point spacing as a fraction of the tool radius (default 0.25).
     pub point_spacing: Option<Spanned<f64>>,
-    /// Speed limit of the simulated tool following the device (m/s, default 2).
+    /// Speed limit of the simulated tool following the device (m/s, default 1).
     pub max_tool_speed_m_s: Option<Spanned<f64>>,
+    /// Acceleration limit of the simulated tool (m/s^2, default 100).
+    pub max_tool_accel_m_s2: Option<Spanned<f64>>,
 }
 
 /// Backends by name.

@@ -226,11 +226,13 @@ pub fn prepare_with<B: Backend, E: std::error::Error + 'static>(
         }
     }
     let decls = &tools[..tools.len().min(MAX_TOOLS)];
-    let mut contacts = Tools::with_config(decls, &mut sim, &contact)?;
     // A tool never takes over (or releases) a vertex the scene holds.
-    for v in fixed.iter().chain(prescribed.iter().map(|(v, _)| v)) {
-        contacts.reserve(*v);
-    }
+    let held: Vec<_> = fixed
+        .iter()
+        .copied()
+        .chain(prescribed.iter().map(|(v, _)| *v))
+        .collect();
+    let contacts = Tools::with_config(decls, &mut sim, &contact, &held)?;
     Ok(Prepared {
         sim,
         tools: contacts,

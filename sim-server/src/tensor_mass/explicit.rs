@@ -305,6 +305,18 @@ impl<S: Storage> Explicit<S> {
         Ok(())
     }
 
+    /// Splits each step into at least `n` sub-steps (never fewer than the
+    /// stable step needs): to check a result against a finer integration.
+    /// Call before stepping.
+    pub fn set_min_substeps(&mut self, n: usize) {
+        if n > self.substeps {
+            self.substeps = n;
+            for v in 0..self.u.len() {
+                self.refresh_vertex(v);
+            }
+        }
+    }
+
     fn substep(&mut self) {
         self.membrane_step();
         self.kernel_step();

@@ -25,6 +25,7 @@ use sim_server::server::prepare;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use crate::phases::{Phase, classify, dropouts, rms_by_phase};
 use crate::plot::{Series, chart};
 use crate::progress::bar;
 
@@ -60,7 +61,7 @@ pub struct Args {
 }
 
 /// One method's figures.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct MethodResult {
     /// RMS of |F - F_truth| over the ticks (N).
     pub rms_error_n: f64,
@@ -70,6 +71,18 @@ pub struct MethodResult {
     pub p99_jump_n: f64,
     /// Work of the rendered force on the hand, sum of F . dp (J).
     pub net_energy_j: f64,
+    /// RMS of |F - F_truth| per phase of the path (N).
+    pub rms_error_by_phase_n: BTreeMap<&'static str, f64>,
+}
+
+/// How far the ground truth can be trusted: the same simulation with each
+/// step split into twice as many integrator sub-steps.
+#[derive(Serialize)]
+struct TruthCheck {
+    /// Sub-steps per haptic tick of the truth and of the check.
+    substeps: [usize; 2],
+    /// RMS of |F_truth - F_check| over the ticks (N).
+    rms_difference_n: f64,
 }
 
 #[derive(Serialize)]
@@ -82,6 +95,11 @@ struct Report {
     ticks: usize,
     truth: MethodResult,
     truth_max_force_n: f64,
+    truth_check: TruthCheck,
+    /// Zero-force ticks of the truth with force within 50 ms on both sides.
+    truth_dropout_ticks: usize,
+    /// Ticks per phase.
+    phase_ticks: BTreeMap<&'static str, usize>,
     methods: BTreeMap<&'static str, MethodResult>,
 }
 
@@ -96,14 +114,16 @@ fn scene_source(path: Option<&Path>) -> Result<SceneSource> {
 type Sample = (Vec3, [[f64; 3]; 3], bool);
 
 /// Tool 0's force (and contact state) for each pose the loop gives, the
-/// simulation stepped `dt_s` after each.
+/// simulation stepped `dt_s` after each, in `substep_factor` times the
+/// sub-steps stability needs; and the sub-steps per step used.
 fn simulate(
     src: &SceneSource,
     dt_s: f64,
+    substep_factor: usize,
     poses: impl Iterator<Item = ([f64; 3], f64)>,
     steps: usize,
     bar: &ProgressBar,
-) -> Result<Vec<Sample>> {
+) -> Result<(Vec<Sample>, usize)> {
     let scene = build_scene(src, &src.parse()?)?;
     anyhow::ensure!(
         !scene.tools.is_empty(),
@@ -111,6 +131,8 @@ fn simulate(
         src.name
     );
     let mut p = prepare::<f64>(scene, Some(dt_s))?;
+    let n = p.sim.substeps() * substep_factor.max(1);
+    p.sim.set_min_substeps(n);
     let mut out = Vec::with_capacity(steps);
     let mut inputs = [None; MAX_TOOLS];
     for (tip, jaw) in poses.take(steps) {
@@ -129,7 +151,7 @@ fn simulate(
         out.push((r.force_n, r.stiffness_rows(), contact));
         bar.inc(1);
     }
-    Ok(out)
+    Ok((out, p.sim.substeps()))
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -140,7 +162,12 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-fn figures(rendered: &[[f64; 3]], truth: &[[f64; 3]], hand: &[[f64; 3]]) -> MethodResult {
+fn figures(
+    rendered: &[[f64; 3]],
+    truth: &[[f64; 3]],
+    hand: &[[f64; 3]],
+    phases: &[Phase],
+) -> MethodResult {
     let n = rendered.len().max(1);
     let err: Vec<f64> = rendered
         .iter()
@@ -162,6 +189,7 @@ fn figures(rendered: &[[f64; 3]], truth: &[[f64; 3]], hand: &[[f64; 3]]) -> Meth
         max_error_n: err.iter().copied().fold(0.0, f64::max),
         p99_jump_n: p99,
         net_energy_j: energy,
+        rms_error_by_phase_n: rms_by_phase(&err, phases),
     }
 }
 
@@ -224,13 +252,19 @@ pub fn run(args: &Args) -> Result<()> {
     let ticks = (duration / h).floor() as usize;
     let sim_steps = (duration / s).ceil() as usize + 1;
     let b = bar(ticks, "truth");
-    let truth = simulate(&src, h, (0..).map(|k| traj.sample(k as f64 * h)), ticks, &b)
-        .context("ground truth")?;
+    let haptic_poses = || (0..).map(|k| traj.sample(k as f64 * h));
+    let (truth, truth_substeps) =
+        simulate(&src, h, 1, haptic_poses(), ticks, &b).context("ground truth")?;
+    b.finish();
+    let b = bar(ticks, "truth, twice the sub-steps");
+    let (check, check_substeps) = simulate(&src, h, 2, haptic_poses(), ticks, &b)
+        .context("ground truth with twice the sub-steps")?;
     b.finish();
     let b = bar(sim_steps, "simulation");
-    let samples = simulate(
+    let (samples, _) = simulate(
         &src,
         s,
+        1,
         (0..).map(|j| traj.sample(j as f64 * s)),
         sim_steps,
         &b,
@@ -240,6 +274,8 @@ pub fn run(args: &Args) -> Result<()> {
 
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.0.to_array()).collect();
+    let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.0.to_array()).collect();
+    let phases = classify(&truth_f, &hand, h);
     let ns = |t: f64| (t * 1e9).round() as u64;
     let mut methods = BTreeMap::new();
     let mut rendered_all = Vec::new();
@@ -264,7 +300,7 @@ pub fn run(args: &Args) -> Result<()> {
             }
             rendered.push(ex.force(ns(t), *p));
         }
-        methods.insert(method.name(), figures(&rendered, &truth_f, &hand));
+        methods.insert(method.name(), figures(&rendered, &truth_f, &hand, &phases));
         rendered_all.push((method.name(), rendered));
     }
     let report = Report {
@@ -274,8 +310,17 @@ pub fn run(args: &Args) -> Result<()> {
         haptic_rate_hz: args.haptic_rate,
         duration_s: duration,
         ticks,
-        truth: figures(&truth_f, &truth_f, &hand),
+        truth: figures(&truth_f, &truth_f, &hand, &phases),
         truth_max_force_n: truth_f.iter().map(|f| norm(*f)).fold(0.0, f64::max),
+        truth_check: TruthCheck {
+            substeps: [truth_substeps, check_substeps],
+            rms_difference_n: figures(&check_f, &truth_f, &hand, &phases).rms_error_n,
+        },
+        truth_dropout_ticks: dropouts(&truth_f, h),
+        phase_ticks: phases.iter().fold(BTreeMap::new(), |mut m, p| {
+            *m.entry(p.name()).or_insert(0) += 1;
+            m
+        }),
         methods,
     };
     println!(
@@ -293,6 +338,30 @@ pub fn run(args: &Args) -> Result<()> {
             m.net_energy_j * 1e3
         );
     }
+    let names: Vec<&str> = report.phase_ticks.keys().copied().collect();
+    print!("\nrms error by phase (N)  ");
+    for n in &names {
+        print!(" {:>9}", format!("{n}:{}", report.phase_ticks[n]));
+    }
+    println!();
+    for (name, m) in report.methods.iter() {
+        print!("{name:<24}");
+        for n in &names {
+            print!(
+                " {:>9.4}",
+                m.rms_error_by_phase_n.get(n).copied().unwrap_or(0.0)
+            );
+        }
+        println!();
+    }
+    println!(
+        "\ntruth: max |F| {:.3} N, {} dropout ticks; {} vs {} sub-steps per tick differ by {:.4} N RMS",
+        report.truth_max_force_n,
+        report.truth_dropout_ticks,
+        report.truth_check.substeps[0],
+        report.truth_check.substeps[1],
+        report.truth_check.rms_difference_n
+    );
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("cannot write {}", path.display()))?;

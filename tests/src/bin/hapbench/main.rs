@@ -4,6 +4,7 @@
 
 mod extrapolation;
 mod latency;
+mod phases;
 mod plot;
 mod progress;
 mod stability;

@@ -1,0 +1,364 @@
+//! The contact stiffness a tool feels: d F / d (tool position) with the
+//! tissue in equilibrium, for the local-model extrapolator of the haptic
+//! loop.
+//!
+//! Each active contact point p (weights w_p on its triangle's vertices)
+//! stores the Hessian G_p of its spring energy with respect to its
+//! position relative to the tool ([`ContactField::hessians`]: the spring
+//! along the normal, less the turning of the normal around the round
+//! tool). With J_p the map from tissue displacements to the point's
+//! motion and K the tissue's stiffness with the scene's fixed vertices
+//! held, moving the tool by dx with the tissue in equilibrium gives
+//!
+//! ```text
+//! dF = -K_eff dx,   K_eff = A - B^T (K + H)^-1 B,
+//! A = sum G_p,  B = sum J_p^T G_p,  H = sum J_p^T G_p J_p
+//! ```
+//!
+//! (for springs along fixed normals, K_eff = N^T (Kp^-1 + J K^-1 J^T)^-1 N:
+//! the springs in series with the tissue's compliance at the contact
+//! points, J K^-1 J^T being SOFA's compliance W = H A^-1 H^T, Duriez et
+//! al. 2006). Only the rows and columns of K^-1 at the touched vertices V
+//! are needed: with S = (K^-1)_VV,
+//!
+//! ```text
+//! K_eff = N^T Kp N - B^T S (I + H S)^-1 B
+//! ```
+//!
+//! a dense solve of size 3|V|. K is factorised once (sparse Cholesky,
+//! [`crate::static_solve::Factorized`]) at start; the three columns of
+//! K^-1 of each touched vertex are solved for the first time it is touched
+//! and kept (a bounded cache, emptied when full). A cut changes K: the
+//! factor is rebuilt on a worker thread and the old one serves until it is
+//! ready. Meshes above [`MAX_FACTOR_VERTICES`] (where a factor costs
+//! seconds and the columns megabytes) use S = blockdiag(K_ii)^-1 instead,
+//! which neglects the coupling through the tissue and overestimates the
+//! stiffness (about 3x on a 5 mm-cell block).
+//!
+//! Neglected: the Hunt-Crossley damping (zero at rest), the tissue's
+//! inertia (K_eff is the quasi-static stiffness), points entering or
+//! leaving contact (they do so at zero force), grips and the other tools'
+//! contacts (their vertices count as free tissue).
+
+use super::field::ContactField;
+use crate::ids::VertexId;
+use crate::math::{Mat3, Real, Vec3};
+use crate::static_solve::{Dirichlet, Factorized};
+use crate::tensor_mass::ElasticModel;
+use std::collections::HashMap;
+use std::thread::JoinHandle;
+
+/// Above this many vertices the stiffness uses the diagonal blocks only.
+pub const MAX_FACTOR_VERTICES: usize = 60_000;
+/// At most this many vertices' columns are kept.
+const MAX_CACHED: usize = 256;
+
+/// The contact stiffness solver of a scene.
+pub struct ContactStiffness {
+    dirichlet: Vec<VertexId>,
+    factor: Option<Factorized>,
+    /// `ElasticModel::topology_changes` the factor was built for.
+    built_for: u64,
+    pending: Option<(u64, JoinHandle<Option<Factorized>>)>,
+    /// Per vertex: K^-1 columns for its x, y and z (3 n vectors).
+    columns: HashMap<u32, Vec<Vec3>>,
+    // Scratch reused across steps.
+    verts: Vec<u32>,
+    slot: HashMap<u32, usize>,
+    h: Vec<Real>,
+    b: Vec<Real>,
+    s: Vec<Real>,
+    m: Vec<Real>,
+    x: Vec<Real>,
+    unit: Vec<Vec3>,
+}
+
+impl ContactStiffness {
+    /// For `model` with `held` vertices fixed (the scene's fixed and
+    /// prescribed ones); factorises K now unless the mesh is too large.
+    pub fn new(model: &ElasticModel, held: &[VertexId]) -> Self {
+        let mut out = Self {
+            dirichlet: held.to_vec(),
+            factor: None,
+            built_for: model.topology_changes(),
+            pending: None,
+            columns: HashMap::new(),
+            verts: Vec::new(),
+            slot: HashMap::new(),
+            h: Vec::new(),
+            b: Vec::new(),
+            s: Vec::new(),
+            m: Vec::new(),
+            x: Vec::new(),
+            unit: Vec::new(),
+        };
+        if model.vertex_count() <= MAX_FACTOR_VERTICES {
+            out.factor = build(model, &out.dirichlet);
+        }
+        out
+    }
+
+    /// Whether K_eff uses the tissue's full compliance (else the diagonal
+    /// blocks only).
+    pub fn exact(&self) -> bool {
+        self.factor.is_some()
+    }
+
+    /// Keeps the factor in step with cuts: starts a rebuild on a worker
+    /// thread after a cut, swaps it in when done.
+    fn refresh(&mut self, model: &ElasticModel) {
+        let now = model.topology_changes();
+        if let Some((version, handle)) = &self.pending
+            && handle.is_finished()
+        {
+            let version = *version;
+            if let Some((_, handle)) = self.pending.take()
+                && let Ok(Some(f)) = handle.join()
+            {
+                self.factor = Some(f);
+                self.built_for = version;
+                self.columns.clear();
+            }
+        }
+        if now != self.built_for
+            && self.pending.is_none()
+            && model.vertex_count() <= MAX_FACTOR_VERTICES
+        {
+            let (model, held) = (model.clone(), self.dirichlet.clone());
+            let handle = std::thread::Builder::new()
+                .name("contact-stiffness".into())
+                .spawn(move || build(&model, &held));
+            if let Ok(handle) = handle {
+                self.pending = Some((now, handle));
+            }
+        }
+    }
+
+    /// K_eff (N/m) of tool `tool` from the field's active points after a
+    /// step.
+    pub fn stiffness(&mut self, model: &ElasticModel, field: &ContactField, tool: usize) -> Mat3 {
+        self.refresh(model);
+        let mut a = Mat3::ZERO;
+        self.verts.clear();
+        self.slot.clear();
+        let active = field
+            .points()
+            .iter()
+            .zip(field.penetrations_m())
+            .zip(field.hessians())
+            .filter(|((p, d), _)| **d > 0.0 && field.parts()[p.part as usize].tool == tool);
+        for ((p, _), _) in active.clone() {
+            for v in p.vertices {
+                if !self.slot.contains_key(&v) {
+                    self.slot.insert(v, self.verts.len());
+                    self.verts.push(v);
+                }
+            }
+        }
+        let nv = 3 * self.verts.len();
+        if nv == 0 {
+            return a;
+        }
+        // H (nv x nv), B (nv x 3), A = N^T Kp N.
+        self.h.clear();
+        self.h.resize(nv * nv, 0.0);
+        self.b.clear();
+        self.b.resize(nv * 3, 0.0);
+        for ((p, _), g) in active {
+            let nn = *g;
+            a += nn;
+            for (i, vi) in p.vertices.iter().enumerate() {
+                let si = 3 * self.slot[vi];
+                let wi = p.weights[i];
+                for r in 0..3 {
+                    for c in 0..3 {
+                        self.b[(si + r) * 3 + c] += wi * nn.col(c)[r];
+                    }
+                }
+                for (j, vj) in p.vertices.iter().enumerate() {
+                    let sj = 3 * self.slot[vj];
+                    let w = wi * p.weights[j];
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            self.h[(si + r) * nv + sj + c] += w * nn.col(c)[r];
+                        }
+                    }
+                }
+            }
+        }
+        self.fill_s(model, nv);
+        // M = I + H S, X = M^-1 B, K_eff = A - B^T S X.
+        self.m.clear();
+        self.m.resize(nv * nv, 0.0);
+        for i in 0..nv {
+            for k in 0..nv {
+                let hik = self.h[i * nv + k];
+                if hik != 0.0 {
+                    for j in 0..nv {
+                        self.m[i * nv + j] += hik * self.s[k * nv + j];
+                    }
+                }
+            }
+            self.m[i * nv + i] += 1.0;
+        }
+        self.x.clear();
+        self.x.extend_from_slice(&self.b);
+        if !solve_in_place(&mut self.m, &mut self.x, nv, 3) {
+            return a;
+        }
+        let mut k = a;
+        for r in 0..3 {
+            for c in 0..3 {
+                let mut sum = 0.0;
+                for i in 0..nv {
+                    let mut sx = 0.0;
+                    for j in 0..nv {
+                        sx += self.s[i * nv + j] * self.x[j * 3 + c];
+                    }
+                    sum += self.b[i * 3 + r] * sx;
+                }
+                k.col_mut(c)[r] -= sum;
+            }
+        }
+        // Symmetric in exact arithmetic; remove the rounding.
+        (k + k.transpose()) * 0.5
+    }
+
+    /// S = (K^-1)_VV from the cached columns (solved for new vertices), or
+    /// blockdiag(K_ii)^-1 without a factor.
+    fn fill_s(&mut self, model: &ElasticModel, nv: usize) {
+        self.s.clear();
+        self.s.resize(nv * nv, 0.0);
+        let Some(factor) = &self.factor else {
+            for (slot, &v) in self.verts.iter().enumerate() {
+                let kinv = model.vertex_tensors()[v as usize].inverse();
+                if !kinv.is_finite() {
+                    continue;
+                }
+                for r in 0..3 {
+                    for c in 0..3 {
+                        self.s[(3 * slot + r) * nv + 3 * slot + c] = kinv.col(c)[r];
+                    }
+                }
+            }
+            return;
+        };
+        let n = model.vertex_count();
+        if self.columns.len() + self.verts.len() > MAX_CACHED {
+            self.columns.clear();
+        }
+        for &v in &self.verts {
+            if self.columns.contains_key(&v) {
+                continue;
+            }
+            let mut cols = vec![Vec3::ZERO; 3 * n];
+            self.unit.clear();
+            self.unit.resize(n, Vec3::ZERO);
+            for axis in 0..3 {
+                self.unit[v as usize] = Vec3::ZERO;
+                self.unit[v as usize][axis] = 1.0;
+                factor.solve_into(&self.unit, &mut cols[axis * n..(axis + 1) * n]);
+            }
+            self.columns.insert(v, cols);
+        }
+        for (sj, vj) in self.verts.iter().enumerate() {
+            let cols = &self.columns[vj];
+            for c in 0..3 {
+                let col = &cols[c * n..(c + 1) * n];
+                for (si, vi) in self.verts.iter().enumerate() {
+                    let x = col[*vi as usize];
+                    for r in 0..3 {
+                        self.s[(3 * si + r) * nv + 3 * sj + c] = x[r];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// K factorised with `held` fixed; `None` if it cannot be (then the
+/// diagonal approximation serves).
+fn build(model: &ElasticModel, held: &[VertexId]) -> Option<Factorized> {
+    let mut d = Dirichlet::new(model.vertex_count());
+    for v in held {
+        d.fix(*v);
+    }
+    // Vertices no live tetrahedron holds any more (cut free) are fixed so
+    // that K stays definite.
+    for v in 0..model.vertex_count() {
+        if model.topology().vertex_tet_count(VertexId::from(v)) == 0 {
+            d.fix(VertexId::from(v));
+        }
+    }
+    Factorized::new(model, &d).ok()
+}
+
+/// Solves M X = B in place (M n x n row-major, B n x k row-major, X
+/// written into B) by Gaussian elimination with partial pivoting; false if
+/// M is singular. Hand-written because it runs every step on buffers kept
+/// across steps (a dense crate's LU would allocate its factors each time),
+/// for n of a few tens.
+fn solve_in_place(m: &mut [Real], b: &mut [Real], n: usize, k: usize) -> bool {
+    for col in 0..n {
+        let pivot = (col..n)
+            .max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))
+            .unwrap_or(col);
+        if m[pivot * n + col].abs() < 1e-300 {
+            return false;
+        }
+        if pivot != col {
+            for j in 0..n {
+                m.swap(col * n + j, pivot * n + j);
+            }
+            for j in 0..k {
+                b.swap(col * k + j, pivot * k + j);
+            }
+        }
+        let d = m[col * n + col];
+        for i in col + 1..n {
+            let f = m[i * n + col] / d;
+            if f == 0.0 {
+                continue;
+            }
+            for j in col..n {
+                m[i * n + j] -= f * m[col * n + j];
+            }
+            for j in 0..k {
+                b[i * k + j] -= f * b[col * k + j];
+            }
+        }
+    }
+    for col in (0..n).rev() {
+        let d = m[col * n + col];
+        for j in 0..k {
+            let mut x = b[col * k + j];
+            for i in col + 1..n {
+                x -= m[col * n + i] * b[i * k + j];
+            }
+            b[col * k + j] = x / d;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaussian_elimination_solves_a_pivoting_system() {
+        // The first pivot is zero: partial pivoting must swap.
+        let mut m = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 2.0, 0.0, 3.0];
+        let x_true = [1.0, -2.0, 0.5];
+        let a = m.clone();
+        let mut b: Vec<Real> = (0..3)
+            .map(|i| (0..3).map(|j| a[i * 3 + j] * x_true[j]).sum())
+            .collect();
+        assert!(solve_in_place(&mut m, &mut b, 3, 1));
+        for (x, t) in b.iter().zip(x_true) {
+            assert!((x - t).abs() < 1e-12, "{b:?}");
+        }
+        let mut singular = vec![1.0, 2.0, 2.0, 4.0];
+        assert!(!solve_in_place(&mut singular, &mut [1.0, 1.0], 2, 1));
+    }
+}

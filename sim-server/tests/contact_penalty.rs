@@ -1,0 +1,280 @@
+//! The penalty contact law (the default on tensor-mass): the force is
+//! continuous in the tool pose and zero at zero gap, never drops out while
+//! the tool is in the tissue, does not depend on the integrator's sub-step
+//! count, follows from the contact stiffness it publishes (checked against
+//! finite differences of the settled reaction), survives a pose glitch
+//! through the speed-limited proxy, and keeps gripping and cutting.
+
+use sim_server::contact::{ContactLaw, ToolInput};
+use sim_server::prelude::*;
+use sim_server::scene::{SceneSource, build_scene};
+use sim_server::server::{Prepared, prepare};
+use std::path::PathBuf;
+
+/// Top face of the block (m).
+const TOP_M: f64 = 0.02;
+
+/// A 4 x 2 x 2 cm block on 5 mm cells, bottom fixed, one tool of `kind`
+/// (radius 2.5 mm) entering from above; `extra` appended to the scene.
+fn scene(kind: &str, extra: &str) -> Prepared<Explicit<f64>> {
+    let text = format!(
+        r#"
+[mesh]
+generate = {{ shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }}
+
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 40.0
+
+[[fixed]]
+name = "bottom"
+select = {{ box_m = [[-0.001, -0.001, -0.001], [0.041, 0.021, 0.0001]] }}
+
+[[tool]]
+name = "tool"
+kind = "{kind}"
+fulcrum_m = [0.02, 0.01, 0.15]
+length_m = 0.3
+radius_m = 0.0025
+tip_length_m = 0.01
+{extra}
+"#
+    );
+    let src = SceneSource {
+        name: "<block>".into(),
+        dir: PathBuf::from("."),
+        text,
+    };
+    let built = build_scene(&src, &src.parse().unwrap()).unwrap();
+    prepare::<f64>(built, Some(1e-3)).unwrap()
+}
+
+/// One step with the tool tip at `tip` (jaws `jaw`); the force on it.
+fn step(p: &mut Prepared<Explicit<f64>>, tip: Vec3, jaw: f64) -> Vec3 {
+    let input = [Some(ToolInput {
+        tip_m: tip,
+        jaw_opening: jaw,
+    })];
+    p.tools.update(&mut p.sim, &input);
+    p.tools.step(&mut p.sim);
+    p.tools.reaction(0, &p.sim).force_n
+}
+
+/// Holds the tool at `tip` for `steps` steps; the last force.
+fn settle(p: &mut Prepared<Explicit<f64>>, tip: Vec3, steps: usize) -> Vec3 {
+    let mut f = Vec3::ZERO;
+    for _ in 0..steps {
+        f = step(p, tip, 1.0);
+    }
+    f
+}
+
+/// Between vertices (a cell is 5 mm): no vertex under the tool.
+fn between(z: f64) -> Vec3 {
+    Vec3::new(0.0175, 0.0075, z)
+}
+
+#[test]
+fn penalty_is_the_default_on_tensor_mass() {
+    assert_eq!(scene("hook", "").tools.law(), ContactLaw::Penalty);
+    let p = scene("hook", "[contact]\nlaw = \"projection\"\n");
+    assert_eq!(p.tools.law(), ContactLaw::Projection);
+}
+
+#[test]
+fn force_is_zero_until_touch_then_grows_without_dropping_out() {
+    let mut p = scene("hook", "");
+    // The tool comes in from its fulcrum; wait above the surface.
+    settle(&mut p, between(TOP_M + 0.0045), 400);
+    // The tip (a hemisphere of 2.5 mm) descends between vertices at
+    // 20 mm/s: nothing above the surface, then a force that never vanishes
+    // and never jumps.
+    let mut prev = Vec3::ZERO;
+    let mut touched = false;
+    let mut max_jump: f64 = 0.0;
+    for k in 0..400 {
+        let z = TOP_M + 0.0025 + 0.002 - 0.00002 * k as f64;
+        let f = step(&mut p, between(z), 1.0);
+        let gap = z - 0.0025 - TOP_M;
+        if gap > 1e-4 {
+            assert_eq!(f, Vec3::ZERO, "force {f} at a gap of {gap}");
+        }
+        if touched {
+            assert!(f.z > 0.0, "the force dropped out at depth {}", -gap);
+            max_jump = max_jump.max((f - prev).length());
+        }
+        touched |= f.z > 0.0;
+        prev = f;
+    }
+    assert!(touched && prev.z > 0.05, "pressed 6 mm: {prev}");
+    // 20 um per step: a continuous law moves the force little per step.
+    assert!(
+        max_jump < 0.05 * prev.z,
+        "largest per-step change {max_jump} N of {}",
+        prev.z
+    );
+}
+
+#[test]
+fn sliding_across_vertices_is_smooth() {
+    let mut p = scene("hook", "");
+    let depth = 0.003;
+    let start = Vec3::new(0.01, 0.0075, TOP_M + 0.0025 - depth);
+    settle(&mut p, start, 600);
+    let mut prev = step(&mut p, start, 1.0);
+    let mut max_jump: f64 = 0.0;
+    let mut min_fz = f64::INFINITY;
+    // 2 cm along x (four cells) at 20 mm/s.
+    for k in 1..=1000 {
+        let f = step(&mut p, start + Vec3::new(0.00002 * k as f64, 0.0, 0.0), 1.0);
+        max_jump = max_jump.max((f - prev).length());
+        min_fz = min_fz.min(f.z);
+        prev = f;
+    }
+    assert!(min_fz > 0.0, "contact lost while sliding");
+    assert!(
+        max_jump < 0.1 * min_fz,
+        "per-step jump {max_jump} N, smallest force {min_fz} N"
+    );
+}
+
+#[test]
+fn the_force_does_not_depend_on_the_sub_step_count() {
+    let run = |factor: usize| {
+        let mut p = scene("hook", "");
+        let n = p.sim.substeps() * factor;
+        p.sim.set_min_substeps(n);
+        settle(&mut p, between(TOP_M + 0.003), 400);
+        (0..300)
+            .map(|k| step(&mut p, between(TOP_M + 0.003 - 0.00002 * k as f64), 1.0))
+            .collect::<Vec<_>>()
+    };
+    let (a, b) = (run(1), run(2));
+    let peak = a.iter().map(|f| f.length()).fold(0.0, f64::max);
+    let rms = (a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (*x - *y).length_squared())
+        .sum::<f64>()
+        / a.len() as f64)
+        .sqrt();
+    assert!(peak > 0.02, "peak {peak}");
+    assert!(
+        rms < 0.01 * peak,
+        "rms difference {rms} N for a {peak} N peak"
+    );
+}
+
+#[test]
+fn published_stiffness_matches_finite_differences_of_the_settled_reaction() {
+    for at in [between(0.0), Vec3::new(0.02, 0.01, 0.0)] {
+        let tip = Vec3::new(at.x, at.y, TOP_M + 0.0025 - 0.003);
+        let mut p = scene("hook", "");
+        let f0 = settle(&mut p, tip, 1500);
+        let k = p.tools.reaction(0, &p.sim).stiffness_n_per_m;
+        // Settled to round-off, so a 1 um step resolves the derivative;
+        // over 20 um the contact's own nonlinearity already shows (~10%).
+        let eps = 1e-6;
+        let mut fd = Mat3::ZERO;
+        for axis in 0..3 {
+            let mut q = scene("hook", "");
+            settle(&mut q, tip, 1500);
+            let f = settle(&mut q, tip + Vec3::AXES[axis] * eps, 1500);
+            *fd.col_mut(axis) = -(f - f0) / eps;
+        }
+        let err = (k - fd)
+            .to_cols_array()
+            .iter()
+            .map(|x| x * x)
+            .sum::<f64>()
+            .sqrt();
+        let size = fd.to_cols_array().iter().map(|x| x * x).sum::<f64>().sqrt();
+        assert!(
+            err < 0.05 * size,
+            "at {at}: published {k} vs finite differences {fd} ({:.1}%)",
+            100.0 * err / size
+        );
+    }
+}
+
+/// A 5 ms pose glitch reaching the simulation (the daemon rejects such
+/// samples before they do: see haptic-daemon's plausibility filter). The
+/// proxy strays at most a few millimetres (100 m/s^2 for 5 ms, then
+/// braking), the tool never ends up inside the tissue, and the contact
+/// comes back to what it was.
+#[test]
+fn a_pose_glitch_leaves_the_contact_as_it_was() {
+    for glitch in [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -0.02)] {
+        let mut p = scene("hook", "");
+        let tip = between(TOP_M + 0.0025 - 0.006);
+        let before = settle(&mut p, tip, 1500);
+        // What 3 mm deeper gives: the most the proxy can stray.
+        let mut q = scene("hook", "");
+        let deeper = settle(&mut q, tip - Vec3::new(0.0, 0.0, 0.003), 1500).length();
+        let mut peak: f64 = 0.0;
+        for _ in 0..5 {
+            peak = peak.max(step(&mut p, tip + glitch, 1.0).length());
+        }
+        let mut low = f64::INFINITY;
+        let mut after = Vec3::ZERO;
+        for k in 0..1500 {
+            after = step(&mut p, tip, 1.0);
+            peak = peak.max(after.length());
+            if k > 50 {
+                low = low.min(after.z);
+            }
+        }
+        let f0 = before.length();
+        assert!(
+            (after - before).length() < 0.05 * f0,
+            "glitch {glitch}: {before} before, {after} after"
+        );
+        assert!(
+            peak <= deeper,
+            "glitch {glitch}: peak {peak} N, {deeper} N 3 mm deeper"
+        );
+        assert!(low > 0.25 * before.z, "glitch {glitch}: fell to {low} N");
+    }
+}
+
+#[test]
+fn the_grasper_grips_lifts_and_cuts_under_the_penalty_law() {
+    let mut p = scene("grasper", "");
+    let tip = between(TOP_M + 0.0025 - 0.002);
+    settle(&mut p, tip, 300);
+    // Close the jaws (below 0.5): grip; lift 3 mm: the tissue follows.
+    step(&mut p, tip, 0.3);
+    assert!(p.tools.tool(0).gripping());
+    let lifted = tip + Vec3::new(0.0, 0.0, 0.003);
+    let mut f = Vec3::ZERO;
+    for _ in 0..300 {
+        f = step(&mut p, lifted, 0.3);
+    }
+    assert!(p.tools.tool(0).gripping());
+    assert!(f.z < 0.0, "the tissue holds the lifted grasper back: {f}");
+    // Close below 0.1: cut what is held.
+    let before = p.sim.model().topology().alive_count();
+    step(&mut p, lifted, 0.05);
+    assert!(p.sim.model().topology().alive_count() < before);
+    assert!(!p.tools.tool(0).gripping());
+}
+
+#[test]
+fn bad_contact_constants_are_scene_errors_with_their_line() {
+    let text = "[mesh]\ngenerate = { shape = \"box\", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }\n[material]\nyoung_pa = 5000.0\npoisson = 0.45\ndensity_kg_m3 = 1000.0\ndamping_per_s = 5.0\n[contact]\nstiffness_factor = -3.0\n";
+    let src = SceneSource {
+        name: "bad.toml".into(),
+        dir: PathBuf::from("."),
+        text: text.into(),
+    };
+    let err = build_scene(&src, &src.parse().unwrap())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("bad.toml:9") && err.contains("stiffness_factor"),
+        "{err}"
+    );
+}
