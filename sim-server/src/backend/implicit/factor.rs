@@ -10,8 +10,16 @@
 //! not cover (released since) get the Jacobi step r / diag, held rows 0.
 //! The solve runs on one thread into buffers allocated here, so applying it
 //! allocates nothing.
+//!
+//! It is assembled from an [`Assembly`]: borrowed from the model for an
+//! inline build, or from a [`Snapshot`](super::rebuild::Snapshot) the
+//! stepping thread copied for the background worker. Either way the factor
+//! records which rows were free in the held set it was given (`index`), not
+//! the backend's current one, so [`Factor::apply`] compares that set with
+//! the current one at every use, however much it changed since.
 
-use crate::math::{Real, Vec3};
+use crate::ids::VertexId;
+use crate::math::{Mat3, Real, Vec3};
 use crate::tensor_mass::ElasticModel;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
@@ -19,6 +27,29 @@ use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Par, Side};
 
 const NOT_FREE: usize = usize::MAX;
+
+/// The arrays A is assembled from (see [`ElasticModel`] for each).
+#[derive(Clone, Copy)]
+pub(super) struct Assembly<'a> {
+    pub masses_kg: &'a [Real],
+    pub damping_kg_s: &'a [Real],
+    pub vertex_tensors: &'a [Mat3],
+    pub edges: &'a [[VertexId; 2]],
+    pub edge_tensors: &'a [Mat3],
+}
+
+impl<'a> Assembly<'a> {
+    /// The model's current arrays.
+    pub fn of(model: &'a ElasticModel) -> Self {
+        Self {
+            masses_kg: model.masses_kg(),
+            damping_kg_s: model.damping_kg_s(),
+            vertex_tensors: model.vertex_tensors(),
+            edges: model.topology().edges(),
+            edge_tensors: model.edge_tensors(),
+        }
+    }
+}
 
 /// A factorised A over the rows free at construction.
 pub(super) struct Factor {
@@ -33,8 +64,9 @@ pub(super) struct Factor {
 impl Factor {
     /// Assembles and factorises A = diag(m + h c) + h^2 K over the vertices
     /// not `held`. `Err` names what failed (the backend then stays on Jacobi).
-    pub fn new(model: &ElasticModel, h: Real, held: &[bool]) -> Result<Self, String> {
-        let n = model.vertex_count();
+    pub fn new(model: &Assembly, h: Real, held: &[bool]) -> Result<Self, String> {
+        let n = model.masses_kg.len();
+        assert_eq!(held.len(), n, "one held flag per vertex");
         // Every buffer that grows with the mesh is reserved fallibly: a mesh
         // too large to factorise gets an Err (and Jacobi), not an abort.
         let mut index = Vec::new();
@@ -51,13 +83,13 @@ impl Factor {
                 }
             }
         }
-        let (m, c) = (model.masses_kg(), model.damping_kg_s());
+        let (m, c) = (model.masses_kg, model.damping_kg_s);
         // Lower triangle: 6 entries per vertex block, 9 per edge block.
         let mut triplets = Vec::new();
         triplets
-            .try_reserve(6 * n + 9 * model.edge_tensors().len())
+            .try_reserve(6 * n + 9 * model.edge_tensors.len())
             .map_err(|e| format!("assembly: {e}"))?;
-        let mut push = |a: usize, b: usize, k: &crate::math::Mat3, shift: Real| {
+        let mut push = |a: usize, b: usize, k: &Mat3, shift: Real| {
             for r in 0..3 {
                 let fr = index[3 * a + r];
                 for col in 0..3 {
@@ -69,10 +101,10 @@ impl Factor {
                 }
             }
         };
-        for (v, k) in model.vertex_tensors().iter().enumerate() {
+        for (v, k) in model.vertex_tensors.iter().enumerate() {
             push(v, v, k, m[v] + h * c[v]);
         }
-        for ([a, b], k) in model.topology().edges().iter().zip(model.edge_tensors()) {
+        for ([a, b], k) in model.edges.iter().zip(model.edge_tensors) {
             push(a.idx(), b.idx(), k, 0.0);
             push(b.idx(), a.idx(), &k.transpose(), 0.0);
         }

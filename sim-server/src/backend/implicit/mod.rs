@@ -15,20 +15,46 @@
 //! and rebuilt once the iterations spent beyond one per step since it was
 //! built pass [`REFACTOR_BUDGET`], about what a factorisation costs.
 //! The Jacobi preconditioner (diagonal of A) needs no factor, for meshes
-//! too large to factorise, at hundreds of iterations at nu 0.45. The buffers
-//! are reused, so a step allocates nothing unless it refactorises.
+//! too large to factorise, at hundreds of iterations at nu 0.45.
+//!
+//! Rebuilds run off the stepping thread ([`rebuild`], unless
+//! [`ImplicitConfig::background_rebuild`] is off): the step that finds the
+//! budget spent copies the tensors and the held set into a buffer it owns
+//! and posts it to the backend's worker thread, which factorises while the
+//! steps go on with the old factor; the first step after the worker is done
+//! swaps the new factor in (the old one goes to the worker to be freed).
+//! Only the first factor, when there is no old one, is built inline in the
+//! first step. The buffers are reused, so a step allocates nothing once
+//! running, a background swap included; with inline rebuilds, a step that
+//! refactorises allocates.
+//!
+//! A factor always belongs to the held set of its snapshot, whenever it
+//! arrives: the preconditioner compares that set with the current one at
+//! every use (rows held since get 0, rows released since the Jacobi step),
+//! so holds and releases while a rebuild is in flight cost iterations, not
+//! correctness, and the budget, counted afresh from the swap, orders the
+//! next rebuild if they cost too many. A cut while a rebuild is in flight is
+//! treated the same way, as a cut after an inline rebuild always was: the
+//! arriving factor is the inverse of a nearby SPD matrix (K before the cut),
+//! still a valid preconditioner, and no staler about the cut than the factor
+//! it replaces, which also predates it; so it is swapped in, not discarded.
 //!
 //! Cutting updates the same tensors as the explicit backend. A nonlinear
 //! membrane (eq 29) is not linear in u and is refused; the linear one is in K.
 
 mod factor;
+mod rebuild;
 
 use super::Backend;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::membrane::MembraneModel;
 use crate::tensor_mass::{CutChange, CutError, ElasticModel};
-use factor::Factor;
+use factor::{Assembly, Factor};
+use rebuild::{Rebuilder, Received};
+use std::sync::Weak;
+
+pub use rebuild::RebuildGate;
 
 /// Solver settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +67,11 @@ pub struct ImplicitConfig {
     pub max_iterations: usize,
     /// How the CG is preconditioned.
     pub preconditioner: Preconditioner,
+    /// Rebuild the Cholesky factor on a worker thread, the steps using the
+    /// old one meanwhile (default); `false` rebuilds inline, in the step
+    /// that needs it, so that runs are reproducible step for step (the
+    /// trajectories agree either way, to the CG tolerance).
+    pub background_rebuild: bool,
 }
 
 /// The CG preconditioner of the implicit backend.
@@ -61,13 +92,14 @@ pub const REFACTOR_BUDGET: usize = 50;
 
 impl ImplicitConfig {
     /// Step `dt_s`, residual 1e-9, at most 1000 iterations, Cholesky
-    /// preconditioner.
+    /// preconditioner rebuilt in the background.
     pub fn new(dt_s: Real) -> Self {
         Self {
             dt_s,
             tolerance: 1e-9,
             max_iterations: 1000,
             preconditioner: Preconditioner::Cholesky,
+            background_rebuild: true,
         }
     }
 }
@@ -105,10 +137,14 @@ pub struct Implicit {
     ap: Vec<Vec3>,
     diag: Vec<Vec3>,
     factor: Option<Factor>,
-    /// Build the Cholesky factor before the next step.
+    /// The background worker (Cholesky with `background_rebuild`).
+    rebuilder: Option<Rebuilder>,
+    /// Build (or post) the Cholesky factor before the next step.
     refactor: bool,
-    /// Iterations beyond one per step since the factor was built.
+    /// Iterations beyond one per step since the factor was swapped in.
     excess_iterations: usize,
+    /// Factors put to use so far.
+    factor_builds: usize,
     iterations: usize,
     residual: Real,
 }
@@ -127,6 +163,10 @@ impl Implicit {
         }
         let n = model.vertex_count();
         let z = vec![Vec3::ZERO; n];
+        // No thread (rare) means inline rebuilds, as with the option off.
+        let rebuilder = (cfg.preconditioner == Preconditioner::Cholesky && cfg.background_rebuild)
+            .then(|| Rebuilder::new(&model, cfg.dt_s).ok())
+            .flatten();
         Ok(Self {
             model,
             cfg,
@@ -144,8 +184,10 @@ impl Implicit {
             ap: z.clone(),
             diag: z,
             factor: None,
+            rebuilder,
             refactor: cfg.preconditioner == Preconditioner::Cholesky,
             excess_iterations: 0,
+            factor_builds: 0,
             iterations: 0,
             residual: 0.0,
         })
@@ -175,6 +217,83 @@ impl Implicit {
                     *z = *r / *d;
                 }
             }
+        }
+    }
+
+    /// Cholesky factors put to use so far: the first, built inline, and
+    /// every rebuild once swapped in.
+    pub fn factor_builds(&self) -> usize {
+        self.factor_builds
+    }
+
+    /// A background rebuild has been posted and not yet swapped in.
+    pub fn rebuild_in_flight(&self) -> bool {
+        self.rebuilder.as_ref().is_some_and(Rebuilder::in_flight)
+    }
+
+    /// Blocks until the background rebuild in flight, if any, is done; the
+    /// next step swaps it in. For tests and offline runs that want the
+    /// background path reproducibly: never call it from a real-time loop,
+    /// and never while the [`RebuildGate`] is closed (it would wait for ever).
+    #[doc(hidden)]
+    pub fn wait_for_rebuild(&self) {
+        if let Some(r) = &self.rebuilder {
+            r.wait();
+        }
+    }
+
+    /// The worker's gate, for tests that need a rebuild to stay in flight
+    /// (`None` without a worker).
+    #[doc(hidden)]
+    pub fn rebuild_gate(&self) -> Option<RebuildGate> {
+        self.rebuilder.as_ref().map(Rebuilder::gate)
+    }
+
+    /// Upgrades while the worker thread runs (`None` without a worker), for
+    /// tests that check it ends with the backend.
+    #[doc(hidden)]
+    pub fn rebuild_worker(&self) -> Option<Weak<()>> {
+        self.rebuilder.as_ref().map(Rebuilder::alive)
+    }
+
+    /// Before a step: swaps in a factor the worker has finished, then builds
+    /// or posts one if the last steps asked for it.
+    fn update_factor(&mut self) {
+        if let Some(rebuilder) = &mut self.rebuilder {
+            match rebuilder.receive(&mut self.factor) {
+                Some(Received::Swapped) => {
+                    self.factor_builds += 1;
+                    self.excess_iterations = 0;
+                }
+                Some(Received::Failed) => {
+                    // As inline: Jacobi for good (the factor was retired).
+                    self.cfg.preconditioner = Preconditioner::Jacobi;
+                    self.refactor = false;
+                }
+                None => {}
+            }
+        }
+        if !self.refactor {
+            return;
+        }
+        if let (Some(rebuilder), Some(_)) = (&mut self.rebuilder, &self.factor) {
+            // The old factor serves until the new one arrives. A busy lock
+            // leaves `refactor` set: posted next step.
+            if rebuilder.request(&self.model, &self.held) {
+                self.refactor = false;
+            }
+            return;
+        }
+        // Inline: rebuilds without a worker, and the first factor.
+        self.refactor = false;
+        self.excess_iterations = 0;
+        // A factor that cannot be built (memory) leaves the backend on
+        // Jacobi for good rather than retrying every step.
+        self.factor = Factor::new(&Assembly::of(&self.model), self.cfg.dt_s, &self.held).ok();
+        if self.factor.is_some() {
+            self.factor_builds += 1;
+        } else {
+            self.cfg.preconditioner = Preconditioner::Jacobi;
         }
     }
 
@@ -239,16 +358,7 @@ impl Backend for Implicit {
     fn step(&mut self) {
         let h = self.cfg.dt_s;
         let n = self.u.len();
-        if self.refactor {
-            self.refactor = false;
-            self.excess_iterations = 0;
-            // A factor that cannot be built (memory) leaves the backend on
-            // Jacobi for good rather than retrying every step.
-            self.factor = Factor::new(&self.model, h, &self.held).ok();
-            if self.factor.is_none() {
-                self.cfg.preconditioner = Preconditioner::Jacobi;
-            }
-        }
+        self.update_factor();
         let (m, c) = (self.model.masses_kg(), self.model.damping_kg_s());
         // b = M v + h (f - K u); held rows carry their known velocity.
         for (s, u) in self.scratch.iter_mut().zip(&self.u) {
@@ -316,7 +426,8 @@ impl Backend for Implicit {
         self.residual = residual;
         if self.cfg.preconditioner == Preconditioner::Cholesky {
             self.excess_iterations += iterations.saturating_sub(1);
-            self.refactor = self.excess_iterations > REFACTOR_BUDGET;
+            // Not again while one is in flight: its swap resets the count.
+            self.refactor = self.excess_iterations > REFACTOR_BUDGET && !self.rebuild_in_flight();
         }
         for i in 0..n {
             if self.held[i] {
