@@ -2,9 +2,11 @@
 //! force samples (live ones only) -> extrapolate -> safety (with passivity)
 //! -> write device -> telemetry. Everything it needs is
 //! allocated in [`RtLoop::new`]; [`RtLoop::tick`] allocates nothing, takes
-//! no lock, and makes no system call other than what the device needs
-//! (iceoryx2's `receive` is allocation-free; publishing happens on the I/O
-//! thread, because iceoryx2 0.10's `loan` allocates).
+//! no lock, and makes no system call other than what the device needs and
+//! one non-blocking futex wake of the I/O thread when it sleeps
+//! ([`Shared::wake_io`]: `Thread::unpark`), so that the pose is published
+//! at once (iceoryx2's `receive` is allocation-free; publishing happens on
+//! the I/O thread, because iceoryx2 0.10's `loan` allocates).
 //!
 //! The daemon's own checks ([`ChainConfig`]):
 //!
@@ -38,8 +40,9 @@ use crossbeam_queue::ArrayQueue;
 use iceoryx2::port::subscriber::Subscriber;
 use shared::protocol::{ForceMsg, PROTOCOL_VERSION, TelemetryTick};
 use shared::services::Ipc;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::thread::Thread;
 use thiserror::Error;
 
 /// What the threads share.
@@ -64,6 +67,8 @@ pub struct Shared {
     pub passivity_ticks: AtomicU64,
     /// Energy the passivity controller set out to dissipate (J, f64 bits).
     pub passivity_dissipated_j_bits: AtomicU64,
+    /// The I/O thread, woken after each pose write (set by the I/O thread).
+    pub io_thread: OnceLock<Thread>,
 }
 
 impl Shared {
@@ -80,6 +85,15 @@ impl Shared {
             samples_not_live: AtomicU64::new(0),
             passivity_ticks: AtomicU64::new(0),
             passivity_dissipated_j_bits: AtomicU64::new(0f64.to_bits()),
+            io_thread: OnceLock::new(),
+        }
+    }
+
+    /// Wakes the I/O thread if it registered (allocation-free and
+    /// non-blocking: an atomic swap, and a futex wake if it sleeps).
+    pub fn wake_io(&self) {
+        if let Some(t) = self.io_thread.get() {
+            t.unpark();
         }
     }
 
@@ -253,13 +267,15 @@ impl<D: Device> RtLoop<D> {
             }
             Err(_) => poisoned = true,
         }
-        // 2. Pose for the simulation (published by the I/O thread).
+        // 2. Pose for the simulation (published by the I/O thread, woken
+        // for it).
         self.shared.pose.write(
             now_ns,
             self.last.position_m,
             self.last.gripper,
             self.last.buttons,
         );
+        self.shared.wake_io();
         // 3. Force samples: drain, newest wins (the extrapolator keeps two);
         // samples faster than wall time are not rendered.
         let mut resumed = false;

@@ -1,6 +1,11 @@
 //! The I/O thread (not real time): publishes the pose the RT thread left in
 //! its slot, drains the telemetry queue into statistics, the record CSV and
 //! telemetry batches, and watches whether a simulation is publishing.
+//!
+//! It sleeps parked (at most 1 ms) and the RT thread unparks it after each
+//! pose write, so a pose is published one thread wake-up after the device
+//! read; it then notifies the session's `pose-ready` event, which wakes a
+//! simulation waiting for its next step.
 
 use crate::daemon::Shared;
 use crate::rt::LatenessHistogram;
@@ -73,6 +78,8 @@ pub enum IoError {
 pub const DEVICE_STALL_NS: u64 = 250_000_000;
 /// A gap in this thread's own wake-ups that restarts the stall watch (ns).
 const STALL_IO_GAP_NS: u64 = 50_000_000;
+/// How often dead nodes are reaped and the simulation's presence checked (ns).
+const PEER_CHECK_NS: u64 = 20_000_000;
 /// The exit status after a blocked device.
 pub const DEVICE_STALL_EXIT_CODE: i32 = 3;
 
@@ -114,6 +121,9 @@ pub fn run_io(
     let pose_pub = services::publisher(&services::pose_service(&node, &session)?)?;
     let tele_pub = services::publisher(&services::telemetry_service(&node, &session)?)?;
     let force_service = services::force_service(&node, &session)?;
+    let pose_ready = services::pose_ready_notifier(&node, &session)?;
+    // From here on the RT thread wakes this thread after each pose.
+    let _ = shared.io_thread.set(std::thread::current());
     let mut writer = match &record {
         Some(path) => {
             let err = |source| IoError::Record {
@@ -139,8 +149,8 @@ pub fn run_io(
     let mut last_pose_seq = 0u64;
     let mut pose_msgs = 0u64;
     let mut next_seq = 0u64;
-    let mut loops = 0u64;
     let mut last_wake_ns = shared::monotonic_ns();
+    let mut peers_checked_ns = 0u64;
     let mut watch_from_ns = last_wake_ns;
     loop {
         let done = shared.flags.rt_done.load(Ordering::Acquire);
@@ -160,6 +170,7 @@ pub fn run_io(
             msg.tools[0].buttons = p.buttons;
             msg.tools[0].flags = TOOL_PRESENT;
             let _ = pose_pub.send_copy(msg);
+            let _ = pose_ready.notify();
             pose_msgs += 1;
         }
         {
@@ -215,18 +226,19 @@ pub fn run_io(
             );
             std::process::exit(DEVICE_STALL_EXIT_CODE);
         }
-        if loops.is_multiple_of(20) {
+        if now.saturating_sub(peers_checked_ns) >= PEER_CHECK_NS {
             // Reap dead nodes so a crashed simulation's publisher disappears,
             // then see whether anyone publishes forces.
+            peers_checked_ns = now;
             services::reap_dead_nodes(&node);
             let alive = services::publisher_count(&force_service) > 0;
             shared.flags.peer_alive.store(alive, Ordering::Relaxed);
         }
-        loops += 1;
         if done && shared.telemetry.is_empty() {
             break;
         }
-        std::thread::sleep(Duration::from_millis(1));
+        // Until the RT thread's next pose (or 1 ms).
+        std::thread::park_timeout(Duration::from_millis(1));
     }
     if batch.count > 0 {
         batch.seq = batches;

@@ -6,6 +6,8 @@ use crate::SessionName;
 use crate::protocol::{
     ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, TelemetryBatch, TopologyHeader,
 };
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 /// Brings `update_connections` into scope: a publisher that sends rarely
@@ -32,6 +34,9 @@ pub mod stream {
     pub const MESH: &str = "mesh";
     /// Sim -> viewer surface triangles (on topology changes).
     pub const TOPOLOGY: &str = "topology";
+    /// Daemon -> sim event: a pose was just published (optional; the
+    /// simulation steps on it instead of waiting for its next step time).
+    pub const POSE_READY: &str = "pose-ready";
 }
 
 /// Why a service could not be used.
@@ -67,6 +72,16 @@ pub enum ServiceError {
 
 /// The iceoryx2 service type of the project: inter-process, shared memory.
 pub type Ipc = ipc::Service;
+/// An iceoryx2 node of the project (for crates that do not use iceoryx2 directly).
+pub type IpcNode = Node<Ipc>;
+/// The pose service.
+pub type PoseService = PortFactory<Ipc, PoseMsg, ()>;
+/// A pose subscriber.
+pub type PoseSubscriber = Subscriber<Ipc, PoseMsg, ()>;
+/// A listener on the pose-ready event.
+pub type PoseReadyListener = Listener<Ipc>;
+/// A force subscriber.
+pub type ForceSubscriber = Subscriber<Ipc, ForceMsg, ()>;
 
 /// Creates a node named `name` (shows in iceoryx2's node listings).
 /// Signal handling stays with the program, which must zero forces itself.
@@ -164,6 +179,88 @@ pub fn telemetry_service(
     session: &SessionName,
 ) -> Result<PortFactory<Ipc, TelemetryBatch, ()>, ServiceError> {
     open(node, session, stream::TELEMETRY, 64)
+}
+
+/// The pose-ready event (daemon -> sim): whoever publishes a pose may
+/// notify it right after, so that a simulation waiting for its next step
+/// wakes at once and steps on the fresh pose (see `docs/protocol.md`). A pose
+/// publisher that does not notify still works: the simulation then steps at
+/// its own rate.
+pub fn pose_ready_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ServiceError> {
+    let name = session.service(stream::POSE_READY);
+    let service_name =
+        ServiceName::new(&name).map_err(|e| version_or_open(&name, format!("{e:?}")))?;
+    node.service_builder(&service_name)
+        .event()
+        .max_notifiers(2)
+        .max_listeners(8)
+        .open_or_create_with_attributes(&verifier(&name)?)
+        .map_err(|e| version_or_open(&name, format!("{e:?}")))
+}
+
+/// A notifier on the pose-ready event.
+pub fn pose_ready_notifier(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<Notifier<Ipc>, ServiceError> {
+    let factory = pose_ready_service(node, session)?;
+    factory
+        .notifier_builder()
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// A listener on the pose-ready event.
+pub fn pose_ready_listener(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<Listener<Ipc>, ServiceError> {
+    let factory = pose_ready_service(node, session)?;
+    factory
+        .listener_builder()
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// Waits up to `timeout` for a notification on `listener`, then takes every
+/// pending one; true when woken by one (false: timed out, interrupted).
+///
+/// `ppoll` on the listener's socket, with a nanosecond timeout: iceoryx2's
+/// own `timed_wait` sets a socket receive timeout, which the kernel rounds
+/// up to its tick (4 ms at 250 Hz) and which blocks for ever when the
+/// timeout truncates to zero microseconds.
+pub fn wait_notified(listener: &Listener<Ipc>, timeout: std::time::Duration) -> bool {
+    use iceoryx2::prelude::FileDescriptorBased;
+    // SAFETY: the descriptor stays owned by the listener, which outlives
+    // this call; it is only polled here.
+    let fd = unsafe { listener.file_descriptor().native_handle() };
+    let mut pfd = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs().min(i32::MAX as u64) as libc::time_t,
+        tv_nsec: timeout.subsec_nanos() as libc::c_long,
+    };
+    // SAFETY: one pollfd and one timespec on the stack, valid for the call;
+    // no signal mask.
+    let ready = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+    if ready > 0 {
+        let _ = listener.try_wait(|_| {});
+        true
+    } else {
+        false
+    }
 }
 
 fn version_or_open(service: &str, e: String) -> ServiceError {
@@ -394,6 +491,30 @@ mod tests {
             err.to_string().contains("another protocol version"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn a_pose_ready_notification_wakes_a_waiting_listener() {
+        let session = unique_session("ready");
+        let sim = node("test-ready-sim").unwrap();
+        let daemon = node("test-ready-daemon").unwrap();
+        let listener = pose_ready_listener(&sim, &session).unwrap();
+        let notifier = pose_ready_notifier(&daemon, &session).unwrap();
+        // Nothing yet: short waits time out, at their time (not rounded
+        // to the kernel tick, and zero does not block).
+        let ms = std::time::Duration::from_millis;
+        let t0 = std::time::Instant::now();
+        assert!(!wait_notified(&listener, std::time::Duration::ZERO));
+        assert!(!wait_notified(
+            &listener,
+            std::time::Duration::from_nanos(500)
+        ));
+        assert!(!wait_notified(&listener, ms(1)));
+        assert!(t0.elapsed() < ms(3), "{:?}", t0.elapsed());
+        assert_eq!(notifier.notify().unwrap(), 1, "one listener notified");
+        assert!(wait_notified(&listener, ms(5000)));
+        // Taken: the next wait times out.
+        assert!(!wait_notified(&listener, ms(1)));
     }
 
     #[test]

@@ -117,7 +117,13 @@ def main() -> int:
     forces = service(node, args.session, "force", ForceMsg, 1024).publisher_builder().create()
 
     period_ns = int(1e9 / args.rate_hz)
+    # Protocol rules: a pose older than 50 ms drives no tool; after a stall
+    # of more than two steps or 5 ms the missed time is dropped (the clock
+    # re-anchored), not run fast.
+    pose_timeout_ns = 50_000_000
+    stall_bound_ns = max(2 * period_ns, 5_000_000)
     start = time.monotonic_ns()
+    anchor, anchor_seq = start, 0
     end = start + int(args.duration_s * 1e9)
     latest = None
     seq = 0
@@ -135,7 +141,8 @@ def main() -> int:
             latest = PoseMsg.from_buffer_copy(msg)
         out = ForceMsg(version=PROTOCOL_VERSION, tool_count=1, seq=seq)
         tool = out.tools[0]
-        if latest is not None and latest.tools[0].flags & TOOL_PRESENT:
+        fresh = latest is not None and time.monotonic_ns() - latest.t_ns <= pose_timeout_ns
+        if fresh and latest.tools[0].flags & TOOL_PRESENT:
             p = latest.tools[0].tip_m
             tool.position_m[:] = list(p)
             tool.pose_seq = latest.seq
@@ -147,12 +154,16 @@ def main() -> int:
                 sent_in_contact += 1
         now = time.monotonic_ns()
         out.t_ns = now
-        out.sim_time_ns = now - start
+        out.sim_time_ns = seq * period_ns
         out.step_period_ns = now - last
         last = now
         forces.send_copy(out)
         seq += 1
-        time.sleep(max(0.0, (start + seq * period_ns - time.monotonic_ns()) * 1e-9))
+        due = anchor + (seq - anchor_seq) * period_ns
+        if time.monotonic_ns() - due > stall_bound_ns:
+            anchor, anchor_seq = time.monotonic_ns(), seq
+            due = anchor
+        time.sleep(max(0.0, (due - time.monotonic_ns()) * 1e-9))
     print(f"python backend: {seq} force samples, {sent_in_contact} in contact")
     return 0
 

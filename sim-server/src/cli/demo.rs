@@ -162,6 +162,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         viewer_rate_hz: 30.0,
         status: !args.headless,
         scripts: vec![cavitron_script()],
+        pose_timeout_ns: sim_server::server::poses::DEFAULT_POSE_TIMEOUT_NS,
     };
     let result = super::run_scene(scene, backend, &cfg, stop);
     if let Some(v) = &mut viewer {

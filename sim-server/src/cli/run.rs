@@ -41,6 +41,10 @@ pub struct RunArgs {
     /// No status line.
     #[arg(long)]
     pub quiet: bool,
+    /// A tool whose pose is older than this (ms, from the device read), or
+    /// whose pose publisher died, lets go until a fresh pose comes.
+    #[arg(long, default_value_t = 50.0)]
+    pub pose_timeout_ms: f64,
 }
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
@@ -48,6 +52,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     let backend = super::parse_backend(args.backend.as_deref())?;
     if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {
         bail!("--viewer-rate must be a positive number of Hz");
+    }
+    if !(args.pose_timeout_ms.is_finite() && args.pose_timeout_ms > 0.0) {
+        bail!("--pose-timeout-ms must be a positive number of milliseconds");
     }
     let (src, scene) = load_scene(args.scene.as_deref())?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -62,10 +69,11 @@ pub fn run(args: RunArgs) -> Result<()> {
         viewer_rate_hz: args.viewer_rate,
         status: !args.quiet,
         scripts: Vec::new(),
+        pose_timeout_ns: (args.pose_timeout_ms * 1e6).round() as u64,
     };
     let summary = super::run_scene(scene, backend, &cfg, stop)?;
     println!(
-        "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N",
+        "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N | step us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0}{}",
         src.name,
         summary.steps,
         summary.steps_per_s,
@@ -74,7 +82,19 @@ pub fn run(args: RunArgs) -> Result<()> {
         summary.samples_published,
         summary.contact_steps,
         summary.tets_removed,
-        summary.max_force_n
+        summary.max_force_n,
+        summary.step_us.p50,
+        summary.step_us.p99,
+        summary.step_us.p999,
+        summary.step_us.max,
+        if summary.stalls > 0 {
+            format!(
+                " | {} stalls: {:.3} s of simulated time dropped",
+                summary.stalls, summary.dropped_time_s
+            )
+        } else {
+            String::new()
+        }
     );
     if let Some(path) = &args.json {
         write_json(path, &summary)?;

@@ -4,21 +4,35 @@
 //! force sample per step and the mesh state at the viewer rate, with the
 //! topology when cuts change it. It keeps running when the daemon or the
 //! viewer disappear and serves them again when they come back.
+//!
+//! Real time ([`pacing`]): a step starts when it is due, or up to one step
+//! (at most 2 ms) earlier when a fresh pose arrives ([`poses`]: the daemon
+//! notifies the `pose-ready` event after each pose, which wakes the wait),
+//! so a pose gets its force one step after it arrives. After a stall the
+//! missed time is dropped, not fast-forwarded. A pose older than
+//! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
+
+pub mod pacing;
+pub mod poses;
+pub mod step_time;
 
 use crate::backend::Backend;
 use crate::contact::{ToolInput, Tools};
 use crate::math::{Real, Vec3};
 use crate::scene::BuiltScene;
 use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
+use pacing::Pacing;
+use poses::{PoseIntake, WaitEnd};
 use serde::Serialize;
 use shared::protocol::{
-    CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg,
-    TOOL_PRESENT, TopologyHeader,
+    CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, TOOL_PRESENT,
+    TopologyHeader,
 };
 use shared::services::{self, ServiceError, UpdateConnections};
 use shared::{SessionName, monotonic_ns};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use step_time::{StepHistogram, StepPercentiles};
 use thiserror::Error;
 
 /// How to run.
@@ -38,6 +52,9 @@ pub struct RunConfig {
     pub status: bool,
     /// Tools driven by a script instead of the daemon (e.g. the demo's cavitron).
     pub scripts: Vec<ToolScript>,
+    /// A pose older than this (ns, its `t_ns` against now) drives no tool;
+    /// scripted tools are not affected.
+    pub pose_timeout_ns: u64,
 }
 
 /// A scripted tool: tip position and jaw opening against simulated time,
@@ -97,6 +114,19 @@ pub struct RunSummary {
     pub step_s: Real,
     /// contact_s / (contact_s + step_s): what the tools cost per step.
     pub contact_fraction: Real,
+    /// Wall time of each physics step (us): p50, p99, p99.9, max.
+    pub step_us: StepPercentiles,
+    /// Simulated time dropped after stalls instead of fast-forwarded (s):
+    /// simulated time ends this far behind wall time.
+    pub dropped_time_s: Real,
+    /// Stalls after which time was dropped (the loop fell more than two
+    /// steps or 5 ms behind real time).
+    pub stalls: u64,
+    /// Steps started early because a fresh pose arrived.
+    pub steps_on_pose: u64,
+    /// Times the daemon-driven tools let go because the pose went stale or
+    /// its publisher died.
+    pub pose_timeouts: u64,
 }
 
 /// Why a run failed.
@@ -269,7 +299,7 @@ pub fn run<B: Backend>(
         );
     }
     let node = services::node("sim-server")?;
-    let pose_sub = services::subscriber(&services::pose_service(&node, &cfg.session)?)?;
+    let mut poses = PoseIntake::new(&node, &cfg.session, cfg.pose_timeout_ns)?;
     let force_service = services::force_service(&node, &cfg.session)?;
     // What a crashed simulation left behind goes first, so that only a live
     // one makes this session busy.
@@ -292,11 +322,19 @@ pub fn run<B: Backend>(
         finite: true,
         ..RunSummary::default()
     };
-    let mut latest_pose: Option<PoseMsg> = None;
     let mut topology_version = 1u64;
     let mut published_topology = 0u64;
+    if !cfg.headless {
+        // Wake-ups at the requested time, not up to 50 us later.
+        // SAFETY: prctl(2) on this thread's timer slack; no pointers.
+        unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+    }
+    let mut step_times = StepHistogram::new();
     let start_ns = monotonic_ns();
     let step_ns = (dt_s * 1e9) as u64;
+    let mut pacing = Pacing::new(start_ns, step_ns);
+    let mut stalls_told = 0u64;
+    let mut last_stall_told = 0u64;
     let frame_every = ((1.0 / cfg.viewer_rate_hz.max(1.0)) / dt_s).max(1.0) as u64;
     let mut last_status = start_ns;
     let mut last_step_ns = start_ns;
@@ -311,19 +349,13 @@ pub fn run<B: Backend>(
         {
             break;
         }
-        // Poses: newest wins.
-        while let Some(p) = pose_sub
-            .receive()
-            .map_err(|e| publish_err("pose receive")(format!("{e:?}")))?
-        {
-            shared::protocol::check_version("pose", p.version)?;
-            latest_pose = Some(*p);
-            summary.poses_received += 1;
-        }
+        // Poses: newest wins, if fresh and its publisher alive.
+        poses.drain()?;
+        let contact_t0 = monotonic_ns();
+        let latest_pose = poses.active(contact_t0);
         // Contact: detect and impose before the step.
         let mut flags = [0u32; MAX_TOOLS];
         let mut any_contact = false;
-        let contact_t0 = monotonic_ns();
         let sim_t_s = summary.steps as Real * dt_s;
         let mut inputs = [None; MAX_TOOLS];
         for (i, input) in inputs.iter_mut().enumerate().take(contacts.len()) {
@@ -347,6 +379,7 @@ pub fn run<B: Backend>(
         let reports = contacts.step(&mut sim);
         let step_t1 = monotonic_ns();
         summary.step_s += (step_t1 - step_t0) as Real * 1e-9;
+        step_times.record(step_t1 - step_t0);
         for (i, report) in reports.iter().enumerate() {
             if report.contact {
                 flags[i] |= CONTACT;
@@ -418,6 +451,8 @@ pub fn run<B: Backend>(
             .send_copy(msg)
             .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
         summary.samples_published += 1;
+        // The sample is out: now there is time to look for dead publishers.
+        poses.check_publishers(&node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if summary.steps.is_multiple_of(frame_every) {
             if published_topology != topology_version {
@@ -466,23 +501,58 @@ pub fn run<B: Backend>(
         }
         if cfg.status && now - last_status >= 1_000_000_000 {
             let secs = (now - start_ns) as Real * 1e-9;
+            let stalls = if pacing.stalls() > 0 {
+                format!(
+                    " | dropped {:.3} s in {} stalls",
+                    pacing.dropped_ns() as Real * 1e-9,
+                    pacing.stalls()
+                )
+            } else {
+                String::new()
+            };
             eprintln!(
-                "{:8.0} steps/s | sim time {:.2} s | poses {} | contact {} | removed {} tets | max force {:.3} N",
+                "{:8.0} steps/s | sim time {:.2} s | poses {}{} | contact {} | removed {} tets | max force {:.3} N | step p50 {:.0} us p99.9 {:.0} us{stalls}",
                 summary.steps as Real / secs,
                 summary.steps as Real * dt_s,
-                summary.poses_received,
+                poses.received,
+                if latest_pose.is_some() {
+                    ""
+                } else {
+                    " (none live)"
+                },
                 if any_contact { "yes" } else { "no" },
                 removed_total,
-                summary.max_force_n
+                summary.max_force_n,
+                step_times.quantile_ns(0.5) * 1e-3,
+                step_times.quantile_ns(0.999) * 1e-3,
             );
             last_status = now;
         }
-        // Real time: the next step starts when simulated time catches up.
+        // Real time: the next step starts when it is due, or on a fresh
+        // pose up to one step earlier; after a stall the missed time is
+        // dropped (the grid re-anchored to now), never run fast.
         if !cfg.headless {
-            let due = start_ns + summary.steps * step_ns;
             let now = monotonic_ns();
-            if due > now {
-                std::thread::sleep(std::time::Duration::from_nanos(due - now));
+            if let Some(dropped) = pacing.catch_up(summary.steps, now)
+                && cfg.status
+                && now.saturating_sub(last_stall_told) >= 1_000_000_000
+            {
+                eprintln!(
+                    "sim-server: {:.1} ms behind real time (a stall): the missed time is dropped, not run fast ({} stall(s) since the last message, {:.3} s dropped in all: simulated time now runs that far behind wall time)",
+                    dropped as Real * 1e-6,
+                    pacing.stalls() - stalls_told,
+                    pacing.dropped_ns() as Real * 1e-9
+                );
+                stalls_told = pacing.stalls();
+                last_stall_told = now;
+            }
+            match poses.wait(
+                pacing.earliest(summary.steps),
+                pacing.due(summary.steps),
+                &stop,
+            ) {
+                WaitEnd::Pose => summary.steps_on_pose += 1,
+                WaitEnd::Due | WaitEnd::Stop => {}
             }
         }
     }
@@ -491,5 +561,10 @@ pub fn run<B: Backend>(
     summary.sim_time_s = summary.steps as Real * dt_s;
     summary.tets_removed = removed_total;
     summary.contact_fraction = summary.contact_s / (summary.contact_s + summary.step_s).max(1e-12);
+    summary.poses_received = poses.received;
+    summary.pose_timeouts = poses.timeouts;
+    summary.step_us = step_times.percentiles_us();
+    summary.dropped_time_s = pacing.dropped_ns() as Real * 1e-9;
+    summary.stalls = pacing.stalls();
     Ok(summary)
 }

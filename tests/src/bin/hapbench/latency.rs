@@ -14,6 +14,11 @@
 //!
 //! Receipt is by a subscriber polled every 20 us, so the figures are the
 //! transport and the processes' own delays, not this observer's.
+//!
+//! The simulation's own step time (`sim_step_us`, from its run summary) is
+//! reported beside them: device -> force cannot be shorter than a step, and
+//! when a step takes longer than the simulation's period a pose also waits
+//! for the step in progress.
 
 use anyhow::{Context, Result};
 use haptic_daemon::rt::Pacer;
@@ -40,6 +45,9 @@ pub struct Args {
     /// Write SVG plots here.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// The simulation's scene (default: sim-server's embedded liver).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
 }
 
 /// Flags of the hidden probe publisher (the baseline's other process).
@@ -93,6 +101,12 @@ struct Report {
     daemon_to_sim_us: Stats,
     device_to_force_us: Stats,
     tick_lateness_us: Stats,
+    /// The simulation's physics step (its run summary's `step_us`).
+    sim_step_us: serde_json::Value,
+    /// Steps the simulation started early on a fresh pose.
+    sim_steps_on_pose: u64,
+    /// Steps the simulation took.
+    sim_steps: u64,
 }
 
 /// The baseline's publisher: a stamped sample every millisecond.
@@ -198,17 +212,23 @@ pub fn run(args: &Args) -> Result<()> {
     let poses = services::subscriber(&services::pose_service(&node, &session)?)?;
     let telemetry = services::subscriber(&services::telemetry_service(&node, &session)?)?;
     let run_s = (d + 2.0).to_string();
-    let mut sim = spawn(
-        &[
-            "run",
-            "--quiet",
-            "--session",
-            &session_name,
-            "--duration-s",
-            &run_s,
-        ],
-        sibling("sim-server")?,
-    )?;
+    let sim_json = std::env::temp_dir().join(format!("hapbench-latency-sim{pid}.json"));
+    let mut sim_args = vec![
+        "run".to_string(),
+        "--quiet".to_string(),
+        "--session".to_string(),
+        session_name.clone(),
+        "--duration-s".to_string(),
+        run_s,
+        "--json".to_string(),
+        sim_json.display().to_string(),
+    ];
+    if let Some(scene) = &args.scene {
+        sim_args.push("--scene".to_string());
+        sim_args.push(scene.display().to_string());
+    }
+    let sim_args: Vec<&str> = sim_args.iter().map(String::as_str).collect();
+    let mut sim = spawn(&sim_args, sibling("sim-server")?)?;
     std::thread::sleep(Duration::from_millis(500));
     let mut daemon = spawn(
         &[
@@ -262,8 +282,15 @@ pub fn run(args: &Args) -> Result<()> {
         std::thread::sleep(Duration::from_micros(20));
     }
     let _ = daemon.wait();
-    let _ = sim.kill();
+    // SIGTERM: the simulation stops and writes its summary.
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(sim.id() as libc::pid_t, libc::SIGTERM) };
     let _ = sim.wait();
+    let sim_summary: serde_json::Value = std::fs::read_to_string(&sim_json)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    let _ = std::fs::remove_file(&sim_json);
     progress.finish_and_clear();
     anyhow::ensure!(
         !s2d.is_empty() && !d2s.is_empty(),
@@ -286,6 +313,9 @@ pub fn run(args: &Args) -> Result<()> {
         daemon_to_sim_us: stats(&mut d2s),
         device_to_force_us: stats(&mut dev2f),
         tick_lateness_us: stats(&mut ticks),
+        sim_step_us: sim_summary["step_us"].clone(),
+        sim_steps_on_pose: sim_summary["steps_on_pose"].as_u64().unwrap_or(0),
+        sim_steps: sim_summary["steps"].as_u64().unwrap_or(0),
     };
     println!(
         "{:<22} {:>8} {:>10} {:>10} {:>10} {:>10}",
@@ -304,6 +334,16 @@ pub fn run(args: &Args) -> Result<()> {
             s.count, s.p50, s.p99, s.p999, s.max
         );
     }
+    let step = |k: &str| report.sim_step_us[k].as_f64().unwrap_or(f64::NAN);
+    println!(
+        "{:<22} {:>8} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
+        "sim step",
+        report.sim_steps,
+        step("p50"),
+        step("p99"),
+        step("p999"),
+        step("max")
+    );
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("cannot write {}", path.display()))?;

@@ -1,0 +1,193 @@
+//! Real-time pacing of the simulation loop: when each step is due, how
+//! early a step may start on a fresh pose, and what happens after a stall.
+//!
+//! Pure: the clock is passed in, nothing allocates.
+//!
+//! # The rules
+//!
+//! - Step `k` (counting from the last anchor) is due at
+//!   `anchor_ns + (k - anchor_step) * step_ns`; the loop waits for it.
+//! - A step may start up to [`Pacing::early_ns`] (one step, at most
+//!   [`MAX_EARLY_NS`]) before it is due when a fresh pose has arrived, so that
+//!   a pose gets its force one step later instead of waiting for the grid.
+//!   The grid does not move, so simulated time never runs ahead of wall time
+//!   by more than one early window plus the step in progress: never faster
+//!   than real time.
+//! - After a stall (the process stopped, a long step) the loop does not
+//!   fast-forward through the missed steps: when the next step is more than
+//!   [`Pacing::bound_ns`] (two steps or 5 ms, whichever is larger) overdue,
+//!   the grid is re-anchored to now and the overdue time is counted as
+//!   dropped. Simulated time (`ForceMsg::sim_time_ns`, steps x step) then runs
+//!   behind wall time by everything dropped so far, at the real-time rate.
+
+/// The early window's cap (ns): a step starts at most this long before it is due.
+pub const MAX_EARLY_NS: u64 = 2_000_000;
+/// The smallest stall bound (ns).
+pub const MIN_STALL_BOUND_NS: u64 = 5_000_000;
+
+/// The pacing state.
+#[derive(Clone, Debug)]
+pub struct Pacing {
+    step_ns: u64,
+    anchor_ns: u64,
+    anchor_step: u64,
+    bound_ns: u64,
+    early_ns: u64,
+    dropped_ns: u64,
+    stalls: u64,
+}
+
+impl Pacing {
+    /// Steps of `step_ns` (at least 1 ns) from `start_ns`, step 0 due then.
+    pub fn new(start_ns: u64, step_ns: u64) -> Self {
+        let step_ns = step_ns.max(1);
+        Self {
+            step_ns,
+            anchor_ns: start_ns,
+            anchor_step: 0,
+            bound_ns: (2 * step_ns).max(MIN_STALL_BOUND_NS),
+            early_ns: step_ns.min(MAX_EARLY_NS),
+            dropped_ns: 0,
+            stalls: 0,
+        }
+    }
+
+    /// When the step after `steps` steps is due (ns).
+    pub fn due(&self, steps: u64) -> u64 {
+        self.anchor_ns + steps.saturating_sub(self.anchor_step) * self.step_ns
+    }
+
+    /// The earliest that step may start on a fresh pose (ns).
+    pub fn earliest(&self, steps: u64) -> u64 {
+        self.due(steps).saturating_sub(self.early_ns)
+    }
+
+    /// How far behind the grid the loop may fall before it drops time (ns).
+    pub fn bound_ns(&self) -> u64 {
+        self.bound_ns
+    }
+
+    /// How early a step may start on a fresh pose (ns).
+    pub fn early_ns(&self) -> u64 {
+        self.early_ns
+    }
+
+    /// Called after `steps` steps at `now_ns`: when the next step is overdue
+    /// by more than the bound, re-anchors the grid to now (the next step is
+    /// due at once) and returns the time dropped (ns).
+    pub fn catch_up(&mut self, steps: u64, now_ns: u64) -> Option<u64> {
+        let due = self.due(steps);
+        let behind = now_ns.saturating_sub(due);
+        if behind <= self.bound_ns {
+            return None;
+        }
+        self.anchor_ns = now_ns;
+        self.anchor_step = steps;
+        self.dropped_ns += behind;
+        self.stalls += 1;
+        Some(behind)
+    }
+
+    /// Simulated time dropped so far (ns): how far simulated time runs
+    /// behind wall time since the start, besides the step in progress.
+    pub fn dropped_ns(&self) -> u64 {
+        self.dropped_ns
+    }
+
+    /// Times the grid was re-anchored.
+    pub fn stalls(&self) -> u64 {
+        self.stalls
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    /// Simulates a loop of steps costing `cost_ns` that waits for the due
+    /// time (no poses); `stop_at` = (wall time, length) of a stall. Returns
+    /// the (start time, step index) of every step until `end_ns`, and the pacing.
+    fn simulate(
+        step_ns: u64,
+        cost_ns: u64,
+        stall: Option<(u64, u64)>,
+        end_ns: u64,
+    ) -> (Vec<(u64, u64)>, Pacing) {
+        let mut p = Pacing::new(0, step_ns);
+        let mut now = 0;
+        let mut steps = 0;
+        let mut starts = Vec::new();
+        let mut stalled = false;
+        while now < end_ns {
+            now = now.max(p.due(steps));
+            starts.push((now, steps));
+            now += cost_ns;
+            if let Some((at, len)) = stall
+                && !stalled
+                && now >= at
+            {
+                now += len;
+                stalled = true;
+            }
+            steps += 1;
+            p.catch_up(steps, now);
+        }
+        (starts, p)
+    }
+
+    #[test]
+    fn a_paced_loop_runs_at_the_real_time_rate_and_drops_nothing() {
+        let (starts, p) = simulate(MS, MS / 2, None, 1000 * MS);
+        assert_eq!(p.stalls(), 0);
+        assert_eq!(p.dropped_ns(), 0);
+        for (t, k) in starts {
+            assert_eq!(t, k * MS);
+        }
+    }
+
+    #[test]
+    fn after_a_stall_the_missed_steps_are_dropped_not_run_fast() {
+        // 400 ms stopped at t = 100 ms, 1 ms steps costing 0.6 ms.
+        let (starts, p) = simulate(MS, 600_000, Some((100 * MS, 400 * MS)), 1000 * MS);
+        assert_eq!(p.stalls(), 1);
+        let dropped = p.dropped_ns();
+        assert!(
+            (399 * MS..=401 * MS).contains(&dropped),
+            "dropped {dropped} ns"
+        );
+        // No two steps after the stall closer than a step: no fast-forward.
+        let after: Vec<_> = starts.iter().filter(|(t, _)| *t > 500 * MS).collect();
+        for w in after.windows(2) {
+            assert!(w[1].0 - w[0].0 >= MS, "steps {:?} and {:?}", w[0], w[1]);
+        }
+        // Simulated time + dropped time = wall time (to a step).
+        let &(t, k) = starts.last().unwrap();
+        let lag = t as i64 - (k * MS + dropped) as i64;
+        assert!(lag.unsigned_abs() <= MS, "lag {lag} ns");
+    }
+
+    #[test]
+    fn a_step_or_two_of_lateness_is_caught_up_not_dropped() {
+        let mut p = Pacing::new(0, MS);
+        // Step 1 ran 1.5 ms long: the next is 1.5 ms late, within 5 ms.
+        assert_eq!(p.catch_up(1, 2_500_000), None);
+        assert_eq!(p.due(1), MS);
+        // 6 ms late: dropped.
+        assert_eq!(p.catch_up(2, 8 * MS), Some(6 * MS));
+        assert_eq!(p.due(2), 8 * MS);
+        assert_eq!(p.due(3), 9 * MS);
+    }
+
+    #[test]
+    fn the_bound_is_two_steps_or_5_ms_and_the_early_window_a_step_or_2_ms() {
+        let fast = Pacing::new(0, MS);
+        assert_eq!(fast.bound_ns(), 5 * MS);
+        assert_eq!(fast.early_ns(), MS);
+        let slow = Pacing::new(0, 33 * MS);
+        assert_eq!(slow.bound_ns(), 66 * MS);
+        assert_eq!(slow.early_ns(), 2 * MS);
+        assert_eq!(slow.earliest(1), 31 * MS);
+    }
+}

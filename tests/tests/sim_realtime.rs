@@ -1,0 +1,306 @@
+//! The simulation's real-time rules with the real processes (unique
+//! sessions, every wait bounded), observed on the force stream by this test:
+//!
+//! - a simulation stopped (SIGSTOP) and resumed drops the missed time instead
+//!   of fast-forwarding: simulated time advances at the real-time rate after
+//!   the resume, the daemon's live-sample guard judges the samples live again
+//!   at once, and the run summary counts the stall and the dropped time;
+//! - a tool whose pose publisher (the haptic daemon) stops publishing or is
+//!   killed lets go within the pose timeout (50 ms) plus a margin, and takes
+//!   the tissue again when poses come back; a killed publisher is noticed
+//!   from the publisher count even when the pose timeout is long.
+
+use haptic_daemon::live::{Live, LiveConfig, LiveGuard};
+use shared::protocol::CONTACT;
+use shared::{SessionName, monotonic_ns, services};
+use sim_server::scene::{SceneSource, build_scene};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded};
+
+const MS: u64 = 1_000_000;
+/// The pose timeout's default (50 ms) plus scheduling slack on a busy machine.
+const RELEASE_WITHIN_NS: u64 = 100 * MS;
+
+fn signal(child: &Child, sig: i32) -> u64 {
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(child.id() as libc::pid_t, sig) };
+    monotonic_ns()
+}
+
+fn sim_server(session: &str, args: &[&str]) -> Child {
+    Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--session", session])
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server")
+}
+
+/// A force sample as received here.
+#[derive(Clone, Copy, Debug)]
+struct Got {
+    arrival_ns: u64,
+    t_ns: u64,
+    sim_time_ns: u64,
+    force_n: f64,
+    contact: bool,
+}
+
+/// Receives force samples for `d`, polling every 100 us.
+fn pump(sub: &services::ForceSubscriber, d: Duration, out: &mut Vec<Got>) {
+    let end = monotonic_ns() + d.as_nanos() as u64;
+    while monotonic_ns() < end {
+        while let Ok(Some(s)) = sub.receive() {
+            let f = s.tools[0].force_n;
+            out.push(Got {
+                arrival_ns: monotonic_ns(),
+                t_ns: s.t_ns,
+                sim_time_ns: s.sim_time_ns,
+                force_n: (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt(),
+                contact: s.tools[0].flags & CONTACT != 0,
+            });
+        }
+        std::thread::sleep(Duration::from_micros(100));
+    }
+}
+
+/// Receives until the first sample arrives (the simulation has started;
+/// at most 20 s).
+fn pump_until_running(sub: &services::ForceSubscriber, out: &mut Vec<Got>) {
+    let start = std::time::Instant::now();
+    while out.is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "the simulation did not start"
+        );
+        pump(sub, Duration::from_millis(10), out);
+    }
+}
+
+#[test]
+fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
+    let name = format!("stall{}", std::process::id());
+    let session = SessionName::new(&name).unwrap();
+    let dir = scratch_dir("sim-stall");
+    let json = dir.join("sim.json");
+    let node = services::node("stall-observer").unwrap();
+    let sub = services::subscriber(&services::force_service(&node, &session).unwrap()).unwrap();
+    let sim = sim_server(
+        &name,
+        &["--duration-s", "4", "--json", json.to_str().unwrap()],
+    );
+    let mut got = Vec::new();
+    pump_until_running(&sub, &mut got);
+    pump(&sub, Duration::from_millis(1000), &mut got);
+    let stopped = signal(&sim, libc::SIGSTOP);
+    pump(&sub, Duration::from_millis(400), &mut got);
+    let resumed = signal(&sim, libc::SIGCONT);
+    pump(&sub, Duration::from_millis(1000), &mut got);
+    finish(sim, Duration::from_secs(20), "sim-server");
+    assert!(
+        got.iter().filter(|g| g.arrival_ns < stopped).count() > 200,
+        "too few samples before the stall"
+    );
+
+    // No fast-forward: from the first sample after the resume, simulated
+    // time advances no faster than wall time (a step of slack).
+    let after: Vec<&Got> = got.iter().filter(|g| g.t_ns > resumed).collect();
+    assert!(
+        after.len() > 300,
+        "{} samples after the resume",
+        after.len()
+    );
+    let first = after[0];
+    for g in &after {
+        let d_sim = g.sim_time_ns - first.sim_time_ns;
+        let d_wall = g.t_ns - first.t_ns;
+        assert!(
+            d_sim <= d_wall + 3 * MS,
+            "{} ms simulated in {} ms of wall time after the resume: fast-forward",
+            d_sim as f64 / 1e6,
+            d_wall as f64 / 1e6
+        );
+    }
+
+    // The daemon's guard: live again within 100 ms of the resume, and never
+    // not live after that.
+    let mut guard = LiveGuard::new(LiveConfig::default());
+    let mut live_again = None;
+    for g in &got {
+        let v = guard.observe(g.arrival_ns, g.sim_time_ns);
+        if g.arrival_ns > resumed {
+            match v {
+                Live::NotLive => assert!(
+                    live_again.is_none(),
+                    "a sample {} ms after the resume was not live",
+                    (g.arrival_ns - resumed) / MS
+                ),
+                _ => {
+                    live_again.get_or_insert(g.arrival_ns);
+                }
+            }
+        }
+    }
+    let live_again = live_again.expect("never live again after the stall");
+    assert!(
+        live_again - resumed < 100 * MS,
+        "live again {} ms after the resume",
+        (live_again - resumed) / MS
+    );
+
+    let s = read_json(&json);
+    assert!(s["stalls"].as_u64().unwrap() >= 1, "{s}");
+    let dropped = s["dropped_time_s"].as_f64().unwrap();
+    assert!(dropped >= 0.35, "{s}");
+    for key in ["p50", "p99", "p999", "max"] {
+        let v = s["step_us"][key].as_f64().unwrap();
+        assert!(v > 0.0 && v.is_finite(), "step_us.{key}: {s}");
+    }
+    assert!(s["step_us"]["p50"].as_f64() <= s["step_us"]["max"].as_f64());
+    // Simulated time + dropped time = wall time, to the other stalls a
+    // busy machine adds (all counted in dropped) and the start-up.
+    let wall = s["steps"].as_f64().unwrap() / s["steps_per_s"].as_f64().unwrap();
+    let sim = s["sim_time_s"].as_f64().unwrap();
+    assert!(
+        (sim + dropped - wall).abs() < 0.1,
+        "sim {sim} s + dropped {dropped} s vs wall {wall} s"
+    );
+}
+
+/// The liver's top (z, m) near the axis, where the hand presses.
+fn liver_top_z() -> f64 {
+    let src = SceneSource::embedded();
+    let model = build_scene(&src, &src.parse().unwrap()).unwrap().model;
+    let p = model.mesh().positions_m();
+    model
+        .topology()
+        .surface_triangles(model.mesh())
+        .flatten()
+        .map(|v| p[v.idx()])
+        .filter(|x| x.x.hypot(x.y) < 0.006)
+        .map(|x| x.z)
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// A daemon whose simulated hand comes down over 1 s to 6 mm into the liver
+/// and stays there.
+fn pressing_daemon(session: &str, dir: &std::path::Path) -> Child {
+    let traj = dir.join("press.csv");
+    let top = liver_top_z();
+    assert!(top.is_finite());
+    std::fs::write(
+        &traj,
+        format!(
+            "t_s,x_m,y_m,z_m\n0,0,0,{}\n1,0,0,{}\n60,0,0,{}\n",
+            top + 0.01,
+            top - 0.006,
+            top - 0.006
+        ),
+    )
+    .unwrap();
+    Command::new(binary("haptic-daemon"))
+        .args(["run", "--quiet", "--rt-priority", "0", "--session", session])
+        .args(["--duration-s", "30", "--max-force", "4"])
+        .arg("--device")
+        .arg(format!("simulated:{}", traj.display()))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start haptic-daemon")
+}
+
+fn pressing(got: &[Got], from_ns: u64, to_ns: u64) -> bool {
+    got.iter()
+        .any(|g| (from_ns..to_ns).contains(&g.t_ns) && g.contact && g.force_n > 0.05)
+}
+
+/// Samples in [from, to) where tool 0 still touches or pushes.
+fn holding(got: &[Got], from_ns: u64, to_ns: u64) -> Vec<Got> {
+    got.iter()
+        .filter(|g| (from_ns..to_ns).contains(&g.t_ns) && (g.contact || g.force_n > 1e-9))
+        .copied()
+        .collect()
+}
+
+#[test]
+fn a_tool_lets_go_when_its_pose_publisher_stops_and_when_it_is_killed() {
+    let name = format!("poseage{}", std::process::id());
+    let session = SessionName::new(&name).unwrap();
+    let dir = scratch_dir("pose-age");
+    let json = dir.join("sim.json");
+    let node = services::node("pose-age-observer").unwrap();
+    let sub = services::subscriber(&services::force_service(&node, &session).unwrap()).unwrap();
+    let sim = sim_server(
+        &name,
+        &["--duration-s", "12", "--json", json.to_str().unwrap()],
+    );
+    let mut got = Vec::new();
+    pump_until_running(&sub, &mut got);
+    let mut daemon = pressing_daemon(&name, &dir);
+    pump(&sub, Duration::from_millis(2500), &mut got);
+    let stopped = signal(&daemon, libc::SIGSTOP);
+    assert!(
+        pressing(&got, stopped - 500 * MS, stopped),
+        "the tool was not pressing before the daemon stopped"
+    );
+    pump(&sub, Duration::from_millis(400), &mut got);
+    let resumed = signal(&daemon, libc::SIGCONT);
+    pump(&sub, Duration::from_millis(1500), &mut got);
+    let killed = signal(&daemon, libc::SIGKILL);
+    wait_bounded(&mut daemon, Duration::from_secs(5), "killed haptic-daemon");
+    pump(&sub, Duration::from_millis(500), &mut got);
+    signal(&sim, libc::SIGTERM);
+    finish(sim, Duration::from_secs(20), "sim-server");
+
+    let held = holding(&got, stopped + RELEASE_WITHIN_NS, resumed);
+    assert!(
+        held.is_empty(),
+        "the tool still pressed {} ms after its poses stopped: {:?}",
+        (held[0].t_ns - stopped) / MS,
+        held[0]
+    );
+    assert!(
+        pressing(&got, resumed + 500 * MS, killed),
+        "the tool did not take the tissue again when poses came back"
+    );
+    let held = holding(&got, killed + RELEASE_WITHIN_NS, u64::MAX);
+    assert!(
+        held.is_empty(),
+        "the tool still pressed {} ms after its publisher was killed",
+        (held[0].t_ns - killed) / MS
+    );
+    let s = read_json(&json);
+    assert!(s["pose_timeouts"].as_u64().unwrap() >= 2, "{s}");
+}
+
+#[test]
+fn a_killed_pose_publisher_is_noticed_before_its_pose_is_stale() {
+    let name = format!("posepub{}", std::process::id());
+    let session = SessionName::new(&name).unwrap();
+    let dir = scratch_dir("pose-publisher");
+    let node = services::node("pose-pub-observer").unwrap();
+    let sub = services::subscriber(&services::force_service(&node, &session).unwrap()).unwrap();
+    // A pose stays valid for 10 s: only the publisher count can release it.
+    let sim = sim_server(&name, &["--duration-s", "8", "--pose-timeout-ms", "10000"]);
+    let mut got = Vec::new();
+    pump_until_running(&sub, &mut got);
+    let mut daemon = pressing_daemon(&name, &dir);
+    pump(&sub, Duration::from_millis(2500), &mut got);
+    let killed = signal(&daemon, libc::SIGKILL);
+    wait_bounded(&mut daemon, Duration::from_secs(5), "killed haptic-daemon");
+    pump(&sub, Duration::from_millis(800), &mut got);
+    signal(&sim, libc::SIGTERM);
+    finish(sim, Duration::from_secs(20), "sim-server");
+    assert!(
+        pressing(&got, killed - 500 * MS, killed),
+        "the tool was not pressing before the daemon was killed"
+    );
+    let held = holding(&got, killed + RELEASE_WITHIN_NS, u64::MAX);
+    assert!(
+        held.is_empty(),
+        "the tool still pressed {} ms after its publisher was killed",
+        (held[0].t_ns - killed) / MS
+    );
+}
