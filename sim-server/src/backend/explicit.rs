@@ -42,8 +42,8 @@ impl<S: Storage> Backend for Explicit<S> {
     fn integrates_contact(&self) -> bool {
         true
     }
-    fn set_contact_bound(&mut self, omega2: Real) -> Result<(), String> {
-        Explicit::set_contact_bound(self, omega2).map_err(|e| e.to_string())
+    fn set_contact_bound(&mut self, omega2: Real) {
+        Explicit::set_contact_bound(self, omega2);
     }
     fn step_with_contact(
         &mut self,

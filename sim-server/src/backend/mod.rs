@@ -81,12 +81,11 @@ pub trait Backend {
     fn integrates_contact(&self) -> bool {
         false
     }
-    /// Makes the stable step include contact springs adding up to
-    /// `omega2` (rad^2/s^2) to omega_max^2; why not, if the step policy
-    /// refuses. Backends that do not integrate contact ignore it.
-    fn set_contact_bound(&mut self, omega2: Real) -> Result<(), String> {
+    /// Makes the coming steps stable with contact springs adding up to
+    /// `omega2` (rad^2/s^2) to omega_max^2 (sub-stepping as needed).
+    /// Backends that do not integrate contact ignore it.
+    fn set_contact_bound(&mut self, omega2: Real) {
         let _ = omega2;
-        Ok(())
     }
     /// One step with the penalty contact `field`, calling `resample` to
     /// select its points again every `resample_every_s` of simulated time

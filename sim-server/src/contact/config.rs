@@ -53,7 +53,7 @@ impl Default for ContactConfig {
             law: None,
             stiffness_factor: 64.0,
             damping_s_per_m: 3.0,
-            point_spacing: 0.25,
+            point_spacing: 0.5,
             max_tool_speed_m_s: 1.0,
             max_tool_accel_m_s2: 100.0,
         }

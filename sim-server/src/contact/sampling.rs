@@ -63,20 +63,6 @@ impl Sampler {
         }
     }
 
-    /// omega^2 (rad^2/s^2) the contact springs may add to the explicit
-    /// bound: by Gershgorin, a vertex's springs add at most kappa times its
-    /// lumped area over its mass; twice that, since the tip and the shaft
-    /// (or two tools) may press the same triangle.
-    pub fn omega2_bound(&self, model: &ElasticModel) -> Real {
-        let (areas, _) = lumped_areas(model);
-        areas
-            .iter()
-            .zip(model.masses_kg())
-            .filter(|(a, m)| **a > 0.0 && **m > 0.0)
-            .map(|(a, m)| 2.0 * self.kappa_n_per_m3 * a / m)
-            .fold(0.0, Real::max)
-    }
-
     /// Adds to `field` the points of the live surface triangles that may
     /// touch the field's part `part` during the step (within its radius
     /// plus half of it of the part at either end of the step).
@@ -118,6 +104,12 @@ impl Sampler {
             reach_m + 1.5 * self.max_edge_m,
             &mut self.candidates,
         );
+        // Within reach of the part at the start of the step is within
+        // reach plus twice the motion of it at the end (each end moved at
+        // most `moved_m`): one distance per point.
+        let to = SegmentQuery::new(&sweep.to);
+        let keep_m = reach_m + 2.0 * moved_m;
+        let keep2 = keep_m * keep_m;
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
             // Wrapped (after 2^32 passes): old stamps must not match.
@@ -129,8 +121,15 @@ impl Sampler {
         let topo = model.topology();
         let tets = model.mesh().tets();
         let rest = model.mesh().positions_m();
+        // The box query of a long, slanted shaft returns much of the
+        // organ: keep the vertices within reach of the swept part (its end
+        // segment, grown by the motion) plus a triangle's extent.
+        let vertex_reach2 = (keep_m + 1.5 * self.max_edge_m).powi(2);
         for ci in 0..self.candidates.len() {
             let v = self.candidates[ci];
+            if to.distance2(sim.position(v)) > vertex_reach2 {
+                continue;
+            }
             for &t in adj.tets_of(v) {
                 if !topo.is_alive(t) {
                     continue;
@@ -151,8 +150,7 @@ impl Sampler {
                     // Cheap rejection: the triangle's bounding sphere.
                     let centre = (x[0] + x[1] + x[2]) / 3.0;
                     let radius = x.iter().map(|p| p.distance(centre)).fold(0.0, Real::max);
-                    let near = dist(&sweep.from, centre).min(dist(&sweep.to, centre));
-                    if near > radius + reach_m + moved_m {
+                    if to.distance2(centre).sqrt() > radius + keep_m {
                         continue;
                     }
                     let area0 = 0.5 * (x0[1] - x0[0]).cross(x0[2] - x0[0]).length();
@@ -163,10 +161,10 @@ impl Sampler {
                     let n = ((longest / spacing_m).ceil() as usize).clamp(1, MAX_SUBDIVISIONS);
                     let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
                     let ids = tri.map(|w| w.0);
-                    for_each_centroid(n, |w| {
+                    let near = |c: Vec3, r: Real| to.distance2(c).sqrt() < keep_m + r;
+                    for_each_centroid_near(n, &x, near, |w| {
                         let p = x[0] * w[0] + x[1] * w[1] + x[2] * w[2];
-                        let d = dist(&sweep.from, p).min(dist(&sweep.to, p));
-                        if d < reach_m + moved_m {
+                        if to.distance2(p) < keep2 {
                             field.push(ContactPoint {
                                 vertices: ids,
                                 weights: w,
@@ -181,13 +179,72 @@ impl Sampler {
     }
 }
 
-fn dist(seg: &super::geometry::Segment, x: Vec3) -> Real {
-    seg.distance_m(x)
+/// A segment ready for many distance queries.
+struct SegmentQuery {
+    a: Vec3,
+    d: Vec3,
+    inv_len2: Real,
+}
+
+impl SegmentQuery {
+    fn new(seg: &super::geometry::Segment) -> Self {
+        let d = seg.b_m - seg.a_m;
+        let len2 = d.length_squared();
+        Self {
+            a: seg.a_m,
+            d,
+            inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
+        }
+    }
+
+    /// Squared distance from `x` (m^2).
+    fn distance2(&self, x: Vec3) -> Real {
+        let s = ((x - self.a).dot(self.d) * self.inv_len2).clamp(0.0, 1.0);
+        (x - (self.a + self.d * s)).length_squared()
+    }
+}
+
+/// Lattice rows and columns per block of [`for_each_centroid_near`].
+const BLOCK: usize = 4;
+
+/// [`for_each_centroid`] over the triangle `x`, skipping blocks of
+/// BLOCK x BLOCK lattice cells whose bounding sphere (centre, radius) is
+/// not `near`: a tool touches a few blocks of a large triangle.
+pub(crate) fn for_each_centroid_near(
+    n: usize,
+    x: &[Vec3; 3],
+    near: impl Fn(Vec3, Real) -> bool,
+    mut f: impl FnMut([Real; 3]),
+) {
+    let inv = 1.0 / n as Real;
+    let (e1, e2) = ((x[1] - x[0]) * inv, (x[2] - x[0]) * inv);
+    let half = BLOCK as Real / 2.0;
+    let radius = (half + 1.0) * (e1.length() + e2.length());
+    for bi in (0..n).step_by(BLOCK) {
+        for bj in (0..n - bi).step_by(BLOCK) {
+            let centre = x[0] + e1 * (bi as Real + half) + e2 * (bj as Real + half);
+            if !near(centre, radius) {
+                continue;
+            }
+            for i in bi..(bi + BLOCK).min(n) {
+                for j in bj..(bj + BLOCK).min(n - i) {
+                    let (b, c) = ((i as Real + 1.0 / 3.0) * inv, (j as Real + 1.0 / 3.0) * inv);
+                    f([1.0 - b - c, b, c]);
+                    if i + j + 1 < n {
+                        let (b, c) = ((i as Real + 2.0 / 3.0) * inv, (j as Real + 2.0 / 3.0) * inv);
+                        f([1.0 - b - c, b, c]);
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Calls `f` with the barycentric weights of the centroids of the n^2
-/// sub-triangles of a triangle split n times along each edge.
-pub(crate) fn for_each_centroid(n: usize, mut f: impl FnMut([Real; 3])) {
+/// sub-triangles of a triangle split n times along each edge (the
+/// reference [`for_each_centroid_near`] is tested against).
+#[cfg(test)]
+fn for_each_centroid(n: usize, mut f: impl FnMut([Real; 3])) {
     let inv = 1.0 / n as Real;
     for i in 0..n {
         for j in 0..n - i {
@@ -225,6 +282,38 @@ fn lumped_areas(model: &ElasticModel) -> (Vec<Real>, Real) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn blocks_visit_every_centroid_once_and_cull_far_ones() {
+        let x = [
+            Vec3::ZERO,
+            Vec3::new(0.01, 0.0, 0.0),
+            Vec3::new(0.0, 0.01, 0.0),
+        ];
+        for n in [1, 3, 4, 7, 16] {
+            let mut all = Vec::new();
+            for_each_centroid(n, |w| all.push(w));
+            let mut blocked = Vec::new();
+            for_each_centroid_near(n, &x, |_, _| true, |w| blocked.push(w));
+            let key = |w: &[Real; 3]| ((w[1] * 1e9) as i64, (w[2] * 1e9) as i64);
+            let mut a: Vec<_> = all.iter().map(key).collect();
+            let mut b: Vec<_> = blocked.iter().map(key).collect();
+            a.sort_unstable();
+            b.sort_unstable();
+            assert_eq!(a, b, "n {n}");
+            // Culling by a sphere keeps every point within it.
+            let q = Vec3::new(0.002, 0.002, 0.0);
+            let r = 0.0015;
+            let mut kept = Vec::new();
+            for_each_centroid_near(n, &x, |c, s| c.distance(q) < r + s, |w| kept.push(key(&w)));
+            for w in &all {
+                let p = x[1] * w[1] + x[2] * w[2];
+                if p.distance(q) < r {
+                    assert!(kept.contains(&key(w)), "n {n}: {w:?} culled");
+                }
+            }
+        }
+    }
 
     #[test]
     fn centroids_cover_the_triangle_evenly() {

@@ -359,7 +359,7 @@ pub struct ContactSpec {
     pub stiffness_factor: Option<Spanned<f64>>,
     /// Hunt-Crossley damping alpha (s/m, default 3; 0 for none).
     pub damping_s_per_m: Option<Spanned<f64>>,
-    /// Contact point spacing as a fraction of the tool radius (default 0.25).
+    /// Contact point spacing as a fraction of the tool radius (default 0.5).
     pub point_spacing: Option<Spanned<f64>>,
     /// Speed limit of the simulated tool following the device (m/s, default 1).
     pub max_tool_speed_m_s: Option<Spanned<f64>>,

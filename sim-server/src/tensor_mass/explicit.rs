@@ -143,6 +143,10 @@ pub struct Explicit<S: Storage> {
     policy: DtPolicy,
     dt_s: Real,
     substeps: usize,
+    /// Sub-steps the elastic model alone needs.
+    elastic_substeps: usize,
+    /// Sub-steps asked for by [`Explicit::set_min_substeps`].
+    min_substeps: usize,
     steps: u64,
 }
 
@@ -217,6 +221,8 @@ impl<S: Storage> Explicit<S> {
             policy: config.policy,
             dt_s,
             substeps,
+            elastic_substeps: substeps,
+            min_substeps: 1,
             steps: 0,
             model,
         };
@@ -291,29 +297,48 @@ impl<S: Storage> Explicit<S> {
         self.steps += 1;
     }
 
-    /// Raises omega_max^2 of the stable step by `omega2` (the contact
-    /// springs' share) and re-plans the sub-steps under the policy. Call
-    /// before stepping.
-    pub fn set_contact_bound(&mut self, omega2: Real) -> Result<(), ExplicitError> {
+    /// Makes the coming steps stable with contact springs adding up to
+    /// `omega2` to omega_max^2 (Weyl: the bounds add), sub-stepping as
+    /// needed whatever the policy (the springs are the simulation's own,
+    /// not the user's step; `unchecked` adds none). Called every step with
+    /// that step's springs, so a scene pays for them only in contact; when
+    /// the sub-step count changes the velocity is kept (U(t-1) rescaled),
+    /// an O(n) pass.
+    pub fn set_contact_bound(&mut self, omega2: Real) {
         let lambda = self.elastic_stable.omega_max_rad_s.powi(2) + omega2.max(0.0);
         let stable = StableStep::from_lambda(lambda, self.elastic_stable.method);
-        self.substeps = substeps_for(self.dt_s, &stable, self.policy)?;
+        let policy = match self.policy {
+            DtPolicy::Unchecked => DtPolicy::Unchecked,
+            _ => DtPolicy::Substep,
+        };
+        let needed = substeps_for(self.dt_s, &stable, policy).unwrap_or(self.substeps);
         self.stable = stable;
-        for v in 0..self.u.len() {
-            self.refresh_vertex(v);
-        }
-        Ok(())
+        self.resubstep(needed.max(self.elastic_substeps).max(self.min_substeps));
     }
 
     /// Splits each step into at least `n` sub-steps (never fewer than the
     /// stable step needs): to check a result against a finer integration.
-    /// Call before stepping.
     pub fn set_min_substeps(&mut self, n: usize) {
+        self.min_substeps = n;
         if n > self.substeps {
-            self.substeps = n;
-            for v in 0..self.u.len() {
-                self.refresh_vertex(v);
+            self.resubstep(n);
+        }
+    }
+
+    /// Sets the sub-step count, keeping the velocity (U(t) - U(t-1)) / h.
+    fn resubstep(&mut self, n: usize) {
+        if n == self.substeps {
+            return;
+        }
+        let ratio = self.substeps as Real / n as Real;
+        for (now, before) in self.u.iter().zip(self.next.iter_mut()) {
+            for k in 0..3 {
+                before[k] = now[k] - (now[k] - before[k]) * ratio;
             }
+        }
+        self.substeps = n;
+        for v in 0..self.u.len() {
+            self.refresh_vertex(v);
         }
     }
 

@@ -115,7 +115,7 @@ type Sample = (Vec3, [[f64; 3]; 3], bool);
 
 /// Tool 0's force (and contact state) for each pose the loop gives, the
 /// simulation stepped `dt_s` after each, in `substep_factor` times the
-/// sub-steps stability needs; and the sub-steps per step used.
+/// sub-steps stability needs; and the most sub-steps a step used.
 fn simulate(
     src: &SceneSource,
     dt_s: f64,
@@ -134,6 +134,8 @@ fn simulate(
     let n = p.sim.substeps() * substep_factor.max(1);
     p.sim.set_min_substeps(n);
     let mut out = Vec::with_capacity(steps);
+    // The contact springs add sub-steps while the tool touches.
+    let mut most_substeps = p.sim.substeps();
     let mut inputs = [None; MAX_TOOLS];
     for (tip, jaw) in poses.take(steps) {
         inputs[0] = Some(ToolInput {
@@ -142,6 +144,7 @@ fn simulate(
         });
         p.tools.update(&mut p.sim, &inputs);
         let contact = p.tools.step(&mut p.sim)[0].contact;
+        most_substeps = most_substeps.max(p.sim.substeps());
         let r = p.tools.reaction(0, &p.sim);
         anyhow::ensure!(
             r.force_n.is_finite(),
@@ -151,7 +154,7 @@ fn simulate(
         out.push((r.force_n, r.stiffness_rows(), contact));
         bar.inc(1);
     }
-    Ok((out, p.sim.substeps()))
+    Ok((out, most_substeps))
 }
 
 fn norm(v: [f64; 3]) -> f64 {
