@@ -134,7 +134,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             "--session",
             &session,
             "--extrapolation",
-            "local-model",
+            "local-normal",
         ])
         .arg("--device")
         .arg(format!("simulated:{}", traj.display()))

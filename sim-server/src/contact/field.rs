@@ -132,6 +132,8 @@ pub struct ContactField {
     /// position relative to the tool at the last evaluation (zero if not
     /// in contact).
     hessians: Vec<Mat3>,
+    /// Per point: the spring part of its Hessian alone (slope n n^T).
+    spring_hessians: Vec<Mat3>,
 }
 
 impl ContactField {
@@ -151,6 +153,7 @@ impl ContactField {
         self.parts.clear();
         self.penetration_m.clear();
         self.hessians.clear();
+        self.spring_hessians.clear();
         self.evaluations = 0;
         self.force_sum_n.fill(Vec3::ZERO);
     }
@@ -161,6 +164,7 @@ impl ContactField {
         self.points.clear();
         self.penetration_m.clear();
         self.hessians.clear();
+        self.spring_hessians.clear();
     }
 
     /// Adds a swept tool part; returns its index for [`ContactField::push`].
@@ -174,6 +178,7 @@ impl ContactField {
         self.points.push(p);
         self.penetration_m.push(0.0);
         self.hessians.push(Mat3::ZERO);
+        self.spring_hessians.push(Mat3::ZERO);
     }
 
     /// Whether there is nothing to evaluate and nothing to zero.
@@ -205,6 +210,11 @@ impl ContactField {
     /// force as much as it changes its size. Zero if not in contact.
     pub fn hessians(&self) -> &[Mat3] {
         &self.hessians
+    }
+
+    /// Per point: the spring part of its Hessian alone, slope n n^T (N/m).
+    pub fn spring_hessians(&self) -> &[Mat3] {
+        &self.spring_hessians
     }
 
     /// Zeroes the forces the last evaluation wrote in `out`.
@@ -258,7 +268,8 @@ impl ContactField {
                 turn
             };
             let (spring, slope) = spring(p.stiffness_n_per_m, depth, sweep.radius_m);
-            self.hessians[i] = outer(n, n) * slope - turn * (spring / dist);
+            self.spring_hessians[i] = outer(n, n) * slope;
+            self.hessians[i] = self.spring_hessians[i] - turn * (spring / dist);
             let tool_vel = ((sweep.to.a_m - sweep.from.a_m)
                 + ((sweep.to.b_m - sweep.from.b_m) - (sweep.to.a_m - sweep.from.a_m)) * t)
                 / step_s;

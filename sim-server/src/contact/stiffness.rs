@@ -138,16 +138,32 @@ impl ContactStiffness {
     /// step.
     pub fn stiffness(&mut self, model: &ElasticModel, field: &ContactField, tool: usize) -> Mat3 {
         self.refresh(model);
+        let full = self.effective(model, field, tool, field.hessians());
+        // With the normals' turning, K + H can lose definiteness (a round
+        // tool on a crease is laterally unstable) and the Schur complement
+        // then means nothing: it must stay below the springs alone.
+        let springs: Mat3 = active_points(field, tool)
+            .map(|(i, _)| field.spring_hessians()[i])
+            .fold(Mat3::ZERO, |s, g| s + g);
+        if full.is_finite() && largest_eigenvalue(&full) <= 1.001 * largest_eigenvalue(&springs) {
+            return full;
+        }
+        self.effective(model, field, tool, field.spring_hessians())
+    }
+
+    /// K_eff with the per-point Hessians `hessians` (indexed like the
+    /// field's points).
+    fn effective(
+        &mut self,
+        model: &ElasticModel,
+        field: &ContactField,
+        tool: usize,
+        hessians: &[Mat3],
+    ) -> Mat3 {
         let mut a = Mat3::ZERO;
         self.verts.clear();
         self.slot.clear();
-        let active = field
-            .points()
-            .iter()
-            .zip(field.penetrations_m())
-            .zip(field.hessians())
-            .filter(|((p, d), _)| **d > 0.0 && field.parts()[p.part as usize].tool == tool);
-        for ((p, _), _) in active.clone() {
+        for (_, p) in active_points(field, tool) {
             for v in p.vertices {
                 if !self.slot.contains_key(&v) {
                     self.slot.insert(v, self.verts.len());
@@ -164,8 +180,8 @@ impl ContactStiffness {
         self.h.resize(nv * nv, 0.0);
         self.b.clear();
         self.b.resize(nv * 3, 0.0);
-        for ((p, _), g) in active {
-            let nn = *g;
+        for (i, p) in active_points(field, tool) {
+            let nn = hessians[i];
             a += nn;
             for (i, vi) in p.vertices.iter().enumerate() {
                 let si = 3 * self.slot[vi];
@@ -274,6 +290,23 @@ impl ContactStiffness {
             }
         }
     }
+}
+
+/// The field's points in contact with tool `tool`, with their index.
+fn active_points(
+    field: &ContactField,
+    tool: usize,
+) -> impl Iterator<Item = (usize, &super::field::ContactPoint)> + Clone {
+    field.points().iter().enumerate().filter(move |(i, p)| {
+        field.penetrations_m()[*i] > 0.0 && field.parts()[p.part as usize].tool == tool
+    })
+}
+
+/// The largest eigenvalue of the symmetric part of `m`.
+fn largest_eigenvalue(m: &Mat3) -> Real {
+    let s = (*m + m.transpose()) * 0.5;
+    let n = nalgebra::Matrix3::from_fn(|r, c| s.col(c)[r]);
+    n.symmetric_eigenvalues().max()
 }
 
 /// K factorised with `held` fixed; `None` if it cannot be (then the

@@ -101,6 +101,9 @@ pub fn substeps_for(
     }
 }
 
+/// Steps that must need fewer sub-steps in a row before the count drops.
+const SHRINK_AFTER_STEPS: u32 = 100;
+
 /// Row ranges and the rows each part must finish after the join.
 #[derive(Clone, Debug)]
 struct PartPlan {
@@ -147,6 +150,10 @@ pub struct Explicit<S: Storage> {
     elastic_substeps: usize,
     /// Sub-steps asked for by [`Explicit::set_min_substeps`].
     min_substeps: usize,
+    /// Steps in a row that needed fewer sub-steps than they used.
+    fewer_needed: u32,
+    /// Times the sub-step count changed.
+    resubsteps: u64,
     steps: u64,
 }
 
@@ -223,6 +230,8 @@ impl<S: Storage> Explicit<S> {
             substeps,
             elastic_substeps: substeps,
             min_substeps: 1,
+            fewer_needed: 0,
+            resubsteps: 0,
             steps: 0,
             model,
         };
@@ -311,9 +320,32 @@ impl<S: Storage> Explicit<S> {
             DtPolicy::Unchecked => DtPolicy::Unchecked,
             _ => DtPolicy::Substep,
         };
-        let needed = substeps_for(self.dt_s, &stable, policy).unwrap_or(self.substeps);
+        let needed = substeps_for(self.dt_s, &stable, policy)
+            .unwrap_or(self.substeps)
+            .max(self.elastic_substeps)
+            .max(self.min_substeps);
         self.stable = stable;
-        self.resubstep(needed.max(self.elastic_substeps).max(self.min_substeps));
+        // More at once; fewer only after a while of needing fewer, so a
+        // contact that flickers at the edge of the tool does not cost an
+        // O(n) re-plan every step.
+        if needed > self.substeps {
+            self.fewer_needed = 0;
+            self.resubstep(needed);
+        } else if needed < self.substeps {
+            self.fewer_needed += 1;
+            if self.fewer_needed >= SHRINK_AFTER_STEPS {
+                self.fewer_needed = 0;
+                self.resubstep(needed);
+            }
+        } else {
+            self.fewer_needed = 0;
+        }
+    }
+
+    /// How many times the sub-step count changed (contact springs coming
+    /// and going).
+    pub fn resubsteps(&self) -> u64 {
+        self.resubsteps
     }
 
     /// Splits each step into at least `n` sub-steps (never fewer than the
@@ -337,6 +369,7 @@ impl<S: Storage> Explicit<S> {
             }
         }
         self.substeps = n;
+        self.resubsteps += 1;
         for v in 0..self.u.len() {
             self.refresh_vertex(v);
         }
