@@ -144,8 +144,7 @@ fn sliding_across_vertices_is_smooth() {
 fn the_force_does_not_depend_on_the_sub_step_count() {
     let run = |factor: usize| {
         let mut p = scene("hook", "");
-        let n = p.sim.substeps() * factor;
-        p.sim.set_min_substeps(n);
+        p.sim.set_substep_factor(factor);
         settle(&mut p, between(TOP_M + 0.003), 400);
         (0..300)
             .map(|k| step(&mut p, between(TOP_M + 0.003 - 0.00002 * k as f64), 1.0))

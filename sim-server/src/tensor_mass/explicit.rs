@@ -148,8 +148,9 @@ pub struct Explicit<S: Storage> {
     substeps: usize,
     /// Sub-steps the elastic model alone needs.
     elastic_substeps: usize,
-    /// Sub-steps asked for by [`Explicit::set_min_substeps`].
-    min_substeps: usize,
+    /// Every step's sub-steps are multiplied by this
+    /// ([`Explicit::set_substep_factor`]).
+    substep_factor: usize,
     /// Steps in a row that needed fewer sub-steps than they used.
     fewer_needed: u32,
     /// Times the sub-step count changed.
@@ -229,7 +230,7 @@ impl<S: Storage> Explicit<S> {
             dt_s,
             substeps,
             elastic_substeps: substeps,
-            min_substeps: 1,
+            substep_factor: 1,
             fewer_needed: 0,
             resubsteps: 0,
             steps: 0,
@@ -323,7 +324,7 @@ impl<S: Storage> Explicit<S> {
         let needed = substeps_for(self.dt_s, &stable, policy)
             .unwrap_or(self.substeps)
             .max(self.elastic_substeps)
-            .max(self.min_substeps);
+            * self.substep_factor;
         self.stable = stable;
         // More at once; fewer only after a while of needing fewer, so a
         // contact that flickers at the edge of the tool does not cost an
@@ -348,13 +349,14 @@ impl<S: Storage> Explicit<S> {
         self.resubsteps
     }
 
-    /// Splits each step into at least `n` sub-steps (never fewer than the
-    /// stable step needs): to check a result against a finer integration.
-    pub fn set_min_substeps(&mut self, n: usize) {
-        self.min_substeps = n;
-        if n > self.substeps {
-            self.resubstep(n);
-        }
+    /// Splits each step into `factor` times the sub-steps stability needs
+    /// (now and as contact springs come and go): to check a result
+    /// against a finer integration.
+    pub fn set_substep_factor(&mut self, factor: usize) {
+        let factor = factor.max(1);
+        let base = self.substeps / self.substep_factor;
+        self.substep_factor = factor;
+        self.resubstep(base * factor);
     }
 
     /// Sets the sub-step count, keeping the velocity (U(t) - U(t-1)) / h.

@@ -131,8 +131,7 @@ fn simulate(
         src.name
     );
     let mut p = prepare::<f64>(scene, Some(dt_s))?;
-    let n = p.sim.substeps() * substep_factor.max(1);
-    p.sim.set_min_substeps(n);
+    p.sim.set_substep_factor(substep_factor);
     let mut out = Vec::with_capacity(steps);
     // The contact springs add sub-steps while the tool touches.
     let mut most_substeps = p.sim.substeps();
