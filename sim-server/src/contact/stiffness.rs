@@ -145,7 +145,12 @@ impl ContactStiffness {
         let springs: Mat3 = active_points(field, tool)
             .map(|(i, _)| field.spring_hessians()[i])
             .fold(Mat3::ZERO, |s, g| s + g);
-        if full.is_finite() && largest_eigenvalue(&full) <= 1.001 * largest_eigenvalue(&springs) {
+        // Cheap and sufficient: a valid K_eff is A less a positive
+        // semidefinite term, so its size stays of the order of the
+        // springs' trace; a near-singular K + H blows far past it.
+        let size = full.to_cols_array().iter().map(|x| x * x).sum::<Real>().sqrt();
+        let trace = springs.x_axis.x + springs.y_axis.y + springs.z_axis.z;
+        if full.is_finite() && size <= 2.0 * trace {
             return full;
         }
         self.effective(model, field, tool, field.spring_hessians())
@@ -300,13 +305,6 @@ fn active_points(
     field.points().iter().enumerate().filter(move |(i, p)| {
         field.penetrations_m()[*i] > 0.0 && field.parts()[p.part as usize].tool == tool
     })
-}
-
-/// The largest eigenvalue of the symmetric part of `m`.
-fn largest_eigenvalue(m: &Mat3) -> Real {
-    let s = (*m + m.transpose()) * 0.5;
-    let n = nalgebra::Matrix3::from_fn(|r, c| s.col(c)[r]);
-    n.symmetric_eigenvalues().max()
 }
 
 /// K factorised with `held` fixed; `None` if it cannot be (then the
