@@ -57,6 +57,84 @@ fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
     assert!(dir.join("extrapolation.svg").exists());
 }
 
+/// Issue 15's acceptance for the contact law, on the truth of a
+/// press-palpate-slide-retract over the 5 mm-cell box
+/// (tests/data/box-probe.toml, tests/data/box-palpate.csv) at 1 kHz: smooth
+/// (p99 per-tick change <= 0.05 N), no dropouts while the tool is in the
+/// tissue, passive (net work on the hand <= 0), independent of the
+/// integrator's sub-steps (<= 0.03 N RMS at twice the sub-steps); and every
+/// extrapolator's figures finite, per phase.
+#[test]
+fn hapbench_extrapolation_truth_on_the_box_is_smooth_passive_and_substep_independent() {
+    let dir = scratch_dir("hapbench-box");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let (scene, path) = (data.join("box-probe.toml"), data.join("box-palpate.csv"));
+    let v = hapbench(
+        &[
+            "extrapolation",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--trajectory",
+            path.to_str().unwrap(),
+            "--sim-rate",
+            "60",
+        ],
+        &dir.join("box.json"),
+        None,
+    );
+    let num = |x: &serde_json::Value, what: &str| -> f64 {
+        x.as_f64()
+            .unwrap_or_else(|| panic!("{what} is not a number: {x}"))
+    };
+    let truth = &v["truth"];
+    let (jump, energy, max, dropouts, substeps) = (
+        num(&truth["p99_jump_n"], "truth.p99_jump_n"),
+        num(&truth["net_energy_j"], "truth.net_energy_j"),
+        num(&v["truth_max_force_n"], "truth_max_force_n"),
+        v["truth_dropout_ticks"]
+            .as_u64()
+            .expect("truth_dropout_ticks"),
+        num(
+            &v["truth_check"]["rms_difference_n"],
+            "truth_check.rms_difference_n",
+        ),
+    );
+    eprintln!(
+        "box-palpate truth: p99 jump {jump:.4} N, net energy {:.3} mJ, max {max:.3} N, \
+         {dropouts} dropout ticks, sub-steps {} vs {} differ by {substeps:.4} N RMS",
+        energy * 1e3,
+        v["truth_check"]["substeps"][0],
+        v["truth_check"]["substeps"][1],
+    );
+    assert!(max > 0.1, "the path does not really press: {max} N\n{v}");
+    assert!(jump <= 0.05, "truth p99 per-tick change {jump} N\n{v}");
+    assert_eq!(dropouts, 0, "truth dropout ticks\n{v}");
+    assert!(
+        energy <= 0.0,
+        "the truth puts {energy} J into the hand\n{v}"
+    );
+    assert!(
+        substeps <= 0.03,
+        "truth vs twice the sub-steps: {substeps} N RMS\n{v}"
+    );
+    let methods = v["methods"].as_object().expect("methods");
+    assert!(!methods.is_empty(), "{v}");
+    for (m, r) in methods {
+        for key in ["rms_error_n", "max_error_n", "p99_jump_n", "net_energy_j"] {
+            assert!(num(&r[key], key).is_finite(), "{m}.{key}: {r}");
+        }
+        let phases = r["rms_error_by_phase_n"]
+            .as_object()
+            .unwrap_or_else(|| panic!("{m}: no rms_error_by_phase_n: {r}"));
+        for phase in ["press", "slide", "retract"] {
+            assert!(phases.contains_key(phase), "{m}: no phase {phase}: {r}");
+        }
+        for (phase, e) in phases {
+            assert!(num(e, phase).is_finite(), "{m}.{phase}: {r}");
+        }
+    }
+}
+
 #[test]
 fn hapbench_stability_reports_every_extreme_and_never_a_nan() {
     let dir = scratch_dir("hapbench-stab");

@@ -18,8 +18,8 @@ use crate::math::{Real, Vec3};
 use crate::mesh::TET_FACES;
 use crate::tensor_mass::ElasticModel;
 
-/// At most this many subdivisions per triangle edge (256 points).
-const MAX_SUBDIVISIONS: usize = 16;
+/// At most this many subdivisions per triangle edge (1024 points).
+const MAX_SUBDIVISIONS: usize = 32;
 
 /// Builds each step's contact points and holds the penalty constants.
 pub struct Sampler {
@@ -154,10 +154,13 @@ impl Sampler {
                         continue;
                     }
                     let area0 = 0.5 * (x0[1] - x0[0]).cross(x0[2] - x0[0]).length();
-                    let longest = (x0[1] - x0[0])
-                        .length()
-                        .max((x0[2] - x0[1]).length())
-                        .max((x0[0] - x0[2]).length());
+                    // The lattice follows the deformed triangle: a triangle
+                    // stretched around a deep probe must not let it slip
+                    // between its points.
+                    let longest = [(0, 1), (1, 2), (2, 0)]
+                        .iter()
+                        .map(|&(a, b)| x0[a].distance(x0[b]).max(x[a].distance(x[b])))
+                        .fold(0.0, Real::max);
                     let n = ((longest / spacing_m).ceil() as usize).clamp(1, MAX_SUBDIVISIONS);
                     let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
                     let ids = tri.map(|w| w.0);

@@ -148,7 +148,12 @@ impl ContactStiffness {
         // Cheap and sufficient: a valid K_eff is A less a positive
         // semidefinite term, so its size stays of the order of the
         // springs' trace; a near-singular K + H blows far past it.
-        let size = full.to_cols_array().iter().map(|x| x * x).sum::<Real>().sqrt();
+        let size = full
+            .to_cols_array()
+            .iter()
+            .map(|x| x * x)
+            .sum::<Real>()
+            .sqrt();
         let trace = springs.x_axis.x + springs.y_axis.y + springs.z_axis.z;
         if full.is_finite() && size <= 2.0 * trace {
             return full;
