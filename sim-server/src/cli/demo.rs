@@ -87,6 +87,11 @@ struct DemoJson {
     samples_received_by_daemon: u64,
     duration_s: f64,
     contact_fraction: f64,
+    /// Simulated time dropped after stalls (s): why `sim_steps_per_s` can
+    /// fall short of the rate on a loaded machine.
+    sim_dropped_time_s: f64,
+    /// The simulation's step time (us).
+    sim_step_us: sim_server::server::step_time::StepPercentiles,
 }
 
 /// The cavitron: from outside the anterior face of the right lobe, slowly in.
@@ -196,6 +201,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         samples_received_by_daemon: d["samples_received"].as_u64().unwrap_or(0),
         duration_s: args.duration_s,
         contact_fraction: summary.contact_fraction,
+        sim_dropped_time_s: summary.dropped_time_s,
+        sim_step_us: summary.step_us,
     };
     println!(
         "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed, tools {:.1}% of the step | max rendered force {:.3} N (device limit {} N)",

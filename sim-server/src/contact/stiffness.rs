@@ -50,6 +50,11 @@ use std::thread::JoinHandle;
 
 /// Above this many vertices the stiffness uses the diagonal blocks only.
 pub const MAX_FACTOR_VERTICES: usize = 60_000;
+/// At most this many vertices' columns are solved in one step (three
+/// sparse solves each): after a factor swap or when the tool reaches new
+/// tissue the columns come over a few steps, the last stiffness held
+/// meanwhile, instead of one long step.
+const NEW_COLUMNS_PER_STEP: usize = 4;
 /// At most this many vertices' columns are kept.
 const MAX_CACHED: usize = 256;
 
@@ -71,6 +76,8 @@ pub struct ContactStiffness {
     m: Vec<Real>,
     x: Vec<Real>,
     unit: Vec<Vec3>,
+    /// Per tool: the last stiffness computed.
+    last: Vec<Mat3>,
 }
 
 impl ContactStiffness {
@@ -91,6 +98,7 @@ impl ContactStiffness {
             m: Vec::new(),
             x: Vec::new(),
             unit: Vec::new(),
+            last: Vec::new(),
         };
         if model.vertex_count() <= MAX_FACTOR_VERTICES {
             out.factor = build(model, &out.dirichlet);
@@ -138,7 +146,13 @@ impl ContactStiffness {
     /// step.
     pub fn stiffness(&mut self, model: &ElasticModel, field: &ContactField, tool: usize) -> Mat3 {
         self.refresh(model);
-        let full = self.effective(model, field, tool, field.hessians());
+        if self.last.len() <= tool {
+            self.last.resize(tool + 1, Mat3::ZERO);
+        }
+        let Some(full) = self.effective(model, field, tool, field.hessians()) else {
+            // Columns still coming: hold the last stiffness.
+            return self.last[tool];
+        };
         // With the normals' turning, K + H can lose definiteness (a round
         // tool on a crease is laterally unstable) and the Schur complement
         // then means nothing: it must stay below the springs alone.
@@ -155,10 +169,14 @@ impl ContactStiffness {
             .sum::<Real>()
             .sqrt();
         let trace = springs.x_axis.x + springs.y_axis.y + springs.z_axis.z;
-        if full.is_finite() && size <= 2.0 * trace {
-            return full;
-        }
-        self.effective(model, field, tool, field.spring_hessians())
+        let k = if full.is_finite() && size <= 2.0 * trace {
+            full
+        } else {
+            self.effective(model, field, tool, field.spring_hessians())
+                .unwrap_or(self.last[tool])
+        };
+        self.last[tool] = k;
+        k
     }
 
     /// K_eff with the per-point Hessians `hessians` (indexed like the
@@ -169,7 +187,7 @@ impl ContactStiffness {
         field: &ContactField,
         tool: usize,
         hessians: &[Mat3],
-    ) -> Mat3 {
+    ) -> Option<Mat3> {
         let mut a = Mat3::ZERO;
         self.verts.clear();
         self.slot.clear();
@@ -183,7 +201,7 @@ impl ContactStiffness {
         }
         let nv = 3 * self.verts.len();
         if nv == 0 {
-            return a;
+            return Some(a);
         }
         // H (nv x nv), B (nv x 3), A = N^T Kp N.
         self.h.clear();
@@ -212,7 +230,9 @@ impl ContactStiffness {
                 }
             }
         }
-        self.fill_s(model, nv);
+        if !self.fill_s(model, nv) {
+            return None;
+        }
         // M = I + H S, X = M^-1 B, K_eff = A - B^T S X.
         self.m.clear();
         self.m.resize(nv * nv, 0.0);
@@ -230,7 +250,7 @@ impl ContactStiffness {
         self.x.clear();
         self.x.extend_from_slice(&self.b);
         if !solve_in_place(&mut self.m, &mut self.x, nv, 3) {
-            return a;
+            return Some(a);
         }
         let mut k = a;
         for r in 0..3 {
@@ -247,12 +267,13 @@ impl ContactStiffness {
             }
         }
         // Symmetric in exact arithmetic; remove the rounding.
-        (k + k.transpose()) * 0.5
+        Some((k + k.transpose()) * 0.5)
     }
 
     /// S = (K^-1)_VV from the cached columns (solved for new vertices), or
     /// blockdiag(K_ii)^-1 without a factor.
-    fn fill_s(&mut self, model: &ElasticModel, nv: usize) {
+    /// False when this step's budget of new columns ran out first.
+    fn fill_s(&mut self, model: &ElasticModel, nv: usize) -> bool {
         self.s.clear();
         self.s.resize(nv * nv, 0.0);
         let Some(factor) = &self.factor else {
@@ -267,16 +288,21 @@ impl ContactStiffness {
                     }
                 }
             }
-            return;
+            return true;
         };
         let n = model.vertex_count();
         if self.columns.len() + self.verts.len() > MAX_CACHED {
             self.columns.clear();
         }
+        let mut budget = NEW_COLUMNS_PER_STEP;
         for &v in &self.verts {
             if self.columns.contains_key(&v) {
                 continue;
             }
+            if budget == 0 {
+                return false;
+            }
+            budget -= 1;
             let mut cols = vec![Vec3::ZERO; 3 * n];
             self.unit.clear();
             self.unit.resize(n, Vec3::ZERO);
@@ -299,6 +325,7 @@ impl ContactStiffness {
                 }
             }
         }
+        true
     }
 }
 
