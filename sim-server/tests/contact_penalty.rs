@@ -277,3 +277,49 @@ fn bad_contact_constants_are_scene_errors_with_their_line() {
         "{err}"
     );
 }
+
+#[test]
+fn a_fulcrum_inside_the_organ_and_a_zero_radius_are_scene_errors_with_their_line() {
+    let scene = |fulcrum: &str, radius: &str| {
+        let text = format!(
+            "[mesh]\ngenerate = {{ shape = \"box\", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }}\n[material]\nyoung_pa = 5000.0\npoisson = 0.45\ndensity_kg_m3 = 1000.0\n[[tool]]\nname = \"probe\"\nkind = \"hook\"\nfulcrum_m = {fulcrum}\nlength_m = 0.3\nradius_m = {radius}\ntip_length_m = 0.01\n"
+        );
+        let src = SceneSource {
+            name: "tool.toml".into(),
+            dir: PathBuf::from("."),
+            text,
+        };
+        build_scene(&src, &src.parse().unwrap())
+            .err()
+            .map(|e| e.to_string())
+    };
+    let inside = scene("[0.02, 0.01, 0.01]", "0.0025").expect("refused");
+    assert!(
+        inside.contains("tool.toml:10") && inside.contains("inside the organ"),
+        "{inside}"
+    );
+    let zero = scene("[0.02, 0.01, 0.15]", "0.0").expect("refused");
+    assert!(
+        zero.contains("tool.toml:12") && zero.contains("radius_m"),
+        "{zero}"
+    );
+    assert_eq!(scene("[0.02, 0.01, 0.15]", "0.0025"), None);
+}
+
+#[test]
+fn a_nan_pose_never_reaches_the_contact() {
+    let mut p = scene("hook", "");
+    let tip = between(TOP_M + 0.0025 - 0.003);
+    let held = settle(&mut p, tip, 1500);
+    let nan = step(&mut p, Vec3::new(f64::NAN, 0.01, 0.02), 1.0);
+    let after = settle(&mut p, tip, 5);
+    assert!(nan.is_finite() && after.is_finite());
+    assert!(
+        (nan - held).length() < 1e-3 * held.length(),
+        "{held} then {nan}"
+    );
+    assert!(
+        (after - held).length() < 1e-3 * held.length(),
+        "{held} then {after}"
+    );
+}

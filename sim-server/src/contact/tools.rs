@@ -17,6 +17,37 @@ use crate::math::{Mat3, Real, Vec3};
 use crate::scene::ToolDecl;
 use crate::tensor_mass::ElasticModel;
 
+/// omega^2 the springs of `field`'s points may add: by Gershgorin, a
+/// vertex's springs (sum of k_p w_p over the points on its triangles) over
+/// its mass, the largest; 25% more for points selected again within a long
+/// step. `spring_n_per_m` (zero outside `sprung`) and `sprung` are scratch.
+fn springs_omega2(
+    field: &ContactField,
+    spring_n_per_m: &mut [Real],
+    sprung: &mut Vec<u32>,
+    model: &ElasticModel,
+) -> Real {
+    for p in field.points() {
+        for (v, w) in p.vertices.iter().zip(p.weights) {
+            let k = &mut spring_n_per_m[*v as usize];
+            if *k == 0.0 {
+                sprung.push(*v);
+            }
+            *k += w * p.stiffness_n_per_m;
+        }
+    }
+    let masses = model.masses_kg();
+    let mut omega2: Real = 0.0;
+    for v in sprung.drain(..) {
+        let k = std::mem::take(&mut spring_n_per_m[v as usize]);
+        let m = masses[v as usize];
+        if m > 0.0 {
+            omega2 = omega2.max(1.25 * k / m);
+        }
+    }
+    omega2
+}
+
 /// Simulated time between two selections of the contact points within a
 /// step (s).
 const RESAMPLE_EVERY_S: Real = 1e-3;
@@ -48,6 +79,8 @@ pub struct Tools {
     field: ContactField,
     sampler: Option<Sampler>,
     stiffness: Option<ContactStiffness>,
+    /// Per tool: the last input with finite fields.
+    last_inputs: Vec<Option<ToolInput>>,
     /// Per tool: the penalty contact stiffness after the last step.
     stiffness_n_per_m: Vec<Mat3>,
     mark: Vec<bool>,
@@ -174,37 +207,12 @@ impl Tools {
             field: ContactField::new(decls.len(), config.damping_s_per_m),
             sampler: None,
             stiffness: None,
+            last_inputs: vec![None; decls.len()],
             stiffness_n_per_m: vec![Mat3::ZERO; decls.len()],
             mark: vec![false; model.vertex_count()],
             spring_n_per_m: vec![0.0; model.vertex_count()],
             sprung: Vec::new(),
         }
-    }
-
-    /// omega^2 the springs of this step's points may add: by Gershgorin,
-    /// a vertex's springs (sum of k_p w_p over the points on its
-    /// triangles) over its mass, the largest; 25% more for points selected
-    /// again within a long step.
-    fn springs_omega2(&mut self, model: &ElasticModel) -> Real {
-        for p in self.field.points() {
-            for (v, w) in p.vertices.iter().zip(p.weights) {
-                let k = &mut self.spring_n_per_m[*v as usize];
-                if *k == 0.0 {
-                    self.sprung.push(*v);
-                }
-                *k += w * p.stiffness_n_per_m;
-            }
-        }
-        let masses = model.masses_kg();
-        let mut omega2: Real = 0.0;
-        for v in self.sprung.drain(..) {
-            let k = std::mem::take(&mut self.spring_n_per_m[v as usize]);
-            let m = masses[v as usize];
-            if m > 0.0 {
-                omega2 = omega2.max(1.25 * k / m);
-            }
-        }
-        omega2
     }
 
     /// The contact law in force.
@@ -296,7 +304,17 @@ impl Tools {
         if self.tools.is_empty() {
             return &self.reports;
         }
-        let input = |i: usize| inputs.get(i).copied().flatten();
+        // A pose with a non-finite field never reaches the contact code:
+        // the tool keeps its last finite one.
+        for (i, last) in self.last_inputs.iter_mut().enumerate() {
+            *last = match inputs.get(i).copied().flatten() {
+                Some(p) if p.tip_m.is_finite() && p.jaw_opening.is_finite() => Some(p),
+                Some(_) => *last,
+                None => None,
+            };
+        }
+        let last_inputs = &self.last_inputs;
+        let input = |i: usize| last_inputs[i];
         self.claims.clear();
         for (i, t) in self.tools.iter_mut().enumerate() {
             t.begin(
@@ -321,7 +339,13 @@ impl Tools {
                     sampler.sample(sim, &self.index, &self.adjacency, part, &mut self.field);
                 }
             }
-            sim.set_contact_bound(self.springs_omega2(sim.model()));
+            let omega2 = springs_omega2(
+                &self.field,
+                &mut self.spring_n_per_m,
+                &mut self.sprung,
+                sim.model(),
+            );
+            sim.set_contact_bound(omega2);
         }
         for (i, t) in self.tools.iter_mut().enumerate() {
             let jaw = input(i).map_or(1.0, |p| p.jaw_opening);

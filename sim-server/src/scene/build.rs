@@ -503,6 +503,16 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
                 format!("{what} fulcrum_m must be finite"),
             ));
         }
+        if let Some(tet) = containing_tet(model.mesh(), fulcrum) {
+            return Err(src.error(
+                t.fulcrum_m.span(),
+                format!(
+                    "{what} fulcrum_m {:?} is inside the organ (tetrahedron {}): the fulcrum is where the tool enters the body, outside the tissue, and the simulated tool comes in from it",
+                    fulcrum.to_array(),
+                    tet
+                ),
+            ));
+        }
         let length = positive(src, &t.length_m, &format!("{what} length_m"))?;
         let radius = positive(src, &t.radius_m, &format!("{what} radius_m"))?;
         let tip = positive(src, &t.tip_length_m, &format!("{what} tip_length_m"))?;
@@ -533,6 +543,29 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         hybrid_tets,
         settings,
         report,
+    })
+}
+
+/// The first tetrahedron of `mesh` containing `p` (all four barycentric
+/// coordinates, signed volumes with `p` in place of a vertex over the
+/// tetrahedron's, at least -1e-9), if any.
+fn containing_tet(mesh: &crate::mesh::TetMesh, p: Vec3) -> Option<usize> {
+    let x = mesh.positions_m();
+    let vol = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| (b - a).cross(c - a).dot(d - a);
+    mesh.tets().iter().position(|t| {
+        let [a, b, c, d] = t.map(|v| x[v.idx()]);
+        let v = vol(a, b, c, d);
+        if v == 0.0 {
+            return false;
+        }
+        [
+            vol(p, b, c, d),
+            vol(a, p, c, d),
+            vol(a, b, p, d),
+            vol(a, b, c, p),
+        ]
+        .iter()
+        .all(|w| w / v >= -1e-9)
     })
 }
 
