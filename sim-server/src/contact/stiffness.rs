@@ -53,8 +53,10 @@ pub const MAX_FACTOR_VERTICES: usize = 60_000;
 /// At most this many vertices' columns are solved in one step (three
 /// sparse solves each): after a factor swap or when the tool reaches new
 /// tissue the columns come over a few steps, the last stiffness held
-/// meanwhile, instead of one long step.
-const NEW_COLUMNS_PER_STEP: usize = 4;
+/// meanwhile, instead of one long step. One vertex still costs a long
+/// step on the liver (three solves, 5-7 ms on this VM): the solves belong
+/// on a worker thread, as the factor rebuild is.
+const NEW_COLUMNS_PER_STEP: usize = 1;
 /// At most this many vertices' columns are kept.
 const MAX_CACHED: usize = 256;
 
