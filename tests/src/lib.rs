@@ -88,3 +88,20 @@ pub fn finish(
     );
     out
 }
+
+/// The embedded liver's top (z, m) near the vertical axis through the
+/// origin, where the tests' hand presses.
+pub fn liver_top_z() -> f64 {
+    use sim_server::scene::{SceneSource, build_scene};
+    let src = SceneSource::embedded();
+    let model = build_scene(&src, &src.parse().unwrap()).unwrap().model;
+    let p = model.mesh().positions_m();
+    model
+        .topology()
+        .surface_triangles(model.mesh())
+        .flatten()
+        .map(|v| p[v.idx()])
+        .filter(|x| x.x.hypot(x.y) < 0.006)
+        .map(|x| x.z)
+        .fold(f64::NEG_INFINITY, f64::max)
+}

@@ -7,11 +7,10 @@
 //! ramp, and come back when the simulation does.
 
 use shared::monotonic_ns;
-use sim_server::scene::{SceneSource, build_scene};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded};
+use system_tests::{binary, finish, liver_top_z, read_json, scratch_dir, wait_bounded};
 
 const MAX_FORCE_N: f64 = 4.0;
 /// The daemon's default slew limit: full scale in 5 ms.
@@ -33,21 +32,6 @@ fn signal(child: &Child, sig: i32) -> u64 {
     // SAFETY: kill(2) on our own child's pid.
     unsafe { libc::kill(child.id() as libc::pid_t, sig) };
     monotonic_ns()
-}
-
-/// The liver's top (z, m) above the origin, where the trajectory presses.
-fn liver_top_z() -> f64 {
-    let src = SceneSource::embedded();
-    let model = build_scene(&src, &src.parse().unwrap()).unwrap().model;
-    let p = model.mesh().positions_m();
-    model
-        .topology()
-        .surface_triangles(model.mesh())
-        .flatten()
-        .map(|v| p[v.idx()])
-        .filter(|x| x.x.hypot(x.y) < 0.006)
-        .map(|x| x.z)
-        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// (t_ns, |F|) per tick of a daemon record, checking every row on the way.

@@ -13,10 +13,9 @@
 use haptic_daemon::live::{Live, LiveConfig, LiveGuard};
 use shared::protocol::CONTACT;
 use shared::{SessionName, monotonic_ns, services};
-use sim_server::scene::{SceneSource, build_scene};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded};
+use system_tests::{binary, finish, liver_top_z, read_json, scratch_dir, wait_bounded};
 
 const MS: u64 = 1_000_000;
 /// The pose timeout's default (50 ms) plus scheduling slack on a busy machine.
@@ -167,21 +166,6 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
         (sim + dropped - wall).abs() < 0.1,
         "sim {sim} s + dropped {dropped} s vs wall {wall} s"
     );
-}
-
-/// The liver's top (z, m) near the axis, where the hand presses.
-fn liver_top_z() -> f64 {
-    let src = SceneSource::embedded();
-    let model = build_scene(&src, &src.parse().unwrap()).unwrap().model;
-    let p = model.mesh().positions_m();
-    model
-        .topology()
-        .surface_triangles(model.mesh())
-        .flatten()
-        .map(|v| p[v.idx()])
-        .filter(|x| x.x.hypot(x.y) < 0.006)
-        .map(|x| x.z)
-        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// A daemon whose simulated hand comes down over 1 s to 6 mm into the liver
