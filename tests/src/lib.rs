@@ -105,3 +105,20 @@ pub fn liver_top_z() -> f64 {
         .map(|x| x.z)
         .fold(f64::NEG_INFINITY, f64::max)
 }
+
+/// Writes a replay trajectory that presses the embedded liver 6 mm deep
+/// from 10 mm above its top and holds for a minute.
+pub fn write_liver_press(path: &std::path::Path) {
+    let top = liver_top_z();
+    assert!(top.is_finite());
+    std::fs::write(
+        path,
+        format!(
+            "t_s,x_m,y_m,z_m\n0,0,0,{}\n1,0,0,{}\n60,0,0,{}\n",
+            top + 0.01,
+            top - 0.006,
+            top - 0.006
+        ),
+    )
+    .unwrap();
+}

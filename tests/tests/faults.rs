@@ -10,7 +10,7 @@ use shared::monotonic_ns;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, liver_top_z, read_json, scratch_dir, wait_bounded};
+use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded, write_liver_press};
 
 const MAX_FORCE_N: f64 = 4.0;
 /// The daemon's default slew limit: full scale in 5 ms.
@@ -77,18 +77,7 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
         dir.join("press.csv"),
     );
     // The hand comes down over 1 s to 6 mm into the liver and stays there.
-    let top = liver_top_z();
-    assert!(top.is_finite());
-    std::fs::write(
-        &traj,
-        format!(
-            "t_s,x_m,y_m,z_m\n0,0,0,{}\n1,0,0,{}\n60,0,0,{}\n",
-            top + 0.01,
-            top - 0.006,
-            top - 0.006
-        ),
-    )
-    .unwrap();
+    write_liver_press(&traj);
     let mut first = sim_server(&session, &["--duration-s", "60"]);
     std::thread::sleep(Duration::from_millis(500));
     let daemon = Command::new(binary("haptic-daemon"))

@@ -15,7 +15,7 @@ use shared::protocol::CONTACT;
 use shared::{SessionName, monotonic_ns, services};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, liver_top_z, read_json, scratch_dir, wait_bounded};
+use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded, write_liver_press};
 
 const MS: u64 = 1_000_000;
 /// The pose timeout's default (50 ms) plus scheduling slack on a busy machine.
@@ -172,18 +172,7 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
 /// and stays there.
 fn pressing_daemon(session: &str, dir: &std::path::Path) -> Child {
     let traj = dir.join("press.csv");
-    let top = liver_top_z();
-    assert!(top.is_finite());
-    std::fs::write(
-        &traj,
-        format!(
-            "t_s,x_m,y_m,z_m\n0,0,0,{}\n1,0,0,{}\n60,0,0,{}\n",
-            top + 0.01,
-            top - 0.006,
-            top - 0.006
-        ),
-    )
-    .unwrap();
+    write_liver_press(&traj);
     Command::new(binary("haptic-daemon"))
         .args(["run", "--quiet", "--rt-priority", "0", "--session", session])
         .args(["--duration-s", "30", "--max-force", "4"])

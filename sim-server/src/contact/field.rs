@@ -91,18 +91,6 @@ pub fn spring(k_n_per_m: Real, depth_m: Real, radius_m: Real) -> (Real, Real) {
     }
 }
 
-/// Closest point of `seg` to `x`, and its parameter along the segment.
-pub(crate) fn closest(seg: &Segment, x: Vec3) -> (Vec3, Real) {
-    let d = seg.b_m - seg.a_m;
-    let len2 = d.length_squared();
-    let t = if len2 > 0.0 {
-        ((x - seg.a_m).dot(d) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (seg.a_m + d * t, t)
-}
-
 /// Where in a step an evaluation is.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SubStep {
@@ -250,7 +238,7 @@ impl ContactField {
                 x += p.weights[k] * (rest_m[j] + uj);
                 vel += p.weights[k] * (uj - pj) / h_s;
             }
-            let (c, t) = closest(&seg, x);
+            let (c, t) = seg.closest_m(x);
             let gap = x - c;
             let dist = gap.length();
             let depth = sweep.radius_m - dist;

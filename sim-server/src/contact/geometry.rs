@@ -30,14 +30,20 @@ impl Segment {
 
     /// Distance from `x_m` to the segment (m).
     pub fn distance_m(&self, x_m: Vec3) -> Real {
+        x_m.distance(self.closest_m(x_m).0)
+    }
+
+    /// The point of the segment closest to `x_m` (m) and its parameter
+    /// along the segment (0 at `a_m`, 1 at `b_m`).
+    pub fn closest_m(&self, x_m: Vec3) -> (Vec3, Real) {
         let d = self.b_m - self.a_m;
         let len2 = d.length_squared();
-        let s = if len2 > 0.0 {
+        let t = if len2 > 0.0 {
             ((x_m - self.a_m).dot(d) / len2).clamp(0.0, 1.0)
         } else {
             0.0
         };
-        x_m.distance(self.a_m + d * s)
+        (self.a_m + d * t, t)
     }
 }
 
