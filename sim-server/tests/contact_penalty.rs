@@ -17,6 +17,11 @@ const TOP_M: f64 = 0.02;
 /// A 4 x 2 x 2 cm block on 5 mm cells, bottom fixed, one tool of `kind`
 /// (radius 2.5 mm) entering from above; `extra` appended to the scene.
 fn scene(kind: &str, extra: &str) -> Prepared<Explicit<f64>> {
+    scene_stepped(kind, extra, 1e-3)
+}
+
+/// [`scene`] stepped `dt_s` at a time.
+fn scene_stepped(kind: &str, extra: &str, dt_s: f64) -> Prepared<Explicit<f64>> {
     let text = format!(
         r#"
 [mesh]
@@ -48,7 +53,7 @@ tip_length_m = 0.01
         text,
     };
     let built = build_scene(&src, &src.parse().unwrap()).unwrap();
-    prepare::<f64>(built, Some(1e-3)).unwrap()
+    prepare::<f64>(built, Some(dt_s)).unwrap()
 }
 
 /// One step with the tool tip at `tip` (jaws `jaw`); the force on it.
@@ -321,5 +326,64 @@ fn a_nan_pose_never_reaches_the_contact() {
     assert!(
         (after - held).length() < 1e-3 * held.length(),
         "{held} then {after}"
+    );
+}
+
+#[test]
+fn a_deep_press_held_still_comes_to_rest() {
+    // The contact damping is explicit: unbounded, it locked deep contacts
+    // into an oscillation flipping the force each sub-step (averaged away
+    // in the reported force, not in the tissue).
+    let mut p = scene("hook", "");
+    let at_vertex = |z: f64| Vec3::new(0.02, 0.01, z);
+    for k in 0..=300 {
+        step(
+            &mut p,
+            at_vertex(TOP_M + 0.003 - 0.013 * k as f64 / 300.0),
+            1.0,
+        );
+    }
+    let f = settle(&mut p, at_vertex(TOP_M - 0.010), 700);
+    assert!(f.z > 0.5, "the probe 10 mm deep should press: {f}");
+    let u: Vec<Vec3> = p
+        .sim
+        .displacements()
+        .iter()
+        .map(|a| Vec3::from_array(*a))
+        .collect();
+    let elastic = p.sim.model().energy_j(&u);
+    let kinetic = p.sim.energy_j() - elastic;
+    assert!(
+        kinetic < 1e-6 * elastic,
+        "kinetic energy {kinetic} J against {elastic} J elastic after 0.7 s held still"
+    );
+}
+
+#[test]
+fn a_long_step_reports_the_force_at_its_end_pose() {
+    // A 20 ms step is published with the pose it ends at: its force must
+    // be the one a 1 ms simulation feels at that pose (a mean over the
+    // whole step described the tool 10 ms earlier: 5% of the force here).
+    let pose = |t: f64| between(TOP_M + 0.003 - 0.009 * (t / 0.3).min(1.0));
+    // Both first hold above the surface while the tool comes down from
+    // the fulcrum.
+    let mut fine = scene("hook", "");
+    settle(&mut fine, pose(0.0), 300);
+    let fine_f: Vec<Vec3> = (0..400)
+        .map(|k| step(&mut fine, pose(k as f64 * 1e-3), 1.0))
+        .collect();
+    let mut coarse = scene_stepped("hook", "", 0.02);
+    settle(&mut coarse, pose(0.0), 15);
+    let (mut worst, mut peak) = (0.0_f64, 0.0_f64);
+    for j in 0..20 {
+        let f = step(&mut coarse, pose(j as f64 * 0.02), 1.0);
+        let truth = fine_f[20 * j];
+        peak = peak.max(truth.length());
+        worst = worst.max((f - truth).length());
+    }
+    assert!(peak > 0.3, "peak {peak} N");
+    assert!(
+        worst < 0.02 * peak,
+        "worst difference {worst} N for a {peak} N peak"
     );
 }

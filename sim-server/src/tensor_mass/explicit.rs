@@ -294,6 +294,7 @@ impl<S: Storage> Explicit<S> {
                 h_s: h,
                 step_s: self.dt_s,
                 s,
+                masses_kg: self.model.masses_kg(),
             };
             field.add_forces(rest, &self.u, &self.next, at, &mut self.fmem);
             self.kernel_step();
