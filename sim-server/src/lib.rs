@@ -34,6 +34,7 @@
 #![warn(missing_docs)]
 
 pub mod backend;
+pub mod background;
 pub mod bench;
 pub mod contact;
 pub mod ids;

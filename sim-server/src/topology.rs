@@ -186,6 +186,11 @@ impl Topology {
         self.alive[t.idx()]
     }
 
+    /// Per tetrahedron, whether it is alive.
+    pub fn alive(&self) -> &[bool] {
+        &self.alive
+    }
+
     /// Number of live tetrahedra.
     pub fn alive_count(&self) -> usize {
         self.alive.iter().filter(|a| **a).count()

@@ -5,7 +5,7 @@
 //! finite differences of the settled reaction), survives a pose glitch
 //! through the speed-limited proxy, and keeps gripping and cutting.
 
-use sim_server::contact::{ContactLaw, ToolInput};
+use sim_server::contact::{ContactLaw, StiffnessSolves, ToolInput};
 use sim_server::prelude::*;
 use sim_server::scene::{SceneSource, build_scene};
 use sim_server::server::{Prepared, prepare};
@@ -53,7 +53,10 @@ tip_length_m = 0.01
         text,
     };
     let built = build_scene(&src, &src.parse().unwrap()).unwrap();
-    prepare::<f64>(built, Some(dt_s)).unwrap()
+    let mut p = prepare::<f64>(built, Some(dt_s)).unwrap();
+    // The stiffness exact at every step, whatever the threads' timing.
+    p.tools.set_stiffness_solves(StiffnessSolves::Inline);
+    p
 }
 
 /// One step with the tool tip at `tip` (jaws `jaw`); the force on it.
@@ -385,5 +388,51 @@ fn a_long_step_reports_the_force_at_its_end_pose() {
     assert!(
         worst < 0.02 * peak,
         "worst difference {worst} N for a {peak} N peak"
+    );
+}
+
+#[test]
+fn the_worker_thread_publishes_the_stiffness_the_step_computes() {
+    // The live simulation computes the stiffness on a worker thread and
+    // publishes its newest result, a few steps old: stepped in lockstep
+    // with a simulation computing it in the step, what it publishes must
+    // be exactly one of the latter's recent values.
+    let tip = between(TOP_M - 0.004);
+    let mut inline = scene("hook", "");
+    let mut worker = scene("hook", "");
+    worker.tools.set_stiffness_solves(StiffnessSolves::Worker);
+    let size = |m: Mat3| {
+        m.to_cols_array()
+            .iter()
+            .fold(0.0_f64, |a, x| a.max(x.abs()))
+    };
+    let mut history = std::collections::VecDeque::new();
+    let mut matched = 0;
+    // Liveness only: up to 10 s of wall time for the worker.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    for k in 0..2000 {
+        step(&mut inline, tip, 1.0);
+        step(&mut worker, tip, 1.0);
+        history.push_back(inline.tools.reaction(0, &inline.sim).stiffness_n_per_m);
+        if history.len() > 200 {
+            history.pop_front();
+        }
+        let got = worker.tools.reaction(0, &worker.sim).stiffness_n_per_m;
+        if k >= 300 && size(got) > 1.0 {
+            assert!(
+                history.iter().any(|h| size(got - *h) <= 1e-9 * size(*h)),
+                "step {k}: the worker's {got} is none of the last {} inline values",
+                history.len()
+            );
+            matched += 1;
+        }
+        if matched >= 100 || std::time::Instant::now() > deadline {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
+    assert!(
+        matched >= 100,
+        "the worker published {matched} stiffnesses in contact"
     );
 }

@@ -35,6 +35,10 @@
 //! which neglects the coupling through the tissue and overestimates the
 //! stiffness (about 3x on a 5 mm-cell block).
 //!
+//! The solver works on a [`Snapshot`] of the active points, so that the
+//! live simulation can run it on a worker thread
+//! ([`super::stiffness_thread`]).
+//!
 //! Neglected: the Hunt-Crossley damping (zero at rest), the tissue's
 //! inertia (K_eff is the quasi-static stiffness), points entering or
 //! leaving contact (they do so at zero force), grips and the other tools'
@@ -50,18 +54,54 @@ use std::thread::JoinHandle;
 
 /// Above this many vertices the stiffness uses the diagonal blocks only.
 pub const MAX_FACTOR_VERTICES: usize = 60_000;
-/// At most this many vertices' columns are solved in one step (three
-/// sparse solves each): after a factor swap or when the tool reaches new
-/// tissue the columns come over a few steps, the last stiffness held
-/// meanwhile, instead of one long step. One vertex still costs a long
-/// step on the liver (three solves, 5-7 ms on this VM): the solves belong
-/// on a worker thread, as the factor rebuild is.
-const NEW_COLUMNS_PER_STEP: usize = 1;
-/// At most this many vertices' columns are kept.
+/// At most this many vertices' columns are kept (about 150 kB each on the
+/// embedded liver).
 const MAX_CACHED: usize = 256;
 
+/// One active contact point as the solver needs it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SnapPoint {
+    vertices: [u32; 3],
+    weights: [Real; 3],
+    /// Its Hessian with the normal's turning ([`ContactField::hessians`]).
+    hessian: Mat3,
+    /// The spring part alone.
+    spring: Mat3,
+    tool: usize,
+}
+
+/// The active contact points of a step, copied out of the field (buffers
+/// reused).
+#[derive(Clone, Debug, Default)]
+pub(super) struct Snapshot {
+    points: Vec<SnapPoint>,
+}
+
+impl Snapshot {
+    /// Copies the field's points in contact.
+    pub(super) fn fill(&mut self, field: &ContactField) {
+        self.points.clear();
+        for (i, p) in field.points().iter().enumerate() {
+            if field.penetrations_m()[i] > 0.0 {
+                self.points.push(SnapPoint {
+                    vertices: p.vertices,
+                    weights: p.weights,
+                    hessian: field.hessians()[i],
+                    spring: field.spring_hessians()[i],
+                    tool: field.parts()[p.part as usize].tool,
+                });
+            }
+        }
+    }
+
+    /// The points touching `tool`.
+    fn of(&self, tool: usize) -> impl Iterator<Item = &SnapPoint> + Clone {
+        self.points.iter().filter(move |p| p.tool == tool)
+    }
+}
+
 /// The contact stiffness solver of a scene.
-pub struct ContactStiffness {
+pub(super) struct Solver {
     dirichlet: Vec<VertexId>,
     factor: Option<Factorized>,
     /// `ElasticModel::topology_changes` the factor was built for.
@@ -78,14 +118,12 @@ pub struct ContactStiffness {
     m: Vec<Real>,
     x: Vec<Real>,
     unit: Vec<Vec3>,
-    /// Per tool: the last stiffness computed.
-    last: Vec<Mat3>,
 }
 
-impl ContactStiffness {
+impl Solver {
     /// For `model` with `held` vertices fixed (the scene's fixed and
     /// prescribed ones); factorises K now unless the mesh is too large.
-    pub fn new(model: &ElasticModel, held: &[VertexId]) -> Self {
+    pub(super) fn new(model: &ElasticModel, held: &[VertexId]) -> Self {
         let mut out = Self {
             dirichlet: held.to_vec(),
             factor: None,
@@ -100,7 +138,6 @@ impl ContactStiffness {
             m: Vec::new(),
             x: Vec::new(),
             unit: Vec::new(),
-            last: Vec::new(),
         };
         if model.vertex_count() <= MAX_FACTOR_VERTICES {
             out.factor = build(model, &out.dirichlet);
@@ -110,7 +147,7 @@ impl ContactStiffness {
 
     /// Whether K_eff uses the tissue's full compliance (else the diagonal
     /// blocks only).
-    pub fn exact(&self) -> bool {
+    pub(super) fn exact(&self) -> bool {
         self.factor.is_some()
     }
 
@@ -136,31 +173,25 @@ impl ContactStiffness {
         {
             let (model, held) = (model.clone(), self.dirichlet.clone());
             let handle = std::thread::Builder::new()
-                .name("contact-stiffness".into())
-                .spawn(move || build(&model, &held));
+                .name("contact-factor".into())
+                .spawn(move || {
+                    crate::background::lower_this_thread();
+                    build(&model, &held)
+                });
             if let Ok(handle) = handle {
                 self.pending = Some((now, handle));
             }
         }
     }
 
-    /// K_eff (N/m) of tool `tool` from the field's active points after a
-    /// step.
-    pub fn stiffness(&mut self, model: &ElasticModel, field: &ContactField, tool: usize) -> Mat3 {
+    /// K_eff (N/m) of tool `tool` from the snapshot's points.
+    pub(super) fn stiffness(&mut self, model: &ElasticModel, snap: &Snapshot, tool: usize) -> Mat3 {
         self.refresh(model);
-        if self.last.len() <= tool {
-            self.last.resize(tool + 1, Mat3::ZERO);
-        }
-        let Some(full) = self.effective(model, field, tool, field.hessians()) else {
-            // Columns still coming: hold the last stiffness.
-            return self.last[tool];
-        };
+        let full = self.effective(model, snap, tool, |p| p.hessian);
         // With the normals' turning, K + H can lose definiteness (a round
         // tool on a crease is laterally unstable) and the Schur complement
         // then means nothing: it must stay below the springs alone.
-        let springs: Mat3 = active_points(field, tool)
-            .map(|(i, _)| field.spring_hessians()[i])
-            .fold(Mat3::ZERO, |s, g| s + g);
+        let springs: Mat3 = snap.of(tool).fold(Mat3::ZERO, |s, p| s + p.spring);
         // Cheap and sufficient: a valid K_eff is A less a positive
         // semidefinite term, so its size stays of the order of the
         // springs' trace; a near-singular K + H blows far past it.
@@ -171,29 +202,25 @@ impl ContactStiffness {
             .sum::<Real>()
             .sqrt();
         let trace = springs.x_axis.x + springs.y_axis.y + springs.z_axis.z;
-        let k = if full.is_finite() && size <= 2.0 * trace {
+        if full.is_finite() && size <= 2.0 * trace {
             full
         } else {
-            self.effective(model, field, tool, field.spring_hessians())
-                .unwrap_or(self.last[tool])
-        };
-        self.last[tool] = k;
-        k
+            self.effective(model, snap, tool, |p| p.spring)
+        }
     }
 
-    /// K_eff with the per-point Hessians `hessians` (indexed like the
-    /// field's points).
+    /// K_eff with each point's Hessian `hessian(p)`.
     fn effective(
         &mut self,
         model: &ElasticModel,
-        field: &ContactField,
+        snap: &Snapshot,
         tool: usize,
-        hessians: &[Mat3],
-    ) -> Option<Mat3> {
+        hessian: impl Fn(&SnapPoint) -> Mat3,
+    ) -> Mat3 {
         let mut a = Mat3::ZERO;
         self.verts.clear();
         self.slot.clear();
-        for (_, p) in active_points(field, tool) {
+        for p in snap.of(tool) {
             for v in p.vertices {
                 if !self.slot.contains_key(&v) {
                     self.slot.insert(v, self.verts.len());
@@ -203,15 +230,15 @@ impl ContactStiffness {
         }
         let nv = 3 * self.verts.len();
         if nv == 0 {
-            return Some(a);
+            return a;
         }
         // H (nv x nv), B (nv x 3), A = N^T Kp N.
         self.h.clear();
         self.h.resize(nv * nv, 0.0);
         self.b.clear();
         self.b.resize(nv * 3, 0.0);
-        for (i, p) in active_points(field, tool) {
-            let nn = hessians[i];
+        for p in snap.of(tool) {
+            let nn = hessian(p);
             a += nn;
             for (i, vi) in p.vertices.iter().enumerate() {
                 let si = 3 * self.slot[vi];
@@ -232,9 +259,7 @@ impl ContactStiffness {
                 }
             }
         }
-        if !self.fill_s(model, nv) {
-            return None;
-        }
+        self.fill_s(model, nv);
         // M = I + H S, X = M^-1 B, K_eff = A - B^T S X.
         self.m.clear();
         self.m.resize(nv * nv, 0.0);
@@ -252,7 +277,7 @@ impl ContactStiffness {
         self.x.clear();
         self.x.extend_from_slice(&self.b);
         if !solve_in_place(&mut self.m, &mut self.x, nv, 3) {
-            return Some(a);
+            return a;
         }
         let mut k = a;
         for r in 0..3 {
@@ -269,13 +294,12 @@ impl ContactStiffness {
             }
         }
         // Symmetric in exact arithmetic; remove the rounding.
-        Some((k + k.transpose()) * 0.5)
+        (k + k.transpose()) * 0.5
     }
 
     /// S = (K^-1)_VV from the cached columns (solved for new vertices), or
     /// blockdiag(K_ii)^-1 without a factor.
-    /// False when this step's budget of new columns ran out first.
-    fn fill_s(&mut self, model: &ElasticModel, nv: usize) -> bool {
+    fn fill_s(&mut self, model: &ElasticModel, nv: usize) {
         self.s.clear();
         self.s.resize(nv * nv, 0.0);
         let Some(factor) = &self.factor else {
@@ -290,21 +314,16 @@ impl ContactStiffness {
                     }
                 }
             }
-            return true;
+            return;
         };
         let n = model.vertex_count();
         if self.columns.len() + self.verts.len() > MAX_CACHED {
             self.columns.clear();
         }
-        let mut budget = NEW_COLUMNS_PER_STEP;
         for &v in &self.verts {
             if self.columns.contains_key(&v) {
                 continue;
             }
-            if budget == 0 {
-                return false;
-            }
-            budget -= 1;
             let mut cols = vec![Vec3::ZERO; 3 * n];
             self.unit.clear();
             self.unit.resize(n, Vec3::ZERO);
@@ -327,18 +346,7 @@ impl ContactStiffness {
                 }
             }
         }
-        true
     }
-}
-
-/// The field's points in contact with tool `tool`, with their index.
-fn active_points(
-    field: &ContactField,
-    tool: usize,
-) -> impl Iterator<Item = (usize, &super::field::ContactPoint)> + Clone {
-    field.points().iter().enumerate().filter(move |(i, p)| {
-        field.penetrations_m()[*i] > 0.0 && field.parts()[p.part as usize].tool == tool
-    })
 }
 
 /// K factorised with `held` fixed; `None` if it cannot be (then the

@@ -7,7 +7,7 @@ use super::config::{ContactConfig, ContactLaw};
 use super::field::ContactField;
 use super::proxy::Proxy;
 use super::sampling::Sampler;
-use super::stiffness::ContactStiffness;
+use super::stiffness_thread::{ContactStiffness, StiffnessSolves};
 use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
 use super::{ContactReport, Reaction};
@@ -249,11 +249,20 @@ impl Tools {
             r.contact = t.after_step(&self.field, &mut self.mark);
         }
         if let Some(k) = &mut self.stiffness {
+            k.update(sim.model(), &self.field, self.stiffness_n_per_m.len());
             for (i, out) in self.stiffness_n_per_m.iter_mut().enumerate() {
-                *out = k.stiffness(sim.model(), &self.field, i);
+                *out = k.stiffness(i);
             }
         }
         &self.reports
+    }
+
+    /// Where the contact stiffness is computed (see [`StiffnessSolves`];
+    /// the default is a worker thread, its newest result published).
+    pub fn set_stiffness_solves(&mut self, mode: StiffnessSolves) {
+        if let Some(k) = &mut self.stiffness {
+            k.set_solves(mode);
+        }
     }
 
     /// No tool ever imposes nor releases `v` (a vertex the scene fixes or

@@ -159,6 +159,7 @@ impl Rebuilder {
         let thread = std::thread::Builder::new()
             .name("implicit-factor".into())
             .spawn(move || {
+                crate::background::lower_this_thread();
                 let _token = token;
                 work(&worker, h);
             })?;

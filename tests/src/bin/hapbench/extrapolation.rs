@@ -18,7 +18,7 @@ use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
 use indicatif::ProgressBar;
 use serde::Serialize;
 use shared::protocol::MAX_TOOLS;
-use sim_server::contact::ToolInput;
+use sim_server::contact::{StiffnessSolves, ToolInput};
 use sim_server::math::Vec3;
 use sim_server::scene::{SceneSource, build_scene};
 use sim_server::server::prepare;
@@ -132,6 +132,9 @@ fn simulate(
     );
     let mut p = prepare::<f64>(scene, Some(dt_s))?;
     p.sim.set_substep_factor(substep_factor);
+    // Offline: the stiffness of every sample exact, and the results
+    // independent of thread timing.
+    p.tools.set_stiffness_solves(StiffnessSolves::Inline);
     let mut out = Vec::with_capacity(steps);
     // The contact springs add sub-steps while the tool touches.
     let mut most_substeps = p.sim.substeps();

@@ -1,0 +1,247 @@
+//! Where the contact stiffness is computed: in the step, or on a worker
+//! thread with the step publishing the latest result.
+//!
+//! The stiffness needs, for each newly touched vertex, three sparse solves
+//! with the tissue's factor (5-7 ms on the embedded liver, this VM) and,
+//! every step, a dense solve of three times the touched vertices (a
+//! millisecond or more for a grasper's bite): in the step they were the
+//! live simulation's longest steps (its p99.9, 5-8 ms against a 0.25 ms
+//! median). The live simulation therefore runs the solver on a worker
+//! thread ([`StiffnessSolves::Worker`]): each step hands it a snapshot of
+//! the active contact points when it is idle and publishes the newest
+//! result, one or a few steps old. The worker keeps its own copy of the
+//! tissue model (made at start-up, not in a step), brought up to date
+//! after cuts from the tetrahedra's alive flags (copying the model itself
+//! took 1-3 ms of the step on the liver), and builds the new factor.
+//! Offline benchmarks and tests compute it in the step
+//! ([`StiffnessSolves::Inline`]): exact for every step and independent of
+//! thread timing. The snapshot buffers travel to the worker and back, so
+//! neither side allocates per step once warm.
+
+use super::field::ContactField;
+use super::stiffness::{Snapshot, Solver};
+use crate::ids::{TetId, VertexId};
+use crate::math::Mat3;
+use crate::tensor_mass::ElasticModel;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+
+/// Where the contact stiffness is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StiffnessSolves {
+    /// In the step: exact every step, deterministic (offline benchmarks,
+    /// tests), at the price of long steps when a tool reaches new tissue.
+    Inline,
+    /// On a worker thread, the newest result published (the live
+    /// simulation: no long step).
+    Worker,
+}
+
+/// A snapshot to solve, with the tetrahedra's alive flags when a cut
+/// changed them (else empty).
+struct Job {
+    snap: Snapshot,
+    tools: usize,
+    alive: Vec<bool>,
+}
+
+/// A solved snapshot: its buffers back, and the stiffness per tool.
+struct Done {
+    snap: Snapshot,
+    alive: Vec<bool>,
+    stiffness: Vec<Mat3>,
+}
+
+/// The worker's channel ends.
+struct Link {
+    jobs: Sender<Job>,
+    done: Receiver<Done>,
+    /// A job is out.
+    busy: bool,
+    /// The model's `topology_changes` the worker has.
+    sent_topology: u64,
+}
+
+/// The contact stiffness of a scene's tools (see the module docs).
+pub struct ContactStiffness {
+    mode: StiffnessSolves,
+    /// Inline: the solver. Worker: it until the worker starts (it moves
+    /// there).
+    solver: Option<Solver>,
+    link: Option<Link>,
+    /// The spare snapshot (filled and sent, or solved inline).
+    snap: Snapshot,
+    /// The spare alive-flags buffer.
+    alive: Vec<bool>,
+    /// Worker: the worker's copy of the model, until it starts.
+    copy: Option<Box<ElasticModel>>,
+    /// Per tool: the newest stiffness.
+    newest: Vec<Mat3>,
+    exact: bool,
+    /// The scene's held vertices (to build a solver again).
+    held: Vec<VertexId>,
+}
+
+impl ContactStiffness {
+    /// For `model` with `held` vertices fixed (the scene's fixed and
+    /// prescribed ones); factorises K now unless the mesh is too large.
+    /// Computed on a worker thread unless set otherwise
+    /// ([`ContactStiffness::set_solves`]).
+    pub fn new(model: &ElasticModel, held: &[VertexId]) -> Self {
+        let solver = Solver::new(model, held);
+        Self {
+            mode: StiffnessSolves::Worker,
+            exact: solver.exact(),
+            solver: Some(solver),
+            link: None,
+            snap: Snapshot::default(),
+            alive: Vec::new(),
+            copy: Some(Box::new(model.clone())),
+            newest: Vec::new(),
+            held: held.to_vec(),
+        }
+    }
+
+    /// Where it is computed from now on (a worker already started keeps
+    /// the solver: then this has no effect).
+    pub fn set_solves(&mut self, mode: StiffnessSolves) {
+        if self.link.is_none() {
+            self.mode = mode;
+            if mode == StiffnessSolves::Inline {
+                self.copy = None;
+            }
+        }
+    }
+
+    /// Whether K_eff uses the tissue's full compliance (else the diagonal
+    /// blocks only).
+    pub fn exact(&self) -> bool {
+        self.exact
+    }
+
+    /// Takes in the step's contact (`field`, `tools` tools) on `model`.
+    pub fn update(&mut self, model: &ElasticModel, field: &ContactField, tools: usize) {
+        self.newest.resize(tools, Mat3::ZERO);
+        if self.mode == StiffnessSolves::Worker && self.link.is_none() {
+            self.start(model);
+        }
+        let Some(link) = &mut self.link else {
+            // Inline (or no worker could be started).
+            if let Some(solver) = &mut self.solver {
+                self.snap.fill(field);
+                for (t, k) in self.newest.iter_mut().enumerate() {
+                    *k = solver.stiffness(model, &self.snap, t);
+                }
+            }
+            return;
+        };
+        match link.done.try_recv() {
+            Ok(done) => {
+                self.snap = done.snap;
+                self.alive = done.alive;
+                for (k, d) in self.newest.iter_mut().zip(done.stiffness) {
+                    *k = d;
+                }
+                link.busy = false;
+            }
+            Err(TryRecvError::Empty) => {}
+            Err(TryRecvError::Disconnected) => {
+                // The worker died (a panic in the solver): keep the last
+                // stiffness rather than take the step down; later ones
+                // in the step.
+                self.link = None;
+                self.mode = StiffnessSolves::Inline;
+                self.solver = Some(Solver::new(model, &self.held));
+                return;
+            }
+        }
+        if !link.busy {
+            self.snap.fill(field);
+            let topology = model.topology_changes();
+            self.alive.clear();
+            if topology != link.sent_topology {
+                self.alive.extend_from_slice(model.topology().alive());
+            }
+            link.sent_topology = topology;
+            let job = Job {
+                snap: std::mem::take(&mut self.snap),
+                tools,
+                alive: std::mem::take(&mut self.alive),
+            };
+            link.busy = link.jobs.send(job).is_ok();
+        }
+    }
+
+    /// The newest stiffness of tool `tool` (N/m).
+    pub fn stiffness(&self, tool: usize) -> Mat3 {
+        self.newest.get(tool).copied().unwrap_or(Mat3::ZERO)
+    }
+
+    /// Starts the worker with the solver and a copy of `model`; stays
+    /// inline if the thread cannot start.
+    fn start(&mut self, model: &ElasticModel) {
+        if self.solver.is_none() || self.copy.is_none() {
+            return;
+        }
+        let (Some(mut solver), Some(mut own)) = (self.solver.take(), self.copy.take()) else {
+            return;
+        };
+        let (jobs, inbox) = channel::<Job>();
+        let (outbox, done) = channel::<Done>();
+        let mut results = Vec::new();
+        let spawned = std::thread::Builder::new()
+            .name("contact-stiffness".into())
+            .spawn(move || {
+                crate::background::lower_this_thread();
+                while let Ok(job) = inbox.recv() {
+                    follow_cuts(&mut own, &job.alive);
+                    results.clear();
+                    for t in 0..job.tools {
+                        results.push(solver.stiffness(&own, &job.snap, t));
+                    }
+                    let reply = Done {
+                        snap: job.snap,
+                        alive: job.alive,
+                        stiffness: std::mem::take(&mut results),
+                    };
+                    if outbox.send(reply).is_err() {
+                        return;
+                    }
+                }
+            });
+        match spawned {
+            Ok(_) => {
+                self.link = Some(Link {
+                    jobs,
+                    done,
+                    busy: false,
+                    // The copy was made at start-up: the first job
+                    // brings it up to date.
+                    sent_topology: u64::MAX,
+                });
+            }
+            Err(_) => {
+                // The closure (and the solver in it) is gone: build one
+                // and stay inline.
+                self.mode = StiffnessSolves::Inline;
+                self.solver = Some(Solver::new(model, &self.held));
+            }
+        }
+    }
+}
+
+/// Removes from (restores to) `own` the tetrahedra `alive` says are dead
+/// (alive); nothing when `alive` is empty (no cut since the last job).
+fn follow_cuts(own: &mut ElasticModel, alive: &[bool]) {
+    for (t, &a) in alive.iter().enumerate() {
+        let id = TetId::from(t);
+        match (own.topology().is_alive(id), a) {
+            (true, false) => {
+                let _ = own.remove_tet(id);
+            }
+            (false, true) => {
+                let _ = own.restore_tet(id);
+            }
+            _ => {}
+        }
+    }
+}
