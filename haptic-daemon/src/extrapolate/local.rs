@@ -35,7 +35,9 @@
 //! largest gain `|K d| / |d|`, the largest eigenvalue of a symmetric `K`)
 //! is at most the device's `max_stiffness_n_per_m`.
 
-use crate::math::{M3, V3, ZERO, add, dot, is_finite, mat_vec, norm, scale, spectral_norm, sub};
+use crate::math::{
+    M3, V3, ZERO, add, dot, is_finite, mat_vec, norm, positive_part, scale, spectral_norm, sub,
+};
 
 /// Below this sample force (N) its direction is not trusted as the contact
 /// normal: 1 mN, under the force resolution of any haptic device (~10 mN).
@@ -80,8 +82,9 @@ pub fn unilateral(f_model_n: V3, f_sample_n: V3) -> V3 {
     add(scale(n, f), scale(tangential, f / load))
 }
 
-/// The local model `F_n + K_c (P_n - P)` with `K_c` the stiffness capped at
-/// `max_stiffness_n_per_m`, made unilateral.
+/// The local model `F_n + K_c (P_n - P)` with `K_c` the positive part of the
+/// stiffness ([`positive_part`]) capped at `max_stiffness_n_per_m`, made
+/// unilateral.
 pub fn local_model_unilateral(
     f_last_n: V3,
     k_n_per_m: &M3,
@@ -89,7 +92,7 @@ pub fn local_model_unilateral(
     p_last_m: V3,
     p_m: V3,
 ) -> V3 {
-    let k = cap_stiffness(k_n_per_m, max_stiffness_n_per_m);
+    let k = cap_stiffness(&positive_part(k_n_per_m), max_stiffness_n_per_m);
     let model = add(f_last_n, mat_vec(&k, sub(p_last_m, p_m)));
     unilateral(model, f_last_n)
 }
@@ -159,8 +162,10 @@ mod tests {
 
     #[test]
     fn continuous_at_the_release_point() {
-        // With shear coupling: K maps a z withdrawal into an x force too.
-        let k = [[300.0, 0.0, 100.0], [0.0, 300.0, 0.0], [0.0, 0.0, 300.0]];
+        // With shear coupling: K maps a z withdrawal into an x force too
+        // (symmetric positive definite, as a contact stiffness is: the
+        // model renders only the positive part).
+        let k = [[300.0, 0.0, 100.0], [0.0, 300.0, 0.0], [100.0, 0.0, 300.0]];
         let fs = [0.0, 0.0, 1.0];
         let release = 1.0 / 300.0;
         let mut prev = local_model_unilateral(fs, &k, 1e4, ZERO, ZERO);
@@ -173,7 +178,8 @@ mod tests {
             assert!(f[2] >= 0.0);
             prev = f;
         }
-        // Step 0.67 um at ~316 N/m: a continuous force moves < 1 mN a step.
+        // Step 0.67 um at ~316 N/m (|K e_z|): a continuous force moves
+        // < 1 mN a step.
         assert!(max_jump < 1e-3, "{max_jump}");
         // Just below the release point: tiny; at and beyond it: zero.
         let f = local_model_unilateral(fs, &k, 1e4, ZERO, [0.0, 0.0, release * 0.999]);
@@ -183,6 +189,16 @@ mod tests {
         // Half-way out: normal 0.5 N, the shear halved (-100 * z * 0.5).
         let f = local_model_unilateral(fs, &k, 1e4, ZERO, [0.0, 0.0, release / 2.0]);
         assert!(close(f, [-100.0 * release / 2.0 * 0.5, 0.0, 0.5]), "{f:?}");
+    }
+
+    #[test]
+    fn a_negative_stiffness_is_never_rendered() {
+        // An unstable contact (K_yy < 0): moving sideways along y, the raw
+        // model would push the hand further along y (energy in); only the
+        // positive part is rendered.
+        let k = [[300.0, 0.0, 0.0], [0.0, -80.0, 0.0], [0.0, 0.0, 300.0]];
+        let f = local_model_unilateral([0.0, 0.0, 1.0], &k, 1e4, ZERO, [0.0, 0.001, 0.0]);
+        assert!(close(f, [0.0, 0.0, 1.0]), "{f:?}");
     }
 
     #[test]

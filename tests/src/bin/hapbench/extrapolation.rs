@@ -153,6 +153,15 @@ fn simulate(
             "the simulation diverged at step {}",
             out.len()
         );
+        if std::env::var_os("DBGK").is_some() && out.len() % 5 == 0 {
+            eprintln!(
+                "DBGK {} tip {:?} F {:?} K {:?}",
+                out.len(),
+                tip,
+                r.force_n,
+                r.stiffness_rows()
+            );
+        }
         out.push((r.force_n, r.stiffness_rows(), contact));
         bar.inc(1);
     }
