@@ -9,7 +9,8 @@
 //! median). The live simulation therefore runs the solver on a worker
 //! thread ([`StiffnessSolves::Worker`]): each step hands it a snapshot of
 //! the active contact points when it is idle and publishes the newest
-//! result, one or a few steps old. The worker keeps its own copy of the
+//! result, a few steps old (a hand-over every [`HAND_OVER_EVERY_S`] in
+//! contact). The worker keeps its own copy of the
 //! tissue model (made at start-up, not in a step), brought up to date
 //! after cuts from the tetrahedra's alive flags (copying the model itself
 //! took 1-3 ms of the step on the liver), and builds the new factor.
@@ -21,9 +22,16 @@
 use super::field::ContactField;
 use super::stiffness::{Snapshot, Solver};
 use crate::ids::{TetId, VertexId};
-use crate::math::Mat3;
+use crate::math::{Mat3, Real};
 use crate::tensor_mass::ElasticModel;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+
+/// In contact, the worker gets a new snapshot at most this often
+/// (simulated s; and at once when a contact starts): each hand-over wakes
+/// it, and on this VM waking a thread on the other core cost the stepping
+/// thread 7% of its time when it happened every 1 ms step. K changes
+/// slowly against the force, which every sample carries.
+pub const HAND_OVER_EVERY_S: Real = 4e-3;
 
 /// Where the contact stiffness is computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,6 +67,10 @@ struct Link {
     busy: bool,
     /// The model's `topology_changes` the worker has.
     sent_topology: u64,
+    /// Simulated time since the last hand-over (s).
+    waited_s: Real,
+    /// Whether the last snapshot handed over had points in contact.
+    touching: bool,
 }
 
 /// The contact stiffness of a scene's tools (see the module docs).
@@ -118,8 +130,9 @@ impl ContactStiffness {
         self.exact
     }
 
-    /// Takes in the step's contact (`field`, `tools` tools) on `model`.
-    pub fn update(&mut self, model: &ElasticModel, field: &ContactField, tools: usize) {
+    /// Takes in the step's contact (`field`, `tools` tools) on `model`,
+    /// `dt_s` after the previous one.
+    pub fn update(&mut self, model: &ElasticModel, field: &ContactField, tools: usize, dt_s: Real) {
         self.newest.resize(tools, Mat3::ZERO);
         if self.mode == StiffnessSolves::Worker && self.link.is_none() {
             self.start(model);
@@ -154,7 +167,16 @@ impl ContactStiffness {
                 return;
             }
         }
-        if !link.busy {
+        link.waited_s += dt_s;
+        let touching = field.penetrations_m().iter().any(|d| *d > 0.0);
+        if !touching {
+            // No contact: no stiffness, and nothing for the worker.
+            self.newest.fill(Mat3::ZERO);
+        }
+        let due = touching != link.touching || (touching && link.waited_s >= HAND_OVER_EVERY_S);
+        if !link.busy && due {
+            link.waited_s = 0.0;
+            link.touching = touching;
             self.snap.fill(field);
             let topology = model.topology_changes();
             self.alive.clear();
@@ -217,6 +239,8 @@ impl ContactStiffness {
                     // The copy was made at start-up: the first job
                     // brings it up to date.
                     sent_topology: u64::MAX,
+                    waited_s: 0.0,
+                    touching: false,
                 });
             }
             Err(_) => {

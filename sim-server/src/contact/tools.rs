@@ -249,7 +249,12 @@ impl Tools {
             r.contact = t.after_step(&self.field, &mut self.mark);
         }
         if let Some(k) = &mut self.stiffness {
-            k.update(sim.model(), &self.field, self.stiffness_n_per_m.len());
+            k.update(
+                sim.model(),
+                &self.field,
+                self.stiffness_n_per_m.len(),
+                sim.dt_s(),
+            );
             for (i, out) in self.stiffness_n_per_m.iter_mut().enumerate() {
                 *out = k.stiffness(i);
             }
