@@ -435,4 +435,9 @@ fn the_worker_thread_publishes_the_stiffness_the_step_computes() {
         matched >= 100,
         "the worker published {matched} stiffnesses in contact"
     );
+    assert_eq!(
+        worker.tools.stiffness_solves(),
+        Some(StiffnessSolves::Worker),
+        "the stiffness must have come from the worker thread"
+    );
 }

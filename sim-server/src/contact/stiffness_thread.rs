@@ -130,6 +130,16 @@ impl ContactStiffness {
         self.exact
     }
 
+    /// Where it is being computed now: `Worker` once the worker thread
+    /// runs (it starts at the first step), else `Inline`.
+    pub fn solves(&self) -> StiffnessSolves {
+        if self.link.is_some() {
+            StiffnessSolves::Worker
+        } else {
+            StiffnessSolves::Inline
+        }
+    }
+
     /// Takes in the step's contact (`field`, `tools` tools) on `model`,
     /// `dt_s` after the previous one.
     pub fn update(&mut self, model: &ElasticModel, field: &ContactField, tools: usize, dt_s: Real) {
@@ -201,12 +211,12 @@ impl ContactStiffness {
     /// Starts the worker with the solver and a copy of `model`; stays
     /// inline if the thread cannot start.
     fn start(&mut self, model: &ElasticModel) {
-        if self.solver.is_none() || self.copy.is_none() {
-            return;
-        }
-        let (Some(mut solver), Some(mut own)) = (self.solver.take(), self.copy.take()) else {
+        let Some(mut solver) = self.solver.take() else {
             return;
         };
+        // The copy made at start-up, or (switched back from inline) one
+        // made now, once.
+        let mut own = self.copy.take().unwrap_or_else(|| Box::new(model.clone()));
         let (jobs, inbox) = channel::<Job>();
         let (outbox, done) = channel::<Done>();
         let mut results = Vec::new();

@@ -270,6 +270,12 @@ impl Tools {
         }
     }
 
+    /// Where the contact stiffness is being computed now (`None`: no
+    /// penalty contact, no stiffness).
+    pub fn stiffness_solves(&self) -> Option<StiffnessSolves> {
+        self.stiffness.as_ref().map(ContactStiffness::solves)
+    }
+
     /// No tool ever imposes nor releases `v` (a vertex the scene fixes or
     /// prescribes).
     pub fn reserve(&mut self, v: VertexId) {
