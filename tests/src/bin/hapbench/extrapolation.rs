@@ -25,7 +25,7 @@ use sim_server::server::prepare;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::phases::{Phase, classify, dropouts, rms_by_phase};
+use crate::phases::{Phase, away_from_snaps, classify, dropouts, near_snaps, rms_by_phase};
 use crate::plot::{Series, chart};
 use crate::progress::bar;
 
@@ -73,6 +73,11 @@ pub struct MethodResult {
     pub net_energy_j: f64,
     /// RMS of |F - F_truth| per phase of the path (N).
     pub rms_error_by_phase_n: BTreeMap<&'static str, f64>,
+    /// RMS of |F - F_truth| over the ticks away from the truth's snaps
+    /// (N; see `phases::near_snaps`).
+    pub rms_error_away_from_snaps_n: f64,
+    /// The share of the squared error in the ticks near a snap (0 to 1).
+    pub snap_error_share: f64,
 }
 
 /// How far the ground truth can be trusted: the same simulation with each
@@ -98,6 +103,8 @@ struct Report {
     truth_check: TruthCheck,
     /// Zero-force ticks of the truth with force within 50 ms on both sides.
     truth_dropout_ticks: usize,
+    /// Ticks within a snap of the truth's force or 67 ms after one.
+    truth_snap_ticks: usize,
     /// Ticks per phase.
     phase_ticks: BTreeMap<&'static str, usize>,
     methods: BTreeMap<&'static str, MethodResult>,
@@ -153,15 +160,6 @@ fn simulate(
             "the simulation diverged at step {}",
             out.len()
         );
-        if std::env::var_os("DBGK").is_some() && out.len() % 5 == 0 {
-            eprintln!(
-                "DBGK {} tip {:?} F {:?} K {:?}",
-                out.len(),
-                tip,
-                r.force_n,
-                r.stiffness_rows()
-            );
-        }
         out.push((r.force_n, r.stiffness_rows(), contact));
         bar.inc(1);
     }
@@ -181,6 +179,7 @@ fn figures(
     truth: &[[f64; 3]],
     hand: &[[f64; 3]],
     phases: &[Phase],
+    snaps: &[bool],
 ) -> MethodResult {
     let n = rendered.len().max(1);
     let err: Vec<f64> = rendered
@@ -198,7 +197,10 @@ fn figures(
             f[0] * d[0] + f[1] * d[1] + f[2] * d[2]
         })
         .sum();
+    let (rms_error_away_from_snaps_n, snap_error_share) = away_from_snaps(&err, snaps);
     MethodResult {
+        rms_error_away_from_snaps_n,
+        snap_error_share,
         rms_error_n: (err.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt(),
         max_error_n: err.iter().copied().fold(0.0, f64::max),
         p99_jump_n: p99,
@@ -290,6 +292,7 @@ pub fn run(args: &Args) -> Result<()> {
     let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.0.to_array()).collect();
     let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.0.to_array()).collect();
     let phases = classify(&truth_f, &hand, h);
+    let snaps = near_snaps(&truth_f, h);
     let ns = |t: f64| (t * 1e9).round() as u64;
     let mut methods = BTreeMap::new();
     let mut rendered_all = Vec::new();
@@ -314,7 +317,10 @@ pub fn run(args: &Args) -> Result<()> {
             }
             rendered.push(ex.force(ns(t), *p));
         }
-        methods.insert(method.name(), figures(&rendered, &truth_f, &hand, &phases));
+        methods.insert(
+            method.name(),
+            figures(&rendered, &truth_f, &hand, &phases, &snaps),
+        );
         rendered_all.push((method.name(), rendered));
     }
     let report = Report {
@@ -324,13 +330,14 @@ pub fn run(args: &Args) -> Result<()> {
         haptic_rate_hz: args.haptic_rate,
         duration_s: duration,
         ticks,
-        truth: figures(&truth_f, &truth_f, &hand, &phases),
+        truth: figures(&truth_f, &truth_f, &hand, &phases, &snaps),
         truth_max_force_n: truth_f.iter().map(|f| norm(*f)).fold(0.0, f64::max),
         truth_check: TruthCheck {
             substeps: [truth_substeps, check_substeps],
-            rms_difference_n: figures(&check_f, &truth_f, &hand, &phases).rms_error_n,
+            rms_difference_n: figures(&check_f, &truth_f, &hand, &phases, &snaps).rms_error_n,
         },
         truth_dropout_ticks: dropouts(&truth_f, h),
+        truth_snap_ticks: snaps.iter().filter(|n| **n).count(),
         phase_ticks: phases.iter().fold(BTreeMap::new(), |mut m, p| {
             *m.entry(p.name()).or_insert(0) += 1;
             m
@@ -338,18 +345,19 @@ pub fn run(args: &Args) -> Result<()> {
         methods,
     };
     println!(
-        "{:<24} {:>12} {:>12} {:>12} {:>14}",
-        "method", "rms err N", "max err N", "p99 jump N", "net energy mJ"
+        "{:<24} {:>12} {:>12} {:>12} {:>14} {:>16}",
+        "method", "rms err N", "max err N", "p99 jump N", "net energy mJ", "away snaps N"
     );
     for (name, m) in std::iter::once(("truth (haptic rate)", &report.truth))
         .chain(report.methods.iter().map(|(k, v)| (*k, v)))
     {
         println!(
-            "{name:<24} {:>12.4} {:>12.4} {:>12.4} {:>14.3}",
+            "{name:<24} {:>12.4} {:>12.4} {:>12.4} {:>14.3} {:>16.4}",
             m.rms_error_n,
             m.max_error_n,
             m.p99_jump_n,
-            m.net_energy_j * 1e3
+            m.net_energy_j * 1e3,
+            m.rms_error_away_from_snaps_n
         );
     }
     let names: Vec<&str> = report.phase_ticks.keys().copied().collect();
@@ -369,9 +377,10 @@ pub fn run(args: &Args) -> Result<()> {
         println!();
     }
     println!(
-        "\ntruth: max |F| {:.3} N, {} dropout ticks; {} vs {} sub-steps per tick differ by {:.4} N RMS",
+        "\ntruth: max |F| {:.3} N, {} dropout ticks, {} ticks near snaps; {} vs {} sub-steps per tick differ by {:.4} N RMS",
         report.truth_max_force_n,
         report.truth_dropout_ticks,
+        report.truth_snap_ticks,
         report.truth_check.substeps[0],
         report.truth_check.substeps[1],
         report.truth_check.rms_difference_n

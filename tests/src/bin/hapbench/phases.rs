@@ -12,6 +12,17 @@ const STILL_M_S: f64 = 0.001;
 /// A zero-force tick with force within this time on both sides is a
 /// dropout (s).
 const DROPOUT_WINDOW_S: f64 = 0.05;
+/// A snap of the truth: its force changing by more than this (N) within
+/// [`SNAP_WITHIN_S`], far faster than the hand moves it (on a coarse mesh
+/// a probe drags a surface vertex until it slips around it: an elastic
+/// instability no sample announces).
+const SNAP_JUMP_N: f64 = 0.05;
+/// See [`SNAP_JUMP_N`] (s).
+const SNAP_WITHIN_S: f64 = 0.005;
+/// Ticks from the start of a snap to this long after its end count as near
+/// it (s): two periods of a 30 Hz simulation, the time a sample delivered
+/// one period late needs to show the new state.
+const SNAP_AFTER_S: f64 = 0.067;
 
 /// What the hand does at a tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -105,6 +116,42 @@ pub fn rms_by_phase(err: &[f64], phases: &[Phase]) -> BTreeMap<&'static str, f64
         .collect()
 }
 
+/// Per tick, whether it lies within a snap of the truth's force or
+/// [`SNAP_AFTER_S`] after one (see [`SNAP_JUMP_N`]).
+pub fn near_snaps(truth: &[[f64; 3]], tick_s: f64) -> Vec<bool> {
+    let within = (SNAP_WITHIN_S / tick_s).round().max(1.0) as usize;
+    let after = (SNAP_AFTER_S / tick_s).round() as usize;
+    let mut near = vec![false; truth.len()];
+    for k in within..truth.len() {
+        let d = [0, 1, 2].map(|i| truth[k][i] - truth[k - within][i]);
+        if norm(d) > SNAP_JUMP_N {
+            for n in &mut near[k - within..(k + after).min(truth.len())] {
+                *n = true;
+            }
+        }
+    }
+    near
+}
+
+/// RMS of `err` over the ticks not `near` a snap (N), and the share of the
+/// squared error in the ticks near one (0 to 1; 0 without error).
+pub fn away_from_snaps(err: &[f64], near: &[bool]) -> (f64, f64) {
+    let (mut away, mut away_n, mut at) = (0.0, 0usize, 0.0);
+    for (e, n) in err.iter().zip(near) {
+        if *n {
+            at += e * e;
+        } else {
+            away += e * e;
+            away_n += 1;
+        }
+    }
+    let total = away + at;
+    (
+        (away / away_n.max(1) as f64).sqrt(),
+        if total > 0.0 { at / total } else { 0.0 },
+    )
+}
+
 /// Ticks of exactly zero force with force within 50 ms before and after
 /// (the force dropping out while the tool is in the tissue).
 pub fn dropouts(force: &[[f64; 3]], tick_s: f64) -> usize {
@@ -153,6 +200,23 @@ mod tests {
         assert_eq!(p[250], Phase::Slide);
         assert_eq!(p[350], Phase::Retract);
         assert_eq!(p[400], Phase::Free);
+    }
+
+    #[test]
+    fn a_snap_marks_its_window_and_a_steady_ramp_does_not() {
+        let h = 0.001;
+        // A ramp of 0.5 N/s (0.0025 N per 5 ms), then a 0.2 N drop in 2 ms.
+        let mut f: Vec<[f64; 3]> = (0..500).map(|k| [0.0, 0.0, 0.5 * k as f64 * h]).collect();
+        let top = f[499][2];
+        f.push([0.0, 0.0, top - 0.1]);
+        f.extend((0..300).map(|_| [0.0, 0.0, top - 0.2]));
+        let near = near_snaps(&f, h);
+        assert!(!near[..490].iter().any(|n| *n), "the ramp is no snap");
+        assert!(near[500] && near[520] && near[560]);
+        assert!(!near[600..].iter().any(|n| *n), "67 ms after it ends");
+        // The error is all near the snap: its share is 1, none away.
+        let err: Vec<f64> = near.iter().map(|n| if *n { 0.1 } else { 0.0 }).collect();
+        assert_eq!(away_from_snaps(&err, &near), (0.0, 1.0));
     }
 
     #[test]
