@@ -103,12 +103,14 @@ pub enum ContactError {
         backend: &'static str,
     },
     /// A contact constant is out of range.
-    #[error("[contact] {key} must be a positive finite number, got {value}")]
+    #[error("[contact] {key} must be a {range} finite number, got {value}")]
     BadConstant {
         /// The key.
         key: &'static str,
         /// Its value.
         value: Real,
+        /// What it must be: "positive", or "zero or positive".
+        range: &'static str,
     },
 }
 
@@ -143,13 +145,18 @@ impl Tools {
             ("max_tool_accel_m_s2", config.max_tool_accel_m_s2),
         ] {
             if !(value.is_finite() && value > 0.0) {
-                return Err(ContactError::BadConstant { key, value });
+                return Err(ContactError::BadConstant {
+                    key,
+                    value,
+                    range: "positive",
+                });
             }
         }
         if !(config.damping_s_per_m.is_finite() && config.damping_s_per_m >= 0.0) {
             return Err(ContactError::BadConstant {
                 key: "damping_s_per_m",
                 value: config.damping_s_per_m,
+                range: "zero or positive",
             });
         }
         let law = match config.law {
