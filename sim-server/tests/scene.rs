@@ -394,3 +394,26 @@ fn benchmark_variants_stay_in_sync_with_the_embedded_scene() {
         });
     }
 }
+
+#[test]
+fn absurd_numbers_are_errors_not_panics_nor_unbounded_allocations() {
+    // Vessel points so far apart that their distance overflows.
+    fails_at(
+        &format!(
+            "{BASE}\n[[vessel]]\npoints_m = [[0.0, 0.0, 0.0], [1e300, 0.0, 0.0]]\nradius_m = 0.003\n"
+        ),
+        11,
+        "finite length",
+    );
+    // A cell no integer can count: refused before any allocation.
+    fails_at(
+        &BASE.replace("cell_m = 0.005", "cell_m = 5e-30"),
+        3,
+        "too many",
+    );
+    fails_at(
+        &BASE.replace("size_m = [0.06, 0.02, 0.02]", "size_m = [1e30, 0.02, 0.02]"),
+        3,
+        "too many",
+    );
+}

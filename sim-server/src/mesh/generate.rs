@@ -7,6 +7,12 @@ use super::{MeshError, TetMesh};
 use crate::math::{Real, Vec3};
 use thiserror::Error;
 
+/// The most vertices a generated mesh may have (a box or a shape): 8
+/// million, about 48 million tetrahedra and 1 GB of mesh; beyond, a typo
+/// in `size_m` or `cell_m` (or a size in millimetres) would allocate
+/// without bound.
+pub const MAX_GENERATED_VERTICES: usize = 8_000_000;
+
 /// How finely a box is divided.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum CellSize {
@@ -38,8 +44,11 @@ pub enum GenerateError {
         /// The value given.
         value: Real,
     },
-    /// The grid would exceed the u32 vertex index range.
-    #[error("{cells:?} cells are too many (vertex indices are 32-bit)")]
+    /// The grid would have more than [`MAX_GENERATED_VERTICES`] vertices.
+    #[error(
+        "{cells:?} cells are too many: a generated mesh has at most {} vertices (check size_m and cell_m, and their units: metres)",
+        MAX_GENERATED_VERTICES
+    )]
     TooLarge {
         /// The cell counts per axis.
         cells: [usize; 3],
@@ -108,17 +117,15 @@ impl BoxSpec {
                 value: h,
             });
         }
-        let counts = self
-            .size_m
-            .to_array()
-            .map(|l| ((l / h).round() as usize).max(1));
-        let vertices = counts
-            .iter()
-            .map(|c| c + 1)
-            .try_fold(1usize, |a, c| a.checked_mul(c));
-        match vertices {
-            Some(v) if v < u32::MAX as usize => Ok(counts),
-            _ => Err(GenerateError::TooLarge { cells: counts }),
+        // Counted in floating point first: a cell of 5e-30 m gives counts
+        // no integer holds (the cast saturates and the + 1 wrapped).
+        let exact = self.size_m.to_array().map(|l| (l / h).round().max(1.0));
+        let counts = exact.map(|c| c.min(usize::MAX as Real) as usize);
+        let vertices: Real = exact.iter().map(|c| c + 1.0).product();
+        if vertices <= MAX_GENERATED_VERTICES as Real {
+            Ok(counts)
+        } else {
+            Err(GenerateError::TooLarge { cells: counts })
         }
     }
 

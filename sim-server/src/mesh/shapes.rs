@@ -59,15 +59,15 @@ fn build_lattice(
 ) -> Result<(Vec<Vec3>, Vec<[u32; 4]>), GenerateError> {
     // One cell of margin on each side; the body-centred tetrahedra fill the
     // box between the outermost cube centres, which still covers the bounds.
-    let n = ((hi - lo) / cell)
+    // Counted in floating point first (see `cell_counts`).
+    let exact = ((hi - lo) / cell)
         .to_array()
-        .map(|l| l.ceil().max(1.0) as usize + 2);
+        .map(|l| l.ceil().max(1.0) + 2.0);
+    let n = exact.map(|c| c.min(usize::MAX as Real) as usize);
     let [nx, ny, nz] = n;
-    let corners = (nx + 1)
-        .checked_mul(ny + 1)
-        .and_then(|c| c.checked_mul(nz + 1));
-    let total = corners.and_then(|c| c.checked_add(nx * ny * nz));
-    if !matches!(total, Some(t) if t < u32::MAX as usize / 2) {
+    let total: Real =
+        exact.iter().map(|c| c + 1.0).product::<Real>() + exact.iter().product::<Real>();
+    if !(total <= super::generate::MAX_GENERATED_VERTICES as Real) {
         return Err(GenerateError::TooLarge { cells: n });
     }
     let origin = (lo + hi) / 2.0 - Vec3::new(nx as Real, ny as Real, nz as Real) * cell / 2.0;

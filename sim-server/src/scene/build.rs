@@ -315,13 +315,21 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
             .iter()
             .map(|p| Vec3::from_array(*p))
             .collect();
+        // A segment's length must itself be finite and non-zero (points of
+        // 1e300 m are finite, their distance is not).
+        let usable = |w: &[Vec3]| {
+            let len = (w[1] - w[0]).length();
+            len.is_finite() && len > 0.0
+        };
         if points.len() < 2
             || points.iter().any(|p| !p.is_finite())
-            || points.windows(2).any(|w| w[0] == w[1])
+            || !points.windows(2).all(usable)
         {
             return Err(src.error(
                 v.points_m.span(),
-                format!("{what}: points_m needs at least two distinct finite points per segment"),
+                format!(
+                    "{what}: points_m needs at least two distinct finite points per segment, each segment of finite length"
+                ),
             ));
         }
         let radius = positive(src, &v.radius_m, &format!("{what} radius_m"))?;
@@ -345,7 +353,8 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
                 });
             if let Some(w) = best {
                 mats.assign(t, id).expect("tet in range");
-                mats.set_fiber(t, w[1] - w[0]).expect("distinct points");
+                mats.set_fiber(t, w[1] - w[0])
+                    .map_err(|e| src.error(v.points_m.span(), format!("{what}: points_m: {e}")))?;
                 count += 1;
             }
         }
