@@ -67,7 +67,9 @@ fn build_lattice(
     let [nx, ny, nz] = n;
     let total: Real =
         exact.iter().map(|c| c + 1.0).product::<Real>() + exact.iter().product::<Real>();
-    if !(total <= super::generate::MAX_GENERATED_VERTICES as Real) {
+    // NaN (a NaN cell) does not fit either.
+    let fits = total <= super::generate::MAX_GENERATED_VERTICES as Real;
+    if !fits {
         return Err(GenerateError::TooLarge { cells: n });
     }
     let origin = (lo + hi) / 2.0 - Vec3::new(nx as Real, ny as Real, nz as Real) * cell / 2.0;
