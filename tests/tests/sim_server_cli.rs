@@ -296,3 +296,33 @@ select = {{ box_m = [[0.03, -1, -1], [1, 1, 1]] }}
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn a_diverging_run_still_writes_its_json() {
+    // Twenty times the stable step, unchecked, under a load: the explicit
+    // step blows up; the run stops with an error and its summary is kept.
+    let dir = scratch_dir("run-diverged");
+    let (scene, json) = (dir.join("unstable.toml"), dir.join("run.json"));
+    std::fs::write(
+        &scene,
+        format!(
+            "{BLOCK}[[load]]\nselect = {{ box_m = [[0.039, -1.0, -1.0], [1.0, 1.0, 1.0]] }}\nforce_n = [0.0, 0.0, -0.01]\n\n[simulation]\ndt_s = 0.02\ndt_policy = \"unchecked\"\n"
+        ),
+    )
+    .unwrap();
+    let session = format!("diverged{}", std::process::id());
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--headless", "--quiet", "--steps", "5000"])
+        .args(["--session", &session, "--scene"])
+        .arg(&scene)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run sim-server");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "a diverging run must fail: {err}");
+    assert!(err.contains("diverged"), "{err}");
+    let v = read_json(&json);
+    assert_eq!(v["finite"], false, "{v}");
+    assert!(v["steps"].as_u64().unwrap() > 0, "{v}");
+}

@@ -2,7 +2,7 @@
 
 use super::{load_scene, write_json};
 use anyhow::{Result, bail};
-use sim_server::server::RunConfig;
+use sim_server::server::{RunConfig, RunError};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -71,7 +71,18 @@ pub fn run(args: RunArgs) -> Result<()> {
         scripts: Vec::new(),
         pose_timeout_ns: (args.pose_timeout_ms * 1e6).round() as u64,
     };
-    let summary = super::run_scene(scene, backend, &cfg, stop)?;
+    let summary = match super::run_scene(scene, backend, &cfg, stop) {
+        Ok(summary) => summary,
+        Err(e) => {
+            // A diverged run still writes its JSON (`finite`: false).
+            if let (Some(path), Some(RunError::Diverged { summary, .. })) =
+                (&args.json, e.downcast_ref::<RunError>())
+            {
+                write_json(path, summary)?;
+            }
+            return Err(e);
+        }
+    };
     println!(
         "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N | step us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0}{}",
         src.name,

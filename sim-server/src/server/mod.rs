@@ -151,6 +151,9 @@ pub enum RunError {
     Diverged {
         /// The step.
         step: u64,
+        /// What the run did until then (`finite` false), to be written out
+        /// like a finished run's: nothing recorded is lost.
+        summary: Box<RunSummary>,
     },
     /// Another simulation already publishes in the session.
     #[error(
@@ -339,6 +342,7 @@ pub fn run<B: Backend>(
     let mut last_status = start_ns;
     let mut last_step_ns = start_ns;
     let mut removed_total = 0u64;
+    let mut diverged_at = None;
     let mut cut_refusal_told = false;
     loop {
         if stop.load(Ordering::Relaxed)
@@ -417,9 +421,8 @@ pub fn run<B: Backend>(
                 t_ns: monotonic_ns(),
                 ..ForceMsg::default()
             });
-            return Err(RunError::Diverged {
-                step: summary.steps,
-            });
+            diverged_at = Some(summary.steps);
+            break;
         }
         // Force sample: every step.
         let now = monotonic_ns();
@@ -566,5 +569,11 @@ pub fn run<B: Backend>(
     summary.step_us = step_times.percentiles_us();
     summary.dropped_time_s = pacing.dropped_ns() as Real * 1e-9;
     summary.stalls = pacing.stalls();
-    Ok(summary)
+    match diverged_at {
+        Some(step) => Err(RunError::Diverged {
+            step,
+            summary: Box::new(summary),
+        }),
+        None => Ok(summary),
+    }
 }
