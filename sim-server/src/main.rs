@@ -64,12 +64,14 @@ enum Command {
     },
     /// Static equilibrium of a scene: writes a VTU with point data
     /// `displacement` (m) and `force` (N: support reactions at fixed and
-    /// prescribed vertices, the applied load elsewhere).
+    /// prescribed vertices, the applied load elsewhere), or the deformed
+    /// surface as OBJ or STL (by the extension of --out).
     Solve {
         /// Scene file (default: the embedded scene).
         #[arg(long)]
         scene: Option<PathBuf>,
-        /// Output .vtu.
+        /// Output, by extension: .vtu (mesh with `displacement` and `force`),
+        /// .obj or .stl (the deformed surface).
         #[arg(long)]
         out: PathBuf,
         /// Also write a JSON summary here.

@@ -123,6 +123,20 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
         err.contains("bad.toml:5:11") && err.contains("poisson"),
         "{err}"
     );
+    // A surface mesh is refused by name, not parsed as a scene.
+    let stl = dir.join("organ.stl");
+    std::fs::write(&stl, "solid organ\nendsolid organ\n").unwrap();
+    let out = Command::new(binary("sim-server"))
+        .arg("check")
+        .arg(&stl)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("organ.stl") && err.contains("surface mesh") && !err.contains("TOML"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -170,6 +184,57 @@ force_n = [0.0, 0.0, -0.01]
         "{v}"
     );
     assert!(v["max_displacement_m"].as_f64().unwrap() > 0.0);
+    // The deformed surface by extension: OBJ (text) and binary STL; the
+    // free end sags (its z below the rest 0 at the bottom face).
+    let solve_to = |name: &str| {
+        let path = dir.join(name);
+        let out = Command::new(binary("sim-server"))
+            .args(["solve", "--scene"])
+            .arg(&scene)
+            .arg("--out")
+            .arg(&path)
+            .output()
+            .unwrap();
+        (path, out)
+    };
+    let (obj, out) = solve_to("sag.obj");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&obj).unwrap();
+    let lowest = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("v "))
+        .map(|l| l.split_whitespace().nth(2).unwrap().parse::<f64>().unwrap())
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        lowest < -1e-4,
+        "the deformed surface should sag: lowest z {lowest}"
+    );
+    assert!(text.lines().any(|l| l.starts_with("f ")));
+    let (stl, out) = solve_to("sag.stl");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let bytes = std::fs::read(&stl).unwrap();
+    let count = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+    assert!(
+        count > 0 && bytes.len() == 84 + 50 * count,
+        "{} bytes",
+        bytes.len()
+    );
+    // Any other extension is refused before solving, naming what works.
+    let (vtk, out) = solve_to("sag.vtk");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(".vtk") && err.contains(".vtu") && !vtk.exists(),
+        "{err}"
+    );
 }
 
 #[test]

@@ -36,9 +36,27 @@ fn print_quality(q: &QualityReport) {
 
 /// Runs the check; `path` None = the embedded scene.
 pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
-    let is_mesh = path
+    let extension = path
         .and_then(|p| p.extension())
-        .is_some_and(|e| matches!(e.to_str(), Some("msh" | "vtk" | "vtu" | "mesh")));
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let is_mesh = matches!(extension.as_deref(), Some("msh" | "vtk" | "vtu" | "mesh"));
+    // Anything else but a scene is refused by name, not parsed as TOML.
+    if let (Some(p), Some(e)) = (path, extension.as_deref())
+        && !is_mesh
+        && e != "toml"
+    {
+        let why = match e {
+            "stl" | "obj" | "ply" | "off" => {
+                " (a surface mesh: the simulation needs tetrahedra; mesh its volume first, e.g. with Gmsh or TetGen, and save .msh, .vtu or .mesh)"
+            }
+            _ => "",
+        };
+        anyhow::bail!(
+            "{}: .{e} is neither a scene (.toml) nor a tetrahedral mesh (.msh, .vtk, .vtu, .mesh){why}",
+            p.display()
+        );
+    }
     if let (true, Some(p)) = (is_mesh, path) {
         let imported = read_mesh(p)?;
         let q = quality_report(&imported.mesh);

@@ -1,11 +1,14 @@
-//! `sim-server solve --scene FILE --out FILE.vtu [--json FILE]`: static
-//! equilibrium of a scene's fixed sets, prescribed displacements and loads.
+//! `sim-server solve --scene FILE --out FILE.{vtu,obj,stl} [--json FILE]`:
+//! static equilibrium of a scene's fixed sets, prescribed displacements and
+//! loads. The writer follows the extension: VTU with the `displacement` and
+//! `force` point data, or the deformed surface as OBJ or binary STL; any
+//! other extension is refused before solving.
 
 use super::{load_scene, write_json};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use sim_server::math::Vec3;
-use sim_server::mesh::io::write_vtu;
+use sim_server::mesh::io::{write_obj, write_stl, write_vtu};
 use sim_server::static_solve::{Dirichlet, solve_static};
 use std::path::Path;
 use std::time::Instant;
@@ -26,7 +29,33 @@ struct SolveJson {
 }
 
 /// Runs the solve.
+/// What `--out` asks for.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum OutFormat {
+    Vtu,
+    Obj,
+    Stl,
+}
+
+fn out_format(out: &Path) -> Result<OutFormat> {
+    let ext = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("vtu") => Ok(OutFormat::Vtu),
+        Some("obj") => Ok(OutFormat::Obj),
+        Some("stl") => Ok(OutFormat::Stl),
+        other => anyhow::bail!(
+            "--out {}: {} is not a format solve writes: .vtu (the mesh with displacement and force), .obj or .stl (the deformed surface)",
+            out.display(),
+            other.map_or("no extension".to_string(), |e| format!(".{e}"))
+        ),
+    }
+}
+
 pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> {
+    let format = out_format(out)?;
     let (src, b) = load_scene(scene)?;
     let model = &b.model;
     let n = model.vertex_count();
@@ -51,16 +80,33 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
         .filter(|t| model.topology().is_alive(*t))
         .map(|t| model.mesh().tets()[t.idx()])
         .collect();
-    write_vtu(
-        out,
-        model.mesh().positions_m(),
-        &alive,
-        &[
-            ("displacement", &sol.displacement_m),
-            ("force", &sol.force_n),
-        ],
-        &[],
-    )?;
+    match format {
+        OutFormat::Vtu => write_vtu(
+            out,
+            model.mesh().positions_m(),
+            &alive,
+            &[
+                ("displacement", &sol.displacement_m),
+                ("force", &sol.force_n),
+            ],
+            &[],
+        )?,
+        OutFormat::Obj | OutFormat::Stl => {
+            let deformed: Vec<Vec3> = model
+                .mesh()
+                .positions_m()
+                .iter()
+                .zip(&sol.displacement_m)
+                .map(|(p, u)| *p + *u)
+                .collect();
+            let triangles: Vec<_> = model.topology().surface_triangles(model.mesh()).collect();
+            if format == OutFormat::Obj {
+                write_obj(out, &deformed, &triangles)?;
+            } else {
+                write_stl(out, &deformed, &triangles)?;
+            }
+        }
+    }
     let constrained: Vec<bool> = (0..n)
         .map(|v| (0..3).any(|a| bc.get(sim_server::ids::VertexId::from(v), a).is_some()))
         .collect();
