@@ -391,3 +391,60 @@ fn a_diverging_run_still_writes_its_json() {
     assert_eq!(v["finite"], false, "{v}");
     assert!(v["steps"].as_u64().unwrap() > 0, "{v}");
 }
+
+/// The pids whose parent is `pid` (from /proc).
+fn children_of(pid: u32) -> Vec<u32> {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|p| {
+            std::fs::read_to_string(format!("/proc/{p}/stat"))
+                .ok()
+                .and_then(|s| {
+                    // pid (comm) state ppid ...: comm may hold spaces.
+                    let after = &s[s.rfind(')')? + 1..];
+                    after.split_whitespace().nth(1)?.parse::<u32>().ok()
+                })
+                == Some(pid)
+        })
+        .collect()
+}
+
+#[test]
+fn a_killed_demo_takes_its_haptic_daemon_with_it() {
+    // SIGKILL leaves the demo no chance to clean up: its haptic daemon (a
+    // device driver) must still not outlive it.
+    let mut demo = Command::new(binary("sim-server"))
+        .args(["demo", "--headless", "--no-viewer", "--duration-s", "30"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("start the demo");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let daemon = loop {
+        if let Some(&d) = children_of(demo.id()).first() {
+            break d;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the demo started no daemon"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    demo.kill().unwrap();
+    demo.wait().unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    while std::path::Path::new(&format!("/proc/{daemon}")).exists()
+        && std::fs::read_to_string(format!("/proc/{daemon}/stat"))
+            .is_ok_and(|s| !s.contains(") Z "))
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "haptic-daemon {daemon} still runs 10 s after its demo was killed"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}

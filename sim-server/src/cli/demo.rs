@@ -11,7 +11,7 @@ use sim_server::server::{RunConfig, ToolScript};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The grasper's scripted hand (a trajectory for the daemon's simulated device).
 const GRASPER_CSV: &str = include_str!("../../scenes/hepatectomy-grasper.csv");
@@ -62,11 +62,10 @@ fn start_viewer(args: &DemoArgs, session: &str) -> Option<std::process::Child> {
         );
         return None;
     }
-    match Command::new(&bin)
-        .args(["--session", session])
-        .stdout(Stdio::null())
-        .spawn()
-    {
+    let mut cmd = Command::new(&bin);
+    cmd.args(["--session", session]).stdout(Stdio::null());
+    die_with_parent(&mut cmd);
+    match cmd.spawn() {
         Ok(child) => Some(child),
         Err(e) => {
             eprintln!("demo: cannot start {}: {e}", bin.display());
@@ -92,6 +91,28 @@ struct DemoJson {
     sim_dropped_time_s: f64,
     /// The simulation's step time (us).
     sim_step_us: sim_server::server::step_time::StepPercentiles,
+}
+
+/// Makes the child get SIGTERM when the demo dies, even by SIGKILL (Linux
+/// `PR_SET_PDEATHSIG`): a haptic daemon left running would go on
+/// commanding its device with nobody to stop it.
+fn die_with_parent(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    let parent = std::process::id() as libc::pid_t;
+    // SAFETY: the closure runs in the child between fork and exec and calls
+    // only async-signal-safe functions (prctl, getppid, _exit).
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The parent may have died before the prctl took effect.
+            if libc::getppid() != parent {
+                libc::_exit(0);
+            }
+            Ok(())
+        });
+    }
 }
 
 /// The cavitron: from outside the anterior face of the right lobe, slowly in.
@@ -151,6 +172,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     if args.headless {
         daemon_cmd.arg("--quiet");
     }
+    die_with_parent(&mut daemon_cmd);
     let mut daemon = daemon_cmd
         .spawn()
         .with_context(|| format!("cannot start {}", daemon_bin.display()))?;
@@ -169,7 +191,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         scripts: vec![cavitron_script()],
         pose_timeout_ns: sim_server::server::poses::DEFAULT_POSE_TIMEOUT_NS,
     };
-    let result = super::run_scene(scene, backend, &cfg, stop);
+    let result = super::run_scene(scene, backend, &cfg, stop.clone());
     if let Some(v) = &mut viewer {
         // SIGTERM: the window closes; nothing of the viewer's needs saving.
         // SAFETY: kill(2) on our own child's pid.
@@ -183,6 +205,12 @@ pub fn run(args: DemoArgs) -> Result<()> {
             return Err(e);
         }
     };
+    if stop.load(Ordering::Relaxed) {
+        // Interrupted: the daemon ramps its force down and ends now rather
+        // than running out its duration.
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGTERM) };
+    }
     let status = daemon.wait()?;
     let _ = std::fs::remove_file(&traj);
     if !status.success() {
