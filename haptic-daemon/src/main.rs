@@ -53,9 +53,11 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Run the haptic loop.
+    #[command(allow_negative_numbers = true)]
     Run(RunArgs),
     /// Record a session's force samples and telemetry losslessly, counting
     /// sequence gaps (SIGINT/SIGTERM stop it after a flush).
+    #[command(allow_negative_numbers = true)]
     Record(RecordArgs),
 }
 
@@ -219,6 +221,11 @@ fn main() -> Result<()> {
     };
     if !(100.0..=10_000.0).contains(&args.rate) {
         bail!("--rate must lie in 100..=10000 Hz, got {}", args.rate);
+    }
+    if let Some(d) = args.duration_s
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration-s must be a positive number of seconds, got {d}");
     }
     let method = Method::parse(&args.extrapolation).with_context(|| {
         format!(

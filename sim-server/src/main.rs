@@ -47,14 +47,17 @@ enum Command {
     /// poses, applies the contact models, steps in real time (or as fast as it
     /// can with --headless), publishes force samples every step and the mesh
     /// state at the viewer rate.
+    #[command(allow_negative_numbers = true)]
     Run(cli::run::RunArgs),
     /// The whole stack on the embedded liver: sim-server and haptic-daemon with
     /// the simulated device running a scripted hepatectomy (the grasper grips
     /// and pulls the left lobe, the cavitron removes right-lobe parenchyma).
+    #[command(allow_negative_numbers = true)]
     Demo(cli::demo::DemoArgs),
     /// Validate a scene (.toml) or a mesh (.msh, .vtk, .vtu, .mesh): counts,
     /// quality, materials per region, the stable time step, enabled models.
     /// Without FILE, checks the embedded default scene.
+    #[command(allow_negative_numbers = true)]
     Check {
         /// Scene or mesh file.
         file: Option<PathBuf>,
@@ -66,6 +69,7 @@ enum Command {
     /// `displacement` (m) and `force` (N: support reactions at fixed and
     /// prescribed vertices, the applied load elsewhere), or the deformed
     /// surface as OBJ or STL (by the extension of --out).
+    #[command(allow_negative_numbers = true)]
     Solve {
         /// Scene file (default: the embedded scene).
         #[arg(long)]
@@ -79,6 +83,7 @@ enum Command {
         json: Option<PathBuf>,
     },
     /// Time the explicit tensor-mass step on a generated box or a scene.
+    #[command(allow_negative_numbers = true)]
     Bench {
         /// Mesh generator (ignored with --scene).
         #[arg(long, value_enum, default_value = "box")]

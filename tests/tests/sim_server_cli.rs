@@ -448,3 +448,20 @@ fn a_killed_demo_takes_its_haptic_daemon_with_it() {
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
 }
+
+#[test]
+fn a_negative_number_gets_the_flags_own_message() {
+    // Taken as a value (not as an unknown flag "-1") and refused by name.
+    for (bin, sub) in [("sim-server", "run"), ("haptic-daemon", "run")] {
+        let out = Command::new(binary(bin))
+            .args([sub, "--duration-s", "-1"])
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("--duration-s must be a positive number of seconds, got -1"),
+            "{bin}: {err}"
+        );
+    }
+}

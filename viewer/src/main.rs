@@ -10,7 +10,7 @@ use viewer::session::Session;
 
 /// Live 3D view of a hapsim session (organ, tools, forces, rates).
 #[derive(Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Args {
     /// Session to join (shared with sim-server and haptic-daemon).
     #[arg(long, default_value = "default")]

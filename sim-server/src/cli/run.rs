@@ -53,6 +53,11 @@ pub fn run(args: RunArgs) -> Result<()> {
     if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {
         bail!("--viewer-rate must be a positive number of Hz");
     }
+    if let Some(d) = args.duration_s
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration-s must be a positive number of seconds, got {d}");
+    }
     if !(args.pose_timeout_ms.is_finite() && args.pose_timeout_ms > 0.0) {
         bail!("--pose-timeout-ms must be a positive number of milliseconds");
     }

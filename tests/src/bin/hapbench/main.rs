@@ -27,19 +27,24 @@ struct Cli {
 enum Command {
     /// Force extrapolators against the haptic-rate ground truth (paper 5.2):
     /// RMS and max error, p99 per-tick jump, net energy into the hand.
+    #[command(allow_negative_numbers = true)]
     Extrapolation(extrapolation::Args),
     /// The extremes (Poisson ratio, anisotropy, membrane stiffness, time
     /// step, slivers, deep and fast tools), each stable, refused or
     /// diverged-and-detected.
+    #[command(allow_negative_numbers = true)]
     Stability(stability::Args),
     /// Sim -> daemon, daemon -> sim and device -> force latency and the
     /// daemon's tick lateness, beside bare iceoryx2 and bare sleep baselines.
+    #[command(allow_negative_numbers = true)]
     Latency(latency::Args),
     /// Speed against accuracy for every backend over mesh sizes and time
     /// steps, with the Pareto front.
+    #[command(allow_negative_numbers = true)]
     Tradeoff(tradeoff::Args),
     /// The latency baseline's publisher process (started by `latency`).
     #[command(hide = true)]
+    #[command(allow_negative_numbers = true)]
     Probe(latency::ProbeArgs),
 }
 
