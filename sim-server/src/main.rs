@@ -67,15 +67,17 @@ enum Command {
     },
     /// Static equilibrium of a scene: writes a VTU with point data
     /// `displacement` (m) and `force` (N: support reactions at fixed and
-    /// prescribed vertices, the applied load elsewhere), or the deformed
-    /// surface as OBJ or STL (by the extension of --out).
+    /// prescribed vertices, the applied load elsewhere), as VTU or legacy
+    /// VTK, or the deformed mesh (medit) or surface (OBJ, STL), by the
+    /// extension of --out.
     #[command(allow_negative_numbers = true)]
     Solve {
         /// Scene file (default: the embedded scene).
         #[arg(long)]
         scene: Option<PathBuf>,
-        /// Output, by extension: .vtu (mesh with `displacement` and `force`),
-        /// .obj or .stl (the deformed surface).
+        /// Output, by extension: .vtu or .vtk (mesh with `displacement` and
+        /// `force`), .mesh (medit: the deformed mesh), .obj or .stl (the
+        /// deformed surface).
         #[arg(long)]
         out: PathBuf,
         /// Also write a JSON summary here.

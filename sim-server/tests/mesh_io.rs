@@ -7,7 +7,7 @@ use sim_server::ids::{TetId, VertexId};
 use sim_server::math::Vec3;
 use sim_server::mesh::io::{
     ImportedMesh, MeshFormat, MeshIoError, parse_mesh, read_mesh, write_medit, write_obj,
-    write_pvd, write_stl, write_vtu,
+    write_pvd, write_stl, write_vtk, write_vtu,
 };
 use std::path::{Path, PathBuf};
 
@@ -116,6 +116,46 @@ fn reference_meshes_agree_across_formats() {
         volume(&e) < exact && volume(&e) > 0.9 * exact,
         "inscribed polyhedron"
     );
+}
+
+#[test]
+fn legacy_vtk_round_trip_is_exact() {
+    let m = reference("box_v41.msh");
+    let path = scratch("box.vtk");
+    let n = m.mesh.vertex_count();
+    let disp: Vec<Vec3> = (0..n).map(|i| Vec3::new(i as f64, -0.5, 1e-300)).collect();
+    write_vtk(
+        &path,
+        m.mesh.positions_m(),
+        m.mesh.tets(),
+        &[("displacement", &disp)],
+    )
+    .unwrap();
+    let back = read_mesh(&path).unwrap();
+    assert_eq!(back.mesh.positions_m(), m.mesh.positions_m());
+    assert_eq!(back.mesh.tets(), m.mesh.tets());
+    assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+    // A name legacy VTK cannot hold, or a wrong count: no file.
+    let bad = scratch("bad.vtk");
+    assert!(matches!(
+        write_vtk(
+            &bad,
+            m.mesh.positions_m(),
+            m.mesh.tets(),
+            &[("two words", &disp)]
+        ),
+        Err(MeshIoError::BadInput { .. })
+    ));
+    assert!(matches!(
+        write_vtk(
+            &bad,
+            m.mesh.positions_m(),
+            m.mesh.tets(),
+            &[("u", &disp[1..])]
+        ),
+        Err(MeshIoError::BadInput { .. })
+    ));
+    assert!(!bad.exists());
 }
 
 #[test]

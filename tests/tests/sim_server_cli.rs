@@ -227,12 +227,29 @@ force_n = [0.0, 0.0, -0.01]
         "{} bytes",
         bytes.len()
     );
-    // Any other extension is refused before solving, naming what works.
+    // Legacy VTK with the point data; medit with the deformed mesh.
     let (vtk, out) = solve_to("sag.vtk");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&vtk).unwrap();
+    assert!(text.contains("VECTORS displacement double") && text.contains("VECTORS force double"));
+    let (medit, out) = solve_to("sag.mesh");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&medit).unwrap();
+    assert!(text.starts_with("MeshVersionFormatted 2") && text.contains("Tetrahedra"));
+    // Any other extension is refused before solving, naming what works.
+    let (ply, out) = solve_to("sag.ply");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains(".vtk") && err.contains(".vtu") && !vtk.exists(),
+        err.contains(".ply") && err.contains(".vtu") && !ply.exists(),
         "{err}"
     );
 }

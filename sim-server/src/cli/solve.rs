@@ -1,14 +1,15 @@
-//! `sim-server solve --scene FILE --out FILE.{vtu,obj,stl} [--json FILE]`:
-//! static equilibrium of a scene's fixed sets, prescribed displacements and
-//! loads. The writer follows the extension: VTU with the `displacement` and
-//! `force` point data, or the deformed surface as OBJ or binary STL; any
-//! other extension is refused before solving.
+//! `sim-server solve --scene FILE --out FILE.{vtu,vtk,mesh,obj,stl} [--json
+//! FILE]`: static equilibrium of a scene's fixed sets, prescribed
+//! displacements and loads. The writer follows the extension: VTU or legacy
+//! VTK with the `displacement` and `force` point data, the deformed mesh as
+//! medit, or the deformed surface as OBJ or binary STL; any other extension
+//! is refused before solving.
 
 use super::{load_scene, write_json};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use sim_server::math::Vec3;
-use sim_server::mesh::io::{write_obj, write_stl, write_vtu};
+use sim_server::mesh::io::{write_medit, write_obj, write_stl, write_vtk, write_vtu};
 use sim_server::static_solve::{Dirichlet, solve_static};
 use std::path::Path;
 use std::time::Instant;
@@ -33,6 +34,8 @@ struct SolveJson {
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum OutFormat {
     Vtu,
+    Vtk,
+    Medit,
     Obj,
     Stl,
 }
@@ -44,10 +47,12 @@ fn out_format(out: &Path) -> Result<OutFormat> {
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("vtu") => Ok(OutFormat::Vtu),
+        Some("vtk") => Ok(OutFormat::Vtk),
+        Some("mesh") => Ok(OutFormat::Medit),
         Some("obj") => Ok(OutFormat::Obj),
         Some("stl") => Ok(OutFormat::Stl),
         other => anyhow::bail!(
-            "--out {}: {} is not a format solve writes: .vtu (the mesh with displacement and force), .obj or .stl (the deformed surface)",
+            "--out {}: {} is not a format solve writes: .vtu or .vtk (the mesh with displacement and force), .mesh (medit: the deformed mesh), .obj or .stl (the deformed surface)",
             out.display(),
             other.map_or("no extension".to_string(), |e| format!(".{e}"))
         ),
@@ -91,7 +96,17 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
             ],
             &[],
         )?,
-        OutFormat::Obj | OutFormat::Stl => {
+        OutFormat::Vtk => write_vtk(
+            out,
+            model.mesh().positions_m(),
+            &alive,
+            &[
+                ("displacement", &sol.displacement_m),
+                ("force", &sol.force_n),
+            ],
+        )?,
+        OutFormat::Medit | OutFormat::Obj | OutFormat::Stl => {
+            // Formats without point data: the deformed geometry itself.
             let deformed: Vec<Vec3> = model
                 .mesh()
                 .positions_m()
@@ -100,10 +115,10 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
                 .map(|(p, u)| *p + *u)
                 .collect();
             let triangles: Vec<_> = model.topology().surface_triangles(model.mesh()).collect();
-            if format == OutFormat::Obj {
-                write_obj(out, &deformed, &triangles)?;
-            } else {
-                write_stl(out, &deformed, &triangles)?;
+            match format {
+                OutFormat::Medit => write_medit(out, &deformed, &alive, &[])?,
+                OutFormat::Obj => write_obj(out, &deformed, &triangles)?,
+                _ => write_stl(out, &deformed, &triangles)?,
             }
         }
     }

@@ -27,12 +27,14 @@ mod gmsh41;
 mod medit;
 mod text;
 mod vtk;
+mod vtk_export;
 mod vtu;
 mod xml;
 
 pub use error::{Location, MeshIoError};
 pub use export::{write_obj, write_pvd, write_stl, write_vtu};
 pub use medit::write_medit;
+pub use vtk_export::write_vtk;
 
 use crate::math::Vec3;
 use crate::mesh::{MeshError, TetMesh};

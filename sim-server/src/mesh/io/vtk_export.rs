@@ -1,0 +1,71 @@
+//! The legacy VTK writer: ASCII `UNSTRUCTURED_GRID` in the classic `CELLS`
+//! layout, point data as `VECTORS` (ParaView, VisIt, meshio and our own
+//! reader read it). Values are written with Rust's shortest round-trip
+//! formatting, so a re-read gives back the same f64. Indices are checked
+//! before the file is created, as in [`super::export`].
+
+use super::error::MeshIoError;
+use super::export::{check_indices, write_with};
+use crate::ids::VertexId;
+use crate::math::Vec3;
+use std::io::Write;
+use std::path::Path;
+
+/// The VTK cell type of the linear tetrahedron.
+const VTK_TETRA: u8 = 10;
+
+/// Writes a legacy ASCII VTK file: linear tetrahedra and `point_data` as
+/// 3-component `VECTORS` (one per position). Names must be one word
+/// (letters, digits, `_`): legacy VTK separates fields by spaces.
+pub fn write_vtk(
+    path: &Path,
+    positions_m: &[Vec3],
+    tets: &[[VertexId; 4]],
+    point_data: &[(&str, &[Vec3])],
+) -> Result<(), MeshIoError> {
+    let file = path.display().to_string();
+    check_indices(&file, positions_m.len(), tets.iter().flatten())?;
+    for (name, values) in point_data {
+        if values.len() != positions_m.len()
+            || name.is_empty()
+            || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        {
+            return Err(MeshIoError::BadInput {
+                file,
+                message: format!(
+                    "point data {name:?}: {} values for {} positions (and the name must be one word)",
+                    values.len(),
+                    positions_m.len()
+                ),
+            });
+        }
+    }
+    write_with(&file, path, |w| {
+        writeln!(w, "# vtk DataFile Version 3.0")?;
+        writeln!(w, "sim-server, metres")?;
+        writeln!(w, "ASCII")?;
+        writeln!(w, "DATASET UNSTRUCTURED_GRID")?;
+        writeln!(w, "POINTS {} double", positions_m.len())?;
+        for p in positions_m {
+            writeln!(w, "{} {} {}", p.x, p.y, p.z)?;
+        }
+        writeln!(w, "CELLS {} {}", tets.len(), 5 * tets.len())?;
+        for t in tets {
+            writeln!(w, "4 {} {} {} {}", t[0].0, t[1].0, t[2].0, t[3].0)?;
+        }
+        writeln!(w, "CELL_TYPES {}", tets.len())?;
+        for _ in tets {
+            writeln!(w, "{VTK_TETRA}")?;
+        }
+        if !point_data.is_empty() {
+            writeln!(w, "POINT_DATA {}", positions_m.len())?;
+            for (name, values) in point_data {
+                writeln!(w, "VECTORS {name} double")?;
+                for v in *values {
+                    writeln!(w, "{} {} {}", v.x, v.y, v.z)?;
+                }
+            }
+        }
+        Ok(())
+    })
+}
