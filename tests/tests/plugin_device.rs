@@ -128,5 +128,36 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
         &session,
     );
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("/no/such/libdevice.so"));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // The system's reason, not only "dlopen failed".
+    assert!(
+        err.contains("/no/such/libdevice.so") && err.contains("No such file"),
+        "{err}"
+    );
+    // A library that is no plugin: the missing symbol is named.
+    let not_a_plugin = dir.join("libnotaplugin.so");
+    let src = dir.join("notaplugin.c");
+    std::fs::write(&src, "int not_a_device = 1;\n").unwrap();
+    let built = Command::new("cc")
+        .args(["-shared", "-fPIC", "-o"])
+        .arg(&not_a_plugin)
+        .arg(&src)
+        .output()
+        .expect("cc");
+    assert!(
+        built.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let out = run(
+        &format!("plugin:{}", not_a_plugin.display()),
+        &dir.join("z.json"),
+        &session,
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("symbol hapsim_device_abi_version") && err.contains("undefined symbol"),
+        "{err}"
+    );
 }

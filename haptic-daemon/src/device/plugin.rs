@@ -69,6 +69,20 @@ pub enum PluginError {
     },
 }
 
+/// A loader error with its causes: libloading's own message is only
+/// "dlopen failed" or "dlsym failed", the system's reason (`dlerror`: file
+/// not found, wrong architecture, undefined symbol) is its source.
+fn describe(e: &libloading::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
+}
+
 /// A loaded plugin device.
 pub struct Plugin {
     // Field order matters: the function pointers point into `_lib`, which
@@ -99,12 +113,17 @@ impl Plugin {
         };
         // SAFETY: loading a library runs its initialisers; the user named
         // this plugin on the command line to be loaded.
-        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| load_err(e.to_string()))?;
+        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| load_err(describe(&e)))?;
         macro_rules! sym {
             ($name:literal, $ty:ty) => {{
                 // SAFETY: the symbol's type is fixed by the ABI header.
-                let s: libloading::Symbol<$ty> =
-                    unsafe { lib.get($name) }.map_err(|e| load_err(e.to_string()))?;
+                let s: libloading::Symbol<$ty> = unsafe { lib.get($name) }.map_err(|e| {
+                    load_err(format!(
+                        "symbol {}: {} (include/hapsim_device.h lists what a plugin exports)",
+                        String::from_utf8_lossy($name),
+                        describe(&e)
+                    ))
+                })?;
                 *s
             }};
         }
