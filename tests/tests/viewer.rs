@@ -374,3 +374,19 @@ fn the_viewer_session_follows_a_simulation_that_stops_and_restarts() {
     assert_eq!(session.topology_version, 1, "the new simulation's surface");
     finish(second, Duration::from_secs(20), "sim-server");
 }
+
+#[test]
+fn the_help_texts_hold_no_rustdoc_links() {
+    // Doc comments double as --help: a `[`NAME`]` link reads as noise there.
+    for bin in ["viewer", "sim-server", "haptic-daemon"] {
+        let out = std::process::Command::new(system_tests::binary(bin))
+            .arg("--help")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && !text.contains("[`"),
+            "{bin}: {text}"
+        );
+    }
+}

@@ -9,8 +9,9 @@ use three_d::{Camera, InnerSpace, PhysicalPoint, Vec3, Viewport, degrees, vec3};
 pub enum View {
     /// Perspective from above, in front and to the side (z up).
     Iso,
+    // Plain text, no rustdoc link: these docs are also `--view`'s help.
     /// Orthographic looking down -z, +y up: the bounding box's centre at the
-    /// image centre and its xy extent filling [`TOP_FILL`] of the image.
+    /// image centre and its xy extent filling 90% of the image (`TOP_FILL`).
     Top,
     /// Perspective from -y looking along +y (z up).
     Front,
