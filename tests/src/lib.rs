@@ -4,6 +4,26 @@
 
 use std::path::PathBuf;
 
+/// `haptic-daemon run` in `session`, quiet and at normal priority (the
+/// tests share the machine); add the device and the rest.
+pub fn daemon_run(session: &str) -> std::process::Command {
+    let mut c = std::process::Command::new(binary("haptic-daemon"));
+    c.args(["run", "--quiet", "--rt-priority", "0", "--session", session]);
+    c
+}
+
+/// Starts `sim-server run --quiet` in `session` with `args`, stdout
+/// discarded, stderr piped.
+pub fn spawn_sim_server(session: &str, args: &[&str]) -> std::process::Child {
+    std::process::Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--session", session])
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start sim-server")
+}
+
 /// The path of a workspace binary built in the same profile as the running
 /// test (target/<profile>/<name>).
 pub fn binary(name: &str) -> PathBuf {

@@ -10,23 +10,16 @@ use shared::monotonic_ns;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded, write_liver_press};
+use system_tests::{
+    binary, daemon_run, finish, read_json, scratch_dir, spawn_sim_server, wait_bounded,
+    write_liver_press,
+};
 
 const MAX_FORCE_N: f64 = 4.0;
 /// The daemon's default slew limit: full scale in 5 ms.
 const SLEW_N_PER_S: f64 = MAX_FORCE_N / 0.005;
 /// Sample age limit (50 ms) + ramp (10 ms) + scheduling slack on a busy machine.
 const ZERO_AFTER_NS: u64 = 100_000_000;
-
-fn sim_server(session: &str, args: &[&str]) -> Child {
-    Command::new(binary("sim-server"))
-        .args(["run", "--quiet", "--session", session])
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start sim-server")
-}
 
 fn signal(child: &Child, sig: i32) -> u64 {
     // SAFETY: kill(2) on our own child's pid.
@@ -78,17 +71,9 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
     );
     // The hand comes down over 1 s to 6 mm into the liver and stays there.
     write_liver_press(&traj);
-    let mut first = sim_server(&session, &["--duration-s", "60"]);
+    let mut first = spawn_sim_server(&session, &["--duration-s", "60"]);
     std::thread::sleep(Duration::from_millis(500));
-    let daemon = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--rt-priority",
-            "0",
-            "--session",
-            &session,
-        ])
+    let daemon = daemon_run(&session)
         .args([
             "--duration-s",
             "9",
@@ -113,7 +98,7 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
     std::thread::sleep(Duration::from_millis(1000));
     // Restart over the dead simulation's shared memory.
     let restarted = monotonic_ns();
-    let second = sim_server(&session, &["--duration-s", "60"]);
+    let second = spawn_sim_server(&session, &["--duration-s", "60"]);
     std::thread::sleep(Duration::from_millis(2500));
     let stopped = signal(&second, libc::SIGSTOP);
     std::thread::sleep(Duration::from_millis(400));
@@ -156,7 +141,7 @@ fn a_second_simulation_in_a_busy_session_refuses_clearly() {
     let session = format!("busy{}", std::process::id());
     let dir = scratch_dir("busy");
     let json = dir.join("first.json");
-    let mut first = sim_server(
+    let mut first = spawn_sim_server(
         &session,
         &["--duration-s", "3", "--json", json.to_str().unwrap()],
     );
@@ -240,15 +225,7 @@ fn daemon_first_then_simulation_with_a_killed_viewer_in_the_session() {
     let session = format!("order{}", std::process::id());
     let dir = scratch_dir("order");
     let (d_json, s_json) = (dir.join("d.json"), dir.join("s.json"));
-    let mut daemon = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--rt-priority",
-            "0",
-            "--session",
-            &session,
-        ])
+    let mut daemon = daemon_run(&session)
         .args(["--duration-s", "5", "--max-force", "4"])
         .arg("--json")
         .arg(&d_json)
@@ -268,7 +245,7 @@ fn daemon_first_then_simulation_with_a_killed_viewer_in_the_session() {
     std::thread::sleep(Duration::from_millis(1000));
     signal(&viewer, libc::SIGKILL);
     wait_bounded(&mut viewer, Duration::from_secs(5), "killed viewer");
-    let mut sim = sim_server(
+    let mut sim = spawn_sim_server(
         &session,
         &["--duration-s", "3", "--json", s_json.to_str().unwrap()],
     );
@@ -287,7 +264,7 @@ fn sigterm_flushes_every_recorded_row() {
     let session = format!("flush{}", std::process::id());
     let dir = scratch_dir("flush");
     let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let mut sim = sim_server(&session, &["--duration-s", "6"]);
+    let mut sim = spawn_sim_server(&session, &["--duration-s", "6"]);
     let mut recorder = Command::new(binary("haptic-daemon"))
         .args(["record", "--session", &session, "--forces", &p("f.csv")])
         .args(["--telemetry", &p("t.csv"), "--json", &p("r.json")])
@@ -295,15 +272,7 @@ fn sigterm_flushes_every_recorded_row() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let mut daemon = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--rt-priority",
-            "0",
-            "--session",
-            &session,
-        ])
+    let mut daemon = daemon_run(&session)
         .args(["--record", &p("d.csv"), "--json", &p("d.json")])
         .stdout(Stdio::null())
         .stderr(Stdio::null())

@@ -18,7 +18,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
-use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded};
+use system_tests::{binary, daemon_run, finish, read_json, scratch_dir, wait_bounded};
 
 /// tests/data/box-probe.toml made stiffer (5 -> 20 kPa) and more damped
 /// (20 -> 40 /s): a 60 x 40 x 20 mm block on 5 mm cells, bottom fixed, a
@@ -225,15 +225,7 @@ fn glitch(tag: &str, offset_m: [f64; 3]) {
         .spawn()
         .expect("start sim-server");
     wait_until_simulating(&session, &mut sim);
-    let daemon = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--rt-priority",
-            "0",
-            "--session",
-            &session,
-        ])
+    let daemon = daemon_run(&session)
         .arg("--device")
         .arg(format!("replay:{}", p("hand.csv").display()))
         .args(["--duration-s", &DAEMON_S.to_string()])

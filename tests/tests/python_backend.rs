@@ -5,7 +5,7 @@
 
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{daemon_run, read_json, scratch_dir};
 
 #[test]
 fn a_python_backend_drives_the_real_daemon() {
@@ -32,15 +32,7 @@ fn a_python_backend_drives_the_real_daemon() {
     std::thread::sleep(Duration::from_millis(800));
     // The simulated hand pokes from z = 5 cm down to 2 cm; the Python
     // tissue's surface is at 3 cm.
-    let daemon = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--rt-priority",
-            "0",
-            "--session",
-            &session,
-        ])
+    let daemon = daemon_run(&session)
         .args(["--duration-s", "3", "--max-force", "4"])
         .arg("--json")
         .arg(&json)

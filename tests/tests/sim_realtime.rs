@@ -13,9 +13,11 @@
 use haptic_daemon::live::{Live, LiveConfig, LiveGuard};
 use shared::protocol::CONTACT;
 use shared::{SessionName, monotonic_ns, services};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, read_json, scratch_dir, wait_bounded, write_liver_press};
+use system_tests::{
+    daemon_run, finish, read_json, scratch_dir, spawn_sim_server, wait_bounded, write_liver_press,
+};
 
 const MS: u64 = 1_000_000;
 /// The pose timeout's default (50 ms) plus scheduling slack on a busy machine.
@@ -25,16 +27,6 @@ fn signal(child: &Child, sig: i32) -> u64 {
     // SAFETY: kill(2) on our own child's pid.
     unsafe { libc::kill(child.id() as libc::pid_t, sig) };
     monotonic_ns()
-}
-
-fn sim_server(session: &str, args: &[&str]) -> Child {
-    Command::new(binary("sim-server"))
-        .args(["run", "--quiet", "--session", session])
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start sim-server")
 }
 
 /// A force sample as received here.
@@ -86,7 +78,7 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
     let json = dir.join("sim.json");
     let node = services::node("stall-observer").unwrap();
     let sub = services::subscriber(&services::force_service(&node, &session).unwrap()).unwrap();
-    let sim = sim_server(
+    let sim = spawn_sim_server(
         &name,
         &["--duration-s", "4", "--json", json.to_str().unwrap()],
     );
@@ -173,8 +165,7 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
 fn pressing_daemon(session: &str, dir: &std::path::Path) -> Child {
     let traj = dir.join("press.csv");
     write_liver_press(&traj);
-    Command::new(binary("haptic-daemon"))
-        .args(["run", "--quiet", "--rt-priority", "0", "--session", session])
+    daemon_run(session)
         .args(["--duration-s", "30", "--max-force", "4"])
         .arg("--device")
         .arg(format!("simulated:{}", traj.display()))
@@ -205,7 +196,7 @@ fn a_tool_lets_go_when_its_pose_publisher_stops_and_when_it_is_killed() {
     let json = dir.join("sim.json");
     let node = services::node("pose-age-observer").unwrap();
     let sub = services::subscriber(&services::force_service(&node, &session).unwrap()).unwrap();
-    let sim = sim_server(
+    let sim = spawn_sim_server(
         &name,
         &["--duration-s", "12", "--json", json.to_str().unwrap()],
     );
@@ -256,7 +247,7 @@ fn a_killed_pose_publisher_is_noticed_before_its_pose_is_stale() {
     let node = services::node("pose-pub-observer").unwrap();
     let sub = services::subscriber(&services::force_service(&node, &session).unwrap()).unwrap();
     // A pose stays valid for 10 s: only the publisher count can release it.
-    let sim = sim_server(&name, &["--duration-s", "8", "--pose-timeout-ms", "10000"]);
+    let sim = spawn_sim_server(&name, &["--duration-s", "8", "--pose-timeout-ms", "10000"]);
     let mut got = Vec::new();
     pump_until_running(&sub, &mut got);
     let mut daemon = pressing_daemon(&name, &dir);

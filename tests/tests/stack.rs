@@ -5,7 +5,7 @@
 
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use system_tests::{binary, finish, read_json, scratch_dir};
+use system_tests::{binary, daemon_run, finish, read_json, scratch_dir};
 
 #[test]
 fn simulation_and_daemon_talk_and_forces_stay_safe() {
@@ -25,17 +25,8 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
         .spawn()
         .expect("start sim-server");
     std::thread::sleep(Duration::from_millis(300));
-    let daemon = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--rt-priority",
-            "0",
-            "--duration-s",
-            "3",
-            "--session",
-            &session,
-        ])
+    let daemon = daemon_run(&session)
+        .args(["--duration-s", "3"])
         .args(["--extrapolation", "local-model", "--max-force", "4"])
         .arg("--json")
         .arg(&daemon_json)
