@@ -482,3 +482,34 @@ fn a_negative_number_gets_the_flags_own_message() {
         );
     }
 }
+
+#[test]
+fn a_demo_cleans_up_what_a_killed_one_left() {
+    // Files of a demo that was killed outright (a pid above any pid_max:
+    // never running) go; the demo leaves none of its own.
+    let tmp = scratch_dir("demo-tmp");
+    let stale = [
+        tmp.join("hapsim-demo-999999999.csv"),
+        tmp.join("hapsim-demo-999999999-daemon.json"),
+    ];
+    for f in &stale {
+        std::fs::write(f, "left over").unwrap();
+    }
+    let keep = tmp.join("hapsim-demo-notes.txt");
+    std::fs::write(&keep, "not ours").unwrap();
+    let out = Command::new(binary("sim-server"))
+        .args(["demo", "--headless", "--no-viewer", "--duration-s", "1"])
+        .env("TMPDIR", &tmp)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let left: Vec<_> = std::fs::read_dir(&tmp)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left, vec!["hapsim-demo-notes.txt".to_string()], "{left:?}");
+}

@@ -93,6 +93,30 @@ struct DemoJson {
     sim_step_us: sim_server::server::step_time::StepPercentiles,
 }
 
+/// Removes the files a demo killed outright (SIGKILL: no chance to clean
+/// up) left in `dir`: `hapsim-demo-PID.csv` and `hapsim-demo-PID-daemon.json`
+/// of a PID no longer running.
+fn remove_stale_files(dir: &std::path::Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix("hapsim-demo-")) else {
+            continue;
+        };
+        let pid = rest
+            .strip_suffix(".csv")
+            .or_else(|| rest.strip_suffix("-daemon.json"))
+            .and_then(|p| p.parse::<u32>().ok());
+        if let Some(pid) = pid
+            && !std::path::Path::new(&format!("/proc/{pid}")).exists()
+        {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// Makes the child get SIGTERM when the demo dies, even by SIGKILL (Linux
 /// `PR_SET_PDEATHSIG`): a haptic daemon left running would go on
 /// commanding its device with nobody to stop it.
@@ -149,6 +173,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let pid = std::process::id();
     let session = format!("demo{pid}");
     let dir = std::env::temp_dir();
+    remove_stale_files(&dir);
     let traj = dir.join(format!("hapsim-demo-{pid}.csv"));
     let daemon_json = dir.join(format!("hapsim-demo-{pid}-daemon.json"));
     std::fs::write(&traj, GRASPER_CSV)
@@ -202,6 +227,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
         Ok(s) => s,
         Err(e) => {
             let _ = daemon.kill();
+            let _ = daemon.wait();
+            let _ = std::fs::remove_file(&traj);
+            let _ = std::fs::remove_file(&daemon_json);
             return Err(e);
         }
     };
