@@ -9,10 +9,14 @@ use system_tests::{binary, read_json, scratch_dir, wait_bounded};
 
 fn build_plugin(dir: &Path) -> PathBuf {
     let src = concat!(env!("CARGO_MANIFEST_DIR"), "/plugin/fake_device.c");
-    let lib = dir.join("libfake_device.so");
+    compile_library(Path::new(src), &dir.join("libfake_device.so"))
+}
+
+/// Compiles the C file `src` into the shared library `lib`.
+fn compile_library(src: &Path, lib: &Path) -> PathBuf {
     let out = Command::new("cc")
         .args(["-shared", "-fPIC", "-O2", "-o"])
-        .arg(&lib)
+        .arg(lib)
         .arg(src)
         .arg("-lm")
         .output()
@@ -22,7 +26,7 @@ fn build_plugin(dir: &Path) -> PathBuf {
         "cc failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    lib
+    lib.to_path_buf()
 }
 
 fn run(device: &str, json: &Path, session: &str) -> std::process::Output {
@@ -138,17 +142,7 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
     let not_a_plugin = dir.join("libnotaplugin.so");
     let src = dir.join("notaplugin.c");
     std::fs::write(&src, "int not_a_device = 1;\n").unwrap();
-    let built = Command::new("cc")
-        .args(["-shared", "-fPIC", "-o"])
-        .arg(&not_a_plugin)
-        .arg(&src)
-        .output()
-        .expect("cc");
-    assert!(
-        built.status.success(),
-        "{}",
-        String::from_utf8_lossy(&built.stderr)
-    );
+    compile_library(&src, &not_a_plugin);
     let out = run(
         &format!("plugin:{}", not_a_plugin.display()),
         &dir.join("z.json"),

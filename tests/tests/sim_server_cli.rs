@@ -112,13 +112,17 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
         "[mesh]\ngenerate = { shape = \"box\", size_m = [0.1, 0.1, 0.1], cell_m = 0.05 }\n[material]\nyoung_pa = 1000.0\npoisson = 0.7\ndensity_kg_m3 = 1000.0\n",
     )
     .unwrap();
-    let out = Command::new(binary("sim-server"))
-        .arg("check")
-        .arg(&bad)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    // `check FILE` must fail: its stderr.
+    let refused = |file: &std::path::Path| {
+        let out = Command::new(binary("sim-server"))
+            .arg("check")
+            .arg(file)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "check accepted {}", file.display());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = refused(&bad);
     assert!(
         err.contains("bad.toml:5:11") && err.contains("poisson"),
         "{err}"
@@ -126,13 +130,7 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
     // A surface mesh is refused by name, not parsed as a scene.
     let stl = dir.join("organ.stl");
     std::fs::write(&stl, "solid organ\nendsolid organ\n").unwrap();
-    let out = Command::new(binary("sim-server"))
-        .arg("check")
-        .arg(&stl)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = refused(&stl);
     assert!(
         err.contains("organ.stl") && err.contains("surface mesh") && !err.contains("TOML"),
         "{err}"
@@ -197,12 +195,17 @@ force_n = [0.0, 0.0, -0.01]
             .unwrap();
         (path, out)
     };
-    let (obj, out) = solve_to("sag.obj");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // Solved and written: the file's path.
+    let solved = |name: &str| {
+        let (path, out) = solve_to(name);
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        path
+    };
+    let obj = solved("sag.obj");
     let text = std::fs::read_to_string(&obj).unwrap();
     let lowest = text
         .lines()
@@ -214,12 +217,7 @@ force_n = [0.0, 0.0, -0.01]
         "the deformed surface should sag: lowest z {lowest}"
     );
     assert!(text.lines().any(|l| l.starts_with("f ")));
-    let (stl, out) = solve_to("sag.stl");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stl = solved("sag.stl");
     let bytes = std::fs::read(&stl).unwrap();
     let count = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
     assert!(
@@ -228,20 +226,10 @@ force_n = [0.0, 0.0, -0.01]
         bytes.len()
     );
     // Legacy VTK with the point data; medit with the deformed mesh.
-    let (vtk, out) = solve_to("sag.vtk");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let vtk = solved("sag.vtk");
     let text = std::fs::read_to_string(&vtk).unwrap();
     assert!(text.contains("VECTORS displacement double") && text.contains("VECTORS force double"));
-    let (medit, out) = solve_to("sag.mesh");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let medit = solved("sag.mesh");
     let text = std::fs::read_to_string(&medit).unwrap();
     assert!(text.starts_with("MeshVersionFormatted 2") && text.contains("Tetrahedra"));
     // Any other extension is refused before solving, naming what works.
