@@ -201,12 +201,46 @@ pub enum Elasticity {
     Transverse(TransverselyIsotropic),
 }
 
-/// A complete material: elasticity, density and mass-proportional damping.
+/// How strain is measured: the paper's linear model, or one valid for
+/// large displacements with the same constants and energy terms.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MaterialModel {
+    /// Linearised strain (the paper): fastest, valid for displacements
+    /// under about a tenth of the mesh size; a rotation is not force-free.
+    #[default]
+    Linear,
+    /// St Venant-Kirchhoff: the same energy in the Green-Lagrange strain
+    /// (Picinbono, Delingette, Ayache 2003).
+    Stvk,
+    /// Corotational: the linear energy in each element's rotated frame
+    /// (polar rotation), as in SOFA's corotational FEM.
+    Corotational,
+}
+
+impl MaterialModel {
+    /// The scene-file name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MaterialModel::Linear => "linear",
+            MaterialModel::Stvk => "stvk",
+            MaterialModel::Corotational => "corotational",
+        }
+    }
+
+    /// Whether the forces are nonlinear in the displacements.
+    pub fn is_nonlinear(&self) -> bool {
+        *self != MaterialModel::Linear
+    }
+}
+
+/// A complete material: elasticity, density, mass-proportional damping and
+/// the strain model.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Material {
     elasticity: Elasticity,
     density_kg_m3: Real,
     damping_per_s: Real,
+    model: MaterialModel,
 }
 
 impl Material {
@@ -227,7 +261,18 @@ impl Material {
             elasticity,
             density_kg_m3,
             damping_per_s,
+            model: MaterialModel::Linear,
         })
+    }
+
+    /// The same material with strain model `model`.
+    pub fn with_model(self, model: MaterialModel) -> Self {
+        Self { model, ..self }
+    }
+
+    /// The strain model.
+    pub fn model(&self) -> MaterialModel {
+        self.model
     }
 
     /// Shorthand for an isotropic material from Young/Poisson.

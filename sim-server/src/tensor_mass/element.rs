@@ -124,21 +124,52 @@ impl TetElastic {
     pub fn energy_j(&self, g: &Geometry, u: [Vec3; 4]) -> Real {
         // grad U = sum_k U_k (x) m_k; E its symmetric part.
         let grad = (0..4).fold(Mat3::ZERO, |acc, k| acc + outer(u[k], g.shape[k]));
-        let e = (grad + grad.transpose()) * 0.5;
-        let i1 = e.x_axis.x + e.y_axis.y + e.z_axis.z;
-        let e2 = e * e;
-        let tr_e2 = e2.x_axis.x + e2.y_axis.y + e2.z_axis.z;
-        let mut w = 0.5 * self.lambda_pa * i1 * i1 + self.mu_pa * tr_e2;
+        g.volume_m3 * self.energy_density(&((grad + grad.transpose()) * 0.5))
+    }
+
+    /// The energy density W(E) (J/m^3) of a symmetric strain E: the paper's
+    /// invariants, the same function whether E is the linearised strain, the
+    /// Green-Lagrange strain (StVK) or the strain in a rotated frame.
+    pub fn energy_density(&self, e: &Mat3) -> Real {
+        let i1 = trace(e);
+        let e2 = *e * *e;
+        let mut w = 0.5 * self.lambda_pa * i1 * i1 + self.mu_pa * trace(&e2);
         if let Some(f) = &self.fiber {
             let a = f.dir;
-            let i4 = a.dot(e * a);
+            let i4 = a.dot(*e * a);
             let i5 = a.dot(e2 * a);
             w += f.stretch_pa * i4 * i4
                 + f.cross_pa * (i1 * i4 - i4 * i4)
                 + 2.0 * f.shear_pa * (i5 - i4 * i4);
         }
-        g.volume_m3 * w
+        w
     }
+
+    /// The stress dW/dE (Pa) of a symmetric strain E: linear in E, so it is
+    /// also the elasticity tensor applied to a strain increment.
+    #[inline]
+    pub fn stress(&self, e: &Mat3) -> Mat3 {
+        let i1 = trace(e);
+        let mut s = Mat3::from_diagonal(Vec3::splat(self.lambda_pa * i1)) + *e * (2.0 * self.mu_pa);
+        if let Some(f) = &self.fiber {
+            let a = f.dir;
+            let ea = *e * a;
+            let i4 = a.dot(ea);
+            let aa = outer(a, a);
+            // d(I4)/dE = a(x)a, d(I5)/dE = a(x)Ea + Ea(x)a.
+            s += aa
+                * (2.0 * f.stretch_pa * i4 + f.cross_pa * (i1 - 2.0 * i4) - 4.0 * f.shear_pa * i4);
+            s += Mat3::from_diagonal(Vec3::splat(f.cross_pa * i4));
+            s += (outer(a, ea) + outer(ea, a)) * (2.0 * f.shear_pa);
+        }
+        s
+    }
+}
+
+/// The trace of a 3x3 tensor.
+#[inline]
+pub fn trace(m: &Mat3) -> Real {
+    m.x_axis.x + m.y_axis.y + m.z_axis.z
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@ pub mod explicit;
 pub mod huge_pages;
 pub mod kernel;
 pub mod model;
+pub mod nonlinear;
 pub mod stability;
 pub mod submodel;
 

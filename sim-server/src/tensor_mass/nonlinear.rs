@@ -1,0 +1,224 @@
+//! One tetrahedron under large displacements: St Venant-Kirchhoff and
+//! corotational forces, energies and tangents, from the deformation gradient.
+//!
+//! Both models keep the paper's constants and energy terms
+//! ([`TetElastic::energy_density`]); only the strain changes:
+//! - **StVK** (Picinbono, Delingette, Ayache, "Non-linear anisotropic
+//!   elasticity for real-time surgery simulation", Graphical Models 2003):
+//!   the Green-Lagrange strain E = (F^T F - I) / 2, second Piola-Kirchhoff
+//!   stress S = dW/dE, nodal forces f_k = -V F S m_k. The 2003 paper expands
+//!   these forces into tensors on vertices, edges, triangles and tetrahedra
+//!   (cubic in U); evaluating them through F is the same function of U
+//!   (tested against the gradient of the energy) at fewer operations per
+//!   tetrahedron and with one rest array per element instead of four.
+//! - **Corotational** (Felippa; Mueller and Gross 2004; SOFA's
+//!   TetrahedronFEMForceField "polar"): the element's rotation R from the
+//!   polar decomposition F = R S_p, the linear stress of the rotated strain
+//!   S_p - I, nodal forces f_k = -V R sigma m_k (= R K_e (R^T x - X)). For an
+//!   isotropic material these are minus the gradient of V W(S_p - I); for an
+//!   anisotropic one the term of the fibre turning is dropped, as in SOFA.
+//!
+//! The rotation is found by maximising tr(R^T F) over rotations (Mueller,
+//! Bender, Chentanez, Macklin, "A robust method to extract the rotational part
+//! of deformations", MIG 2016), warm-started from the element's last rotation:
+//! one or two iterations per step, and it returns a proper rotation when the
+//! element is inverted (det F < 0), where S_p is then indefinite and pushes
+//! the element back out.
+//!
+//! An StVK element whose volume collapses (det F <= [`STVK_MIN_J`]) has
+//! almost no restoring force (StVK softens in compression and is not
+//! invertible): while it is collapsed its force is the corotational one,
+//! which pushes it back; the step counts such elements.
+
+use super::element::{Geometry, TetElastic, trace};
+use crate::material::MaterialModel;
+use crate::math::{Mat3, Real, Vec3, outer};
+use glam::DQuat;
+
+/// det F at or below which an StVK element is treated as collapsed and
+/// gets the corotational force (a tenth of its rest volume).
+pub const STVK_MIN_J: Real = 0.1;
+
+/// Convergence of the rotation: |omega| below this (rad).
+const ROTATION_TOL_RAD: Real = 1e-13;
+/// Iterations at most per extraction (warm-started: usually 1-3).
+const ROTATION_MAX_ITER: usize = 40;
+
+/// F = I + sum_k u_k (x) m_k.
+#[inline]
+pub fn deformation_gradient(g: &Geometry, u: &[Vec3; 4]) -> Mat3 {
+    Mat3::IDENTITY
+        + outer(u[0], g.shape[0])
+        + outer(u[1], g.shape[1])
+        + outer(u[2], g.shape[2])
+        + outer(u[3], g.shape[3])
+}
+
+/// The rotation R maximising tr(R^T F), refined from `q` in place.
+#[inline]
+pub fn extract_rotation(f: &Mat3, q: &mut DQuat) {
+    for _ in 0..ROTATION_MAX_ITER {
+        let r = Mat3::from_quat(*q);
+        let num = r.x_axis.cross(f.x_axis) + r.y_axis.cross(f.y_axis) + r.z_axis.cross(f.z_axis);
+        let den = (r.x_axis.dot(f.x_axis) + r.y_axis.dot(f.y_axis) + r.z_axis.dot(f.z_axis)).abs();
+        let omega = num / (den + 1e-12);
+        let w = omega.length();
+        // NaN (a NaN state) stops too: the caller's divergence check sees it.
+        if w.is_nan() || w <= ROTATION_TOL_RAD {
+            break;
+        }
+        *q = (DQuat::from_axis_angle(omega / w, w) * *q).normalize();
+    }
+}
+
+/// Which force law an element uses at its current state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Law {
+    /// The linear model (P = sigma(sym grad U)).
+    Linear,
+    /// StVK.
+    Stvk,
+    /// Corotational (also a collapsed StVK element).
+    Corotational,
+}
+
+impl Law {
+    /// The law of `model` at deformation gradient `f`.
+    #[inline]
+    pub fn at(model: MaterialModel, f: &Mat3) -> Self {
+        match model {
+            MaterialModel::Linear => Law::Linear,
+            MaterialModel::Corotational => Law::Corotational,
+            MaterialModel::Stvk if f.determinant() > STVK_MIN_J => Law::Stvk,
+            MaterialModel::Stvk => Law::Corotational,
+        }
+    }
+}
+
+/// The first Piola-Kirchhoff stress P (Pa) of the law at F (rotation in `q`
+/// for the corotational law, refined in place): the nodal forces are
+/// f_k = -V P m_k.
+#[inline]
+pub fn first_piola(law: Law, el: &TetElastic, f: &Mat3, q: &mut DQuat) -> Mat3 {
+    match law {
+        Law::Linear => el.stress(&(((*f + f.transpose()) * 0.5) - Mat3::IDENTITY)),
+        Law::Stvk => *f * el.stress(&green_strain(f)),
+        Law::Corotational => {
+            extract_rotation(f, q);
+            let r = Mat3::from_quat(*q);
+            r * el.stress(&rotated_strain(&r, f))
+        }
+    }
+}
+
+/// E = (F^T F - I) / 2.
+#[inline]
+fn green_strain(f: &Mat3) -> Mat3 {
+    (f.transpose() * *f - Mat3::IDENTITY) * 0.5
+}
+
+/// sym(R^T F) - I (R^T F is symmetric once R is converged).
+#[inline]
+fn rotated_strain(r: &Mat3, f: &Mat3) -> Mat3 {
+    let s = r.transpose() * *f;
+    (s + s.transpose()) * 0.5 - Mat3::IDENTITY
+}
+
+/// Nodal forces (N) of one element for displacements `u` of its vertices.
+pub fn element_forces(
+    model: MaterialModel,
+    el: &TetElastic,
+    g: &Geometry,
+    u: &[Vec3; 4],
+    q: &mut DQuat,
+) -> [Vec3; 4] {
+    let f = deformation_gradient(g, u);
+    let p = first_piola(Law::at(model, &f), el, &f, q) * (-g.volume_m3);
+    g.shape.map(|m| p * m)
+}
+
+/// The element's energy (J): V W of the law's strain.
+pub fn element_energy_j(
+    model: MaterialModel,
+    el: &TetElastic,
+    g: &Geometry,
+    u: &[Vec3; 4],
+    q: &mut DQuat,
+) -> Real {
+    let f = deformation_gradient(g, u);
+    let e = match Law::at(model, &f) {
+        Law::Linear => ((f + f.transpose()) * 0.5) - Mat3::IDENTITY,
+        Law::Stvk => green_strain(&f),
+        Law::Corotational => {
+            extract_rotation(&f, q);
+            rotated_strain(&Mat3::from_quat(*q), &f)
+        }
+    };
+    g.volume_m3 * el.energy_density(&e)
+}
+
+/// dP for an increment dF at F (the law's exact derivative; `r` the
+/// converged rotation for the corotational law).
+fn piola_increment(law: Law, el: &TetElastic, f: &Mat3, r: &Mat3, df: &Mat3) -> Mat3 {
+    match law {
+        Law::Linear => el.stress(&((*df + df.transpose()) * 0.5)),
+        Law::Stvk => {
+            let de = (f.transpose() * *df + df.transpose() * *f) * 0.5;
+            *df * el.stress(&green_strain(f)) + *f * el.stress(&de)
+        }
+        Law::Corotational => {
+            // F = R S_p: R^T dF = Omega S_p + dS_p with Omega = [w]x skew
+            // and dS_p symmetric, so axial(skew(R^T dF)) = (tr S_p I - S_p) w / 2.
+            let sp = r.transpose() * *f;
+            let sp = (sp + sp.transpose()) * 0.5;
+            let rdf = r.transpose() * *df;
+            let skew = (rdf - rdf.transpose()) * 0.5;
+            let axial = Vec3::new(skew.y_axis.z, skew.z_axis.x, skew.x_axis.y);
+            let a = Mat3::from_diagonal(Vec3::splat(trace(&sp))) - sp;
+            let w = a.inverse() * axial * 2.0;
+            let omega = Mat3::from_cols(
+                Vec3::new(0.0, w.z, -w.y),
+                Vec3::new(-w.z, 0.0, w.x),
+                Vec3::new(w.y, -w.x, 0.0),
+            );
+            let dsp = rdf - omega * sp;
+            let sigma = el.stress(&(sp - Mat3::IDENTITY));
+            *r * (omega * sigma + el.stress(&((dsp + dsp.transpose()) * 0.5)))
+        }
+    }
+}
+
+/// The element's tangent stiffness blocks K_ij = -d f_i / d u_j (N/m) at
+/// displacements `u`: the exact derivative of [`element_forces`].
+pub fn element_tangent(
+    model: MaterialModel,
+    el: &TetElastic,
+    g: &Geometry,
+    u: &[Vec3; 4],
+    q: &mut DQuat,
+) -> [[Mat3; 4]; 4] {
+    let f = deformation_gradient(g, u);
+    let law = Law::at(model, &f);
+    if law == Law::Corotational {
+        extract_rotation(&f, q);
+    }
+    let r = Mat3::from_quat(*q);
+    let mut k = [[Mat3::ZERO; 4]; 4];
+    for (j, mj) in g.shape.iter().enumerate() {
+        let mut cols = [[Vec3::ZERO; 3]; 4];
+        for (c, axis) in [Vec3::X, Vec3::Y, Vec3::Z].into_iter().enumerate() {
+            let dp = piola_increment(law, el, &f, &r, &outer(axis, *mj));
+            for (col, mi) in cols.iter_mut().zip(&g.shape) {
+                col[c] = dp * *mi * g.volume_m3;
+            }
+        }
+        for (row, col) in k.iter_mut().zip(&cols) {
+            row[j] = Mat3::from_cols(col[0], col[1], col[2]);
+        }
+    }
+    k
+}
+
+#[cfg(test)]
+#[path = "nonlinear_tests.rs"]
+mod tests;
