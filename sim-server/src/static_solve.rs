@@ -91,6 +91,9 @@ pub enum StaticError {
     /// The factorization failed for another reason.
     #[error("sparse factorization failed: {0}")]
     Factorization(String),
+    /// A nonlinear material model.
+    #[error(transparent)]
+    LinearOnly(#[from] crate::tensor_mass::LinearOnly),
 }
 
 /// Solves K u = f for the model as it is (removed tetrahedra excluded;
@@ -100,6 +103,11 @@ pub fn solve_static(
     dirichlet: &Dirichlet,
     loads_n: &[Vec3],
 ) -> Result<StaticSolution, StaticError> {
+    model.require_linear(
+        "static solver",
+        "it solves K u = f with the linear stiffness",
+        |_| true,
+    )?;
     let n = model.vertex_count();
     for (what, got) in [
         ("loads", loads_n.len()),

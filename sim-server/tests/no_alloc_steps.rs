@@ -54,6 +54,15 @@ fn two_hundred_steps_of_each_backend_allocate_nothing() {
         .collect();
     let mut threaded = ExplicitConfig::new(0.9 * bound);
     threaded.threads = 2;
+    // StVK: the large-strain pass and the sub-steps following its tangent.
+    let stvk = {
+        let mat = *m.materials().material(TetId(0));
+        let mats = TetMaterials::uniform(
+            mat.with_model(sim_server::material::MaterialModel::Stvk),
+            m.mesh().tet_count(),
+        );
+        ElasticModel::new(m.mesh().clone(), mats).unwrap()
+    };
     // (backend, allocations allowed in 200 steps)
     let sims: Vec<(Box<dyn Backend>, u64)> = vec![
         (
@@ -63,6 +72,10 @@ fn two_hundred_steps_of_each_backend_allocate_nothing() {
         (
             Box::new(Explicit::<f64>::new(m.clone(), threaded).unwrap()),
             200 / 63 + 1,
+        ),
+        (
+            Box::new(Explicit::<f32>::new(stvk, ExplicitConfig::new(0.9 * bound)).unwrap()),
+            0,
         ),
         (
             Box::new(Implicit::new(m.clone(), ImplicitConfig::new(10.0 * bound)).unwrap()),

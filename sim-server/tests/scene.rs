@@ -417,3 +417,45 @@ fn absurd_numbers_are_errors_not_panics_nor_unbounded_allocations() {
         "too many",
     );
 }
+
+#[test]
+fn material_models_are_chosen_per_table_and_refused_where_a_backend_cannot_run_them() {
+    use sim_server::ids::TetId;
+    use sim_server::material::MaterialModel;
+    let text = format!(
+        "{BASE}model = \"corotational\"\n\n[[region]]\nselect = {{ box_m = [[0.04, -1.0, -1.0], [1.0, 1.0, 1.0]] }}\nmodel = \"stvk\"\n"
+    );
+    let scene = build(&text).unwrap();
+    let mats = scene.model.materials();
+    let models: std::collections::BTreeSet<_> = (0..scene.model.mesh().tet_count())
+        .map(|t| mats.material(TetId::from(t)).model().name())
+        .collect();
+    assert_eq!(models.into_iter().collect::<Vec<_>>(), ["corotational", "stvk"]);
+    // Default: linear.
+    let linear = build(BASE).unwrap();
+    assert_eq!(
+        linear.model.materials().material(TetId(0)).model(),
+        MaterialModel::Linear
+    );
+    // Misspelled: the admissible values, on the value's line.
+    fails_at(
+        &format!("{BASE}model = \"stvc\"\n"),
+        9,
+        "unknown variant `stvc`, expected one of `linear`, `stvk`, `corotational`",
+    );
+    // A backend that runs the linear model only, at the model key.
+    fails_at(
+        &format!("{BASE}model = \"stvk\"\n\n[simulation]\nbackend = \"implicit\"\n"),
+        9,
+        "implicit backend runs the linear model only",
+    );
+    // The hybrid's precomputed part must be linear: nonlinear only inside [hybrid] select.
+    let hybrid = "\n[hybrid]\nselect = { box_m = [[0.04, -1.0, -1.0], [1.0, 1.0, 1.0]] }\n\n[simulation]\nbackend = \"hybrid\"\n";
+    let region = "\n[[region]]\nselect = { box_m = [[0.045, -1.0, -1.0], [1.0, 1.0, 1.0]] }\nmodel = \"stvk\"\n";
+    build(&format!("{BASE}{region}{hybrid}")).unwrap();
+    fails_at(
+        &format!("{BASE}model = \"corotational\"\n{hybrid}"),
+        9,
+        "hybrid backend's precomputed part runs the linear model only",
+    );
+}

@@ -64,6 +64,13 @@ impl Precomputed {
         cache_dir: Option<&Path>,
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Self, PrecomputedError> {
+        model
+            .require_linear(
+                "precomputed backend",
+                "its responses are solved once for the linear stiffness",
+                |_| true,
+            )
+            .map_err(StaticError::from)?;
         let n = model.vertex_count();
         let mut slot = vec![NONE; n];
         let mut surface = Vec::new();

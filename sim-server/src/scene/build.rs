@@ -5,8 +5,8 @@
 use super::materials::resolve;
 use super::select::{Region, distance_to_segment, segment_crosses_tet};
 use super::spec::{
-    BackendName, BoundName, DtPolicyName, LatticeKind, MembraneModelName, PrecisionName, SceneSpec,
-    ShapeKind, ToolKind,
+    BackendName, BoundName, DtPolicyName, LatticeKind, MaterialModelName, MembraneModelName,
+    PrecisionName, SceneSpec, ShapeKind, ToolKind,
 };
 use super::{SceneError, SceneSource};
 use crate::ids::{TetId, VertexId};
@@ -16,6 +16,7 @@ use crate::membrane::MembraneModel;
 use crate::mesh::{BoxSpec, CellSize, TetMesh, io, rcm_order, shapes};
 use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
 use serde::Serialize;
+use toml::Spanned;
 
 /// A tool as declared (the contact models come with the tool issue).
 #[derive(Clone, Debug, Serialize)]
@@ -105,7 +106,8 @@ pub struct BuiltScene {
 fn describe(m: &crate::material::Material) -> String {
     let l = m.lame();
     let mut s = format!(
-        "E {:.4} kPa, nu {:.3}, rho {:.0} kg/m3, damping {:.3} /s",
+        "{}, E {:.4} kPa, nu {:.3}, rho {:.0} kg/m3, damping {:.3} /s",
+        m.model().name(),
         l.young_pa() / 1e3,
         l.poisson(),
         m.density_kg_m3(),
@@ -541,6 +543,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         });
     }
     let settings = settings(src, spec)?;
+    backend_runs_models(src, spec, &model, settings.backend, hybrid_tets.as_deref())?;
     let contact = contact_config(src, spec)?;
     Ok(BuiltScene {
         contact,
@@ -637,6 +640,62 @@ fn contact_config(
         ));
     }
     Ok(c)
+}
+
+/// A scene whose backend cannot run its material models is refused at the
+/// first nonlinear `model` key, naming the backend's reason.
+fn backend_runs_models(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    model: &ElasticModel,
+    backend: BackendName,
+    hybrid_tets: Option<&[TetId]>,
+) -> Result<(), SceneError> {
+    let refusal = match backend {
+        BackendName::TensorMass => return Ok(()),
+        BackendName::Implicit => model.require_linear(
+            "implicit backend",
+            "backward Euler on the stiffness K assembled once",
+            |_| true,
+        ),
+        BackendName::Precomputed => model.require_linear(
+            "precomputed backend",
+            "its responses are solved once for the linear stiffness",
+            |_| true,
+        ),
+        BackendName::Hybrid => {
+            let mut in_tm = vec![false; model.mesh().tet_count()];
+            for t in hybrid_tets.unwrap_or(&[]) {
+                in_tm[t.idx()] = true;
+            }
+            model.require_linear(
+                "hybrid backend's precomputed part",
+                "its responses are solved once for the linear stiffness; [hybrid] select must cover the nonlinear tetrahedra",
+                |t| !in_tm[t.idx()],
+            )
+        }
+    };
+    let Err(e) = refusal else {
+        return Ok(());
+    };
+    let nonlinear = |m: &Option<Spanned<MaterialModelName>>| {
+        m.as_ref()
+            .filter(|m| *m.get_ref() != MaterialModelName::Linear)
+            .map(Spanned::span)
+    };
+    let span = nonlinear(&spec.material.get_ref().model)
+        .or_else(|| {
+            spec.region
+                .iter()
+                .find_map(|r| nonlinear(&r.get_ref().model))
+        })
+        .or_else(|| {
+            spec.vessel
+                .iter()
+                .find_map(|v| nonlinear(&v.get_ref().model))
+        })
+        .unwrap_or(spec.material.span());
+    Err(src.error(span, e.to_string()))
 }
 
 fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneError> {

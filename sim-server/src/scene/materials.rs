@@ -1,10 +1,10 @@
 //! Turning a table's material keys into a validated [`Material`], with
 //! errors placed on the offending value.
 
-use super::spec::{MaterialKeys, TermName};
+use super::spec::{MaterialKeys, MaterialModelName, TermName};
 use super::{SceneError, SceneSource};
 use crate::material::{
-    Elasticity, Isotropic, Material, MaterialError, Terms, TransverselyIsotropic,
+    Elasticity, Isotropic, Material, MaterialError, MaterialModel, Terms, TransverselyIsotropic,
 };
 use std::ops::Range;
 use toml::Spanned;
@@ -58,10 +58,17 @@ pub fn resolve(
         }
         Elasticity::Isotropic(iso)
     };
-    Material::new(elasticity, density, damping).map_err(|e| match e {
-        MaterialError::Damping(_) => at(&damping_span, e),
-        _ => at(&density_span, e),
-    })
+    let model = match keys.model.map(|m| *m.get_ref()) {
+        None | Some(MaterialModelName::Linear) => MaterialModel::Linear,
+        Some(MaterialModelName::Stvk) => MaterialModel::Stvk,
+        Some(MaterialModelName::Corotational) => MaterialModel::Corotational,
+    };
+    Material::new(elasticity, density, damping)
+        .map(|m| m.with_model(model))
+        .map_err(|e| match e {
+            MaterialError::Damping(_) => at(&damping_span, e),
+            _ => at(&density_span, e),
+        })
 }
 
 fn terms_of(keys: &MaterialKeys<'_>) -> Terms {

@@ -119,6 +119,18 @@ pub enum TermName {
     Shear,
 }
 
+/// Strain models (`model = ...` in a material table).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MaterialModelName {
+    /// The paper's linearised strain.
+    Linear,
+    /// St Venant-Kirchhoff (Green-Lagrange strain).
+    Stvk,
+    /// Corotational (linear in each element's rotated frame).
+    Corotational,
+}
+
 /// Generates a table type holding the material keys (shared by
 /// `[material]`, `[[region]]` and `[[vessel]]`) plus its own keys. serde's
 /// `flatten` cannot be combined with `deny_unknown_fields`, hence a macro.
@@ -147,6 +159,8 @@ macro_rules! with_material_keys {
             pub shear_fiber_pa: Option<Spanned<f64>>,
             /// Enabled anisotropic terms (default all three).
             pub terms: Option<Spanned<Vec<TermName>>>,
+            /// Strain model (default linear).
+            pub model: Option<Spanned<MaterialModelName>>,
         }
 
         impl $name {
@@ -162,6 +176,7 @@ macro_rules! with_material_keys {
                     young_fiber_pa: self.young_fiber_pa.as_ref(),
                     shear_fiber_pa: self.shear_fiber_pa.as_ref(),
                     terms: self.terms.as_ref(),
+                    model: self.model.as_ref(),
                 }
             }
         }
@@ -189,6 +204,8 @@ pub struct MaterialKeys<'a> {
     pub shear_fiber_pa: Option<&'a Spanned<f64>>,
     /// `terms`.
     pub terms: Option<&'a Spanned<Vec<TermName>>>,
+    /// `model`.
+    pub model: Option<&'a Spanned<MaterialModelName>>,
 }
 
 impl<'a> MaterialKeys<'a> {
@@ -204,6 +221,7 @@ impl<'a> MaterialKeys<'a> {
             young_fiber_pa: self.young_fiber_pa.or(base.young_fiber_pa),
             shear_fiber_pa: self.shear_fiber_pa.or(base.shear_fiber_pa),
             terms: self.terms.or(base.terms),
+            model: self.model.or(base.model),
         }
     }
 

@@ -5,6 +5,7 @@
 
 use super::huge_pages::huge_vec;
 use super::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind};
+use super::large_strain::LargeStrain;
 use super::model::{CutChange, CutError, ElasticModel};
 use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
 use crate::ids::{TetId, VertexId};
@@ -101,6 +102,19 @@ pub fn substeps_for(
     }
 }
 
+/// Sub-steps per step at most when contact springs or a stretched
+/// nonlinear body raise the bound: a state that needs more is diverging,
+/// and the caller's divergence check reports it (rather than a step that
+/// never ends).
+pub const MAX_SUBSTEPS: usize = 4096;
+
+/// How fast the sub-steps a stretched nonlinear body needed are given back
+/// once it eases (per step): each change of the count rescales U(t-1) to
+/// keep the velocity, which is not symplectic, and an undamped StVK body
+/// whose count toggled every few steps gained energy (2.8x in 3000 steps
+/// at half the rest bound); held for ~100 steps it keeps it.
+const TANGENT_DECAY_PER_STEP: Real = 0.99;
+
 /// Row ranges and the rows each part must finish after the join.
 #[derive(Clone, Debug)]
 struct PartPlan {
@@ -134,6 +148,16 @@ pub struct Explicit<S: Storage> {
     /// a nonlinear membrane: a scene without one pays nothing).
     fmem: Vec<V3>,
     capsule_vertices: Vec<u32>,
+    /// Nonlinear elements and their force corrections (none and empty in
+    /// a linear scene).
+    large: Option<LargeStrain>,
+    fnl: Vec<V3>,
+    threads: usize,
+    /// The contact springs' share of omega_max^2 ([`Explicit::set_contact_bound`]).
+    contact_omega2: Real,
+    /// The nonlinear elements' tangent bound the sub-steps follow: the
+    /// largest recent one, decaying by [`TANGENT_DECAY_PER_STEP`].
+    tangent_lambda: Real,
     plans: Vec<PartPlan>,
     buffers: Vec<PartBuffers>,
     pool: Option<rayon::ThreadPool>,
@@ -197,6 +221,12 @@ impl<S: Storage> Explicit<S> {
             }
             _ => (Vec::new(), Vec::new()),
         };
+        let large = LargeStrain::new(&model);
+        let fnl = if large.is_some() {
+            huge_vec(n, [0.0; 3])
+        } else {
+            Vec::new()
+        };
         let buffers = plans
             .iter()
             .map(|p| PartBuffers {
@@ -216,6 +246,11 @@ impl<S: Storage> Explicit<S> {
             fext: Vec::new(),
             fmem,
             capsule_vertices,
+            large,
+            fnl,
+            threads,
+            contact_omega2: 0.0,
+            tangent_lambda: 0.0,
             plans,
             buffers,
             pool,
@@ -259,6 +294,7 @@ impl<S: Storage> Explicit<S> {
             self.substep();
         }
         self.steps += 1;
+        self.follow_tangent();
     }
 
     /// Advances by `dt_s` with the penalty contact `field` evaluated at
@@ -300,6 +336,7 @@ impl<S: Storage> Explicit<S> {
             self.kernel_step();
         }
         self.steps += 1;
+        self.follow_tangent();
     }
 
     /// Makes the coming steps stable with contact springs adding up to
@@ -310,21 +347,51 @@ impl<S: Storage> Explicit<S> {
     /// the sub-step count changes the velocity is kept (U(t-1) rescaled),
     /// an O(n) pass.
     pub fn set_contact_bound(&mut self, omega2: Real) {
-        let lambda = self.elastic_stable.omega_max_rad_s.powi(2) + omega2.max(0.0);
+        self.contact_omega2 = omega2.max(0.0);
+        self.update_bound();
+    }
+
+    /// With nonlinear elements, sizes the next step's sub-steps from the
+    /// tangent the last pass saw (StVK stiffens in stretch): the bound
+    /// follows the deformation, sub-stepping whatever the policy (as for
+    /// contact springs; a `refuse` policy refuses at start only).
+    fn follow_tangent(&mut self) {
+        if let Some(large) = &self.large {
+            let now = large.last().lambda;
+            if !now.is_finite() {
+                // A state that is no longer finite: more sub-steps cannot
+                // save it, and the caller's divergence check reports it.
+                return;
+            }
+            self.tangent_lambda = now.max(self.tangent_lambda * TANGENT_DECAY_PER_STEP);
+            self.update_bound();
+        }
+    }
+
+    fn update_bound(&mut self) {
+        let rest = self.elastic_stable.omega_max_rad_s.powi(2);
+        let lambda = rest.max(self.tangent_lambda) + self.contact_omega2;
         let stable = StableStep::from_lambda(lambda, self.elastic_stable.method);
         let policy = match self.policy {
             DtPolicy::Unchecked => DtPolicy::Unchecked,
             _ => DtPolicy::Substep,
         };
-        let needed = substeps_for(self.dt_s, &stable, policy)
+        let needed = (substeps_for(self.dt_s, &stable, policy)
             .unwrap_or(self.substeps)
             .max(self.elastic_substeps)
-            * self.substep_factor;
+            * self.substep_factor)
+            .min(MAX_SUBSTEPS);
         self.stable = stable;
         // Keeping the larger count for a while after the springs ease was
         // tried (to save the O(n) re-plans): the 250 Hz box stroke then
         // showed force steps of 0.07 N that the exact count does not.
         self.resubstep(needed);
+    }
+
+    /// The nonlinear elements (none in a linear scene): their last pass's
+    /// tangent bound and collapsed StVK elements.
+    pub fn large_strain(&self) -> Option<&LargeStrain> {
+        self.large.as_ref()
     }
 
     /// How many times the sub-step count changed (contact springs coming
@@ -385,11 +452,20 @@ impl<S: Storage> Explicit<S> {
             target,
             fext,
             fmem,
+            large,
+            fnl,
+            threads,
             plans,
             buffers,
             pool,
             ..
         } = self;
+        if let Some(large) = large {
+            match pool {
+                Some(pool) => pool.install(|| large.pass(u, fnl, *threads)),
+                None => large.pass(u, fnl, 1),
+            }
+        }
         let inputs = StepInputs {
             u,
             coef,
@@ -397,6 +473,7 @@ impl<S: Storage> Explicit<S> {
             target,
             fext,
             fmem,
+            fnl,
         };
         let mut run = || run_parts(kernel, &inputs, plans, 0, next, buffers);
         match pool {
@@ -477,6 +554,9 @@ impl<S: Storage> Explicit<S> {
     /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
     pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         let change = self.model.remove_tet(t)?;
+        if let Some(large) = &mut self.large {
+            large.set_alive(t, false);
+        }
         self.after_cut(&change);
         Ok(change)
     }
@@ -484,6 +564,9 @@ impl<S: Storage> Explicit<S> {
     /// Adds a removed tetrahedron back.
     pub fn restore_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         let change = self.model.restore_tet(t)?;
+        if let Some(large) = &mut self.large {
+            large.set_alive(t, true);
+        }
         self.after_cut(&change);
         Ok(change)
     }

@@ -299,6 +299,8 @@ pub struct StepInputs<'a> {
     pub fext: &'a [V3],
     /// Nonlinear membrane forces (N); empty without a nonlinear membrane.
     pub fmem: &'a [V3],
+    /// Large-strain corrections of nonlinear elements (N); empty without them.
+    pub fnl: &'a [V3],
 }
 
 impl StepInputs<'_> {
@@ -324,8 +326,9 @@ impl StepInputs<'_> {
                 let u = self.u[i];
                 let fe = self.fext.get(i).copied().unwrap_or([0.0; 3]);
                 let fm = self.fmem.get(i).copied().unwrap_or([0.0; 3]);
+                let fl = self.fnl.get(i).copied().unwrap_or([0.0; 3]);
                 for d in 0..3 {
-                    next[d] = a * (fe[d] + fm[d] - ku[d]) + b * u[d] - c * next[d];
+                    next[d] = a * (fe[d] + fm[d] + fl[d] - ku[d]) + b * u[d] - c * next[d];
                 }
             }
             kind::PRESCRIBED => *next = self.target[i],
@@ -522,6 +525,7 @@ mod tests {
             target: &[],
             fext: &[],
             fmem: &[],
+            fnl: &[],
         };
         let run = |portable: bool| {
             let mut ring = vec![[0.0; 4]; kernel.ring_len()];

@@ -1,6 +1,7 @@
-//! Tensor-mass linear elasticity (paper sections 3.1-3.4): element tensors
+//! Tensor-mass elasticity (paper sections 3.1-3.4): element tensors
 //! derived from the energy, the assembled model with local cutting updates,
-//! the hot kernel, explicit integration and its stability bound.
+//! the hot kernel, explicit integration and its stability bound; and the
+//! large-strain models (StVK, corotational) as a per-element pass beside it.
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
@@ -8,6 +9,7 @@ pub mod element;
 pub mod explicit;
 pub mod huge_pages;
 pub mod kernel;
+pub mod large_strain;
 pub mod model;
 pub mod nonlinear;
 pub mod stability;
@@ -16,6 +18,6 @@ pub mod submodel;
 pub use element::{Geometry, TetElastic};
 pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError, substeps_for};
 pub use kernel::{Kernel, Storage};
-pub use model::{CutChange, CutError, ElasticModel, ModelError};
+pub use model::{CutChange, CutError, ElasticModel, LinearOnly, ModelError};
 pub use stability::{BoundMethod, PowerEstimate, StableStep, element_bound, power_iteration};
 pub use submodel::{Submodel, SubmodelError};

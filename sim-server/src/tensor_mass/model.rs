@@ -53,6 +53,23 @@ pub enum CutError {
     },
 }
 
+/// A backend or solver that runs the linear model only was given
+/// tetrahedra with a nonlinear material model.
+#[derive(Clone, Debug, Error, PartialEq, Eq)]
+#[error(
+    "the {who} runs the linear model only ({why}); {tets} tetrahedra use model = \"{model}\": use the tensor-mass backend, or model = \"linear\""
+)]
+pub struct LinearOnly {
+    /// Which backend or solver.
+    pub who: &'static str,
+    /// Why it cannot run the others.
+    pub why: &'static str,
+    /// Nonlinear tetrahedra it would have to run.
+    pub tets: usize,
+    /// The first one's model name.
+    pub model: &'static str,
+}
+
 /// What a cut changed: the tetrahedron's 4 vertices and 6 edges (whose
 /// tensors were updated) and those it left orphaned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -202,6 +219,30 @@ impl ElasticModel {
         }
     }
 
+    /// Refuses (naming `who` and `why`) when a live tetrahedron that
+    /// `in_part` accepts has a nonlinear material model.
+    pub fn require_linear(
+        &self,
+        who: &'static str,
+        why: &'static str,
+        in_part: impl Fn(TetId) -> bool,
+    ) -> Result<(), LinearOnly> {
+        let mut found = (0..self.mesh.tet_count())
+            .map(TetId::from)
+            .filter(|t| self.topo.is_alive(*t) && in_part(*t))
+            .map(|t| self.materials.material(t).model())
+            .filter(|m| m.is_nonlinear());
+        let Some(first) = found.next() else {
+            return Ok(());
+        };
+        Err(LinearOnly {
+            who,
+            why,
+            tets: 1 + found.count(),
+            model: first.name(),
+        })
+    }
+
     /// The constants and geometry of tetrahedron `t`.
     pub fn element(&self, t: TetId) -> (TetElastic, Geometry) {
         let elastic = TetElastic::new(self.materials.material(t), self.materials.fiber(t));
@@ -327,14 +368,25 @@ impl ElasticModel {
         membrane + self.strain_energy_j(u)
     }
 
-    /// Strain energy (J) of the live tetrahedra alone.
+    /// Strain energy (J) of the live tetrahedra alone, each in its
+    /// material's model (linear, StVK, corotational).
     pub fn strain_energy_j(&self, u: &[Vec3]) -> Real {
         (0..self.mesh.tet_count())
             .map(TetId::from)
             .filter(|t| self.topo.is_alive(*t))
             .map(|t| {
                 let (elastic, geom) = self.element(t);
-                elastic.energy_j(&geom, self.mesh.tets()[t.idx()].map(|v| u[v.idx()]))
+                let ut = self.mesh.tets()[t.idx()].map(|v| u[v.idx()]);
+                match self.materials.material(t).model() {
+                    crate::material::MaterialModel::Linear => elastic.energy_j(&geom, ut),
+                    model => super::nonlinear::element_energy_j(
+                        model,
+                        &elastic,
+                        &geom,
+                        &ut,
+                        &mut glam::DQuat::default(),
+                    ),
+                }
             })
             .sum()
     }

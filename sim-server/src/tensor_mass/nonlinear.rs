@@ -25,19 +25,27 @@
 //! element is inverted (det F < 0), where S_p is then indefinite and pushes
 //! the element back out.
 //!
-//! An StVK element whose volume collapses (det F <= [`STVK_MIN_J`]) has
-//! almost no restoring force (StVK softens in compression and is not
-//! invertible): while it is collapsed its force is the corotational one,
-//! which pushes it back; the step counts such elements.
+//! StVK softens in compression and is not invertible: a flattened element
+//! has almost no restoring force and an inverted one has a force-free
+//! mirror state (W depends on F^T F only). The StVK energy here therefore
+//! carries a barrier on the volume ratio J = det F below [`STVK_BARRIER_J`]:
+//! W_b = k (J_b - J)^3 with k = [`STVK_BARRIER_SCALE`] (lambda + 2 mu), zero
+//! with its first two derivatives at J_b, so the force stays the gradient
+//! of one energy (conservative, continuous: switching to another force law
+//! below a threshold was tried and pumped energy into the body at each
+//! crossing). Tissue compressed to half its volume is outside the model's
+//! use; the step reports how many elements are in the barrier.
 
 use super::element::{Geometry, TetElastic, trace};
 use crate::material::MaterialModel;
 use crate::math::{Mat3, Real, Vec3, outer};
 use glam::DQuat;
 
-/// det F at or below which an StVK element is treated as collapsed and
-/// gets the corotational force (a tenth of its rest volume).
-pub const STVK_MIN_J: Real = 0.1;
+/// Volume ratio det F below which the StVK barrier acts.
+pub const STVK_BARRIER_J: Real = 0.5;
+/// The barrier's k in units of lambda + 2 mu: at J = 0 it pushes with 3/4
+/// of k, three times the uniaxial modulus.
+pub const STVK_BARRIER_SCALE: Real = 4.0;
 
 /// Convergence of the rotation: |omega| below this (rad).
 const ROTATION_TOL_RAD: Real = 1e-13;
@@ -78,19 +86,18 @@ pub enum Law {
     Linear,
     /// StVK.
     Stvk,
-    /// Corotational (also a collapsed StVK element).
+    /// Corotational.
     Corotational,
 }
 
 impl Law {
-    /// The law of `model` at deformation gradient `f`.
+    /// The law of `model`.
     #[inline]
-    pub fn at(model: MaterialModel, f: &Mat3) -> Self {
+    pub fn of(model: MaterialModel) -> Self {
         match model {
             MaterialModel::Linear => Law::Linear,
             MaterialModel::Corotational => Law::Corotational,
-            MaterialModel::Stvk if f.determinant() > STVK_MIN_J => Law::Stvk,
-            MaterialModel::Stvk => Law::Corotational,
+            MaterialModel::Stvk => Law::Stvk,
         }
     }
 }
@@ -102,13 +109,53 @@ impl Law {
 pub fn first_piola(law: Law, el: &TetElastic, f: &Mat3, q: &mut DQuat) -> Mat3 {
     match law {
         Law::Linear => el.stress(&(((*f + f.transpose()) * 0.5) - Mat3::IDENTITY)),
-        Law::Stvk => *f * el.stress(&green_strain(f)),
+        Law::Stvk => *f * el.stress(&green_strain(f)) + barrier_piola(el, f),
         Law::Corotational => {
             extract_rotation(f, q);
             let r = Mat3::from_quat(*q);
             r * el.stress(&rotated_strain(&r, f))
         }
     }
+}
+
+/// The barrier's k (Pa).
+#[inline]
+fn barrier_k(el: &TetElastic) -> Real {
+    STVK_BARRIER_SCALE * (el.lambda_pa + 2.0 * el.mu_pa)
+}
+
+/// cof(F) = det(F) F^-T = d(det F)/dF, columns f2 x f3, f3 x f1, f1 x f2.
+#[inline]
+pub fn cofactor(f: &Mat3) -> Mat3 {
+    Mat3::from_cols(
+        f.y_axis.cross(f.z_axis),
+        f.z_axis.cross(f.x_axis),
+        f.x_axis.cross(f.y_axis),
+    )
+}
+
+/// dW_b/dF = -3 k (J_b - J)^2 cof(F) below J_b, else 0.
+#[inline]
+fn barrier_piola(el: &TetElastic, f: &Mat3) -> Mat3 {
+    let gap = STVK_BARRIER_J - f.determinant();
+    if gap > 0.0 {
+        cofactor(f) * (-3.0 * barrier_k(el) * gap * gap)
+    } else {
+        Mat3::ZERO
+    }
+}
+
+/// W_b = k (J_b - J)^3 below J_b (J/m^3).
+#[inline]
+fn barrier_energy(el: &TetElastic, f: &Mat3) -> Real {
+    let gap = (STVK_BARRIER_J - f.determinant()).max(0.0);
+    barrier_k(el) * gap * gap * gap
+}
+
+/// Whether an StVK element at `f` is in the barrier (det F < J_b).
+#[inline]
+pub fn in_barrier(f: &Mat3) -> bool {
+    f.determinant() < STVK_BARRIER_J
 }
 
 /// E = (F^T F - I) / 2.
@@ -133,7 +180,7 @@ pub fn element_forces(
     q: &mut DQuat,
 ) -> [Vec3; 4] {
     let f = deformation_gradient(g, u);
-    let p = first_piola(Law::at(model, &f), el, &f, q) * (-g.volume_m3);
+    let p = first_piola(Law::of(model), el, &f, q) * (-g.volume_m3);
     g.shape.map(|m| p * m)
 }
 
@@ -146,15 +193,15 @@ pub fn element_energy_j(
     q: &mut DQuat,
 ) -> Real {
     let f = deformation_gradient(g, u);
-    let e = match Law::at(model, &f) {
-        Law::Linear => ((f + f.transpose()) * 0.5) - Mat3::IDENTITY,
-        Law::Stvk => green_strain(&f),
+    let w = match Law::of(model) {
+        Law::Linear => el.energy_density(&(((f + f.transpose()) * 0.5) - Mat3::IDENTITY)),
+        Law::Stvk => el.energy_density(&green_strain(&f)) + barrier_energy(el, &f),
         Law::Corotational => {
             extract_rotation(&f, q);
-            rotated_strain(&Mat3::from_quat(*q), &f)
+            el.energy_density(&rotated_strain(&Mat3::from_quat(*q), &f))
         }
     };
-    g.volume_m3 * el.energy_density(&e)
+    g.volume_m3 * w
 }
 
 /// dP for an increment dF at F (the law's exact derivative; `r` the
@@ -164,7 +211,7 @@ fn piola_increment(law: Law, el: &TetElastic, f: &Mat3, r: &Mat3, df: &Mat3) -> 
         Law::Linear => el.stress(&((*df + df.transpose()) * 0.5)),
         Law::Stvk => {
             let de = (f.transpose() * *df + df.transpose() * *f) * 0.5;
-            *df * el.stress(&green_strain(f)) + *f * el.stress(&de)
+            *df * el.stress(&green_strain(f)) + *f * el.stress(&de) + barrier_increment(el, f, df)
         }
         Law::Corotational => {
             // F = R S_p: R^T dF = Omega S_p + dS_p with Omega = [w]x skew
@@ -188,6 +235,24 @@ fn piola_increment(law: Law, el: &TetElastic, f: &Mat3, r: &Mat3, df: &Mat3) -> 
     }
 }
 
+/// d(dW_b/dF) for an increment dF: 6 k g (cof : dF) cof - 3 k g^2 d cof,
+/// g = J_b - J, d cof the derivative of the cross products.
+fn barrier_increment(el: &TetElastic, f: &Mat3, df: &Mat3) -> Mat3 {
+    let gap = STVK_BARRIER_J - f.determinant();
+    if gap <= 0.0 {
+        return Mat3::ZERO;
+    }
+    let k = barrier_k(el);
+    let cof = cofactor(f);
+    let dj = (0..3).map(|c| cof.col(c).dot(df.col(c))).sum::<Real>();
+    let dcof = Mat3::from_cols(
+        df.y_axis.cross(f.z_axis) + f.y_axis.cross(df.z_axis),
+        df.z_axis.cross(f.x_axis) + f.z_axis.cross(df.x_axis),
+        df.x_axis.cross(f.y_axis) + f.x_axis.cross(df.y_axis),
+    );
+    cof * (6.0 * k * gap * dj) - dcof * (3.0 * k * gap * gap)
+}
+
 /// The element's tangent stiffness blocks K_ij = -d f_i / d u_j (N/m) at
 /// displacements `u`: the exact derivative of [`element_forces`].
 pub fn element_tangent(
@@ -198,7 +263,7 @@ pub fn element_tangent(
     q: &mut DQuat,
 ) -> [[Mat3; 4]; 4] {
     let f = deformation_gradient(g, u);
-    let law = Law::at(model, &f);
+    let law = Law::of(model);
     if law == Law::Corotational {
         extract_rotation(&f, q);
     }

@@ -86,30 +86,36 @@ fn a_rigid_rotation_is_force_free_for_nonlinear_models_but_not_linear() {
 #[test]
 fn forces_are_minus_the_gradient_of_the_energy() {
     let g = tet();
-    let u = affine(&g, some_stretch(), Vec3::new(0.001, 0.002, 0.0));
-    let cases = [
-        (MaterialModel::Stvk, isotropic()),
-        (MaterialModel::Stvk, anisotropic(Vec3::new(1.0, 0.3, 0.2))),
-        (MaterialModel::Corotational, isotropic()),
-        (MaterialModel::Linear, anisotropic(Vec3::new(0.2, 1.0, 0.0))),
-    ];
-    for (model, el) in cases {
-        let f = element_forces(model, &el, &g, &u, &mut q0());
-        let h = 1e-7;
-        for k in 0..4 {
-            for d in 0..3 {
-                let energy = |s: Real| {
-                    let mut v = u;
-                    v[k][d] += s * h;
-                    element_energy_j(model, &el, &g, &v, &mut q0())
-                };
-                let grad = (energy(1.0) - energy(-1.0)) / (2.0 * h);
-                let scale = f[k].length().max(1e-6);
-                assert!(
-                    (f[k][d] + grad).abs() < 1e-6 * scale,
-                    "{model:?} vertex {k} axis {d}: force {} gradient {grad}",
-                    f[k][d]
-                );
+    let squashed = Mat3::from_diagonal(Vec3::new(0.7, 0.9, 0.5)) * some_stretch();
+    assert!(in_barrier(&squashed));
+    for u in [
+        affine(&g, some_stretch(), Vec3::new(0.001, 0.002, 0.0)),
+        affine(&g, squashed, Vec3::ZERO),
+    ] {
+        let cases = [
+            (MaterialModel::Stvk, isotropic()),
+            (MaterialModel::Stvk, anisotropic(Vec3::new(1.0, 0.3, 0.2))),
+            (MaterialModel::Corotational, isotropic()),
+            (MaterialModel::Linear, anisotropic(Vec3::new(0.2, 1.0, 0.0))),
+        ];
+        for (model, el) in cases {
+            let f = element_forces(model, &el, &g, &u, &mut q0());
+            let h = 1e-7;
+            for k in 0..4 {
+                for d in 0..3 {
+                    let energy = |s: Real| {
+                        let mut v = u;
+                        v[k][d] += s * h;
+                        element_energy_j(model, &el, &g, &v, &mut q0())
+                    };
+                    let grad = (energy(1.0) - energy(-1.0)) / (2.0 * h);
+                    let scale = f[k].length().max(1e-6);
+                    assert!(
+                        (f[k][d] + grad).abs() < 1e-6 * scale,
+                        "{model:?} vertex {k} axis {d}: force {} gradient {grad}",
+                        f[k][d]
+                    );
+                }
             }
         }
     }
@@ -122,6 +128,12 @@ fn the_tangent_is_the_derivative_of_the_forces() {
     let states = [
         affine(&g, some_stretch(), Vec3::ZERO),
         affine(&g, turn * some_stretch(), Vec3::new(0.0, 0.01, 0.0)),
+        // In the StVK barrier (det F < 0.5).
+        affine(
+            &g,
+            turn * Mat3::from_diagonal(Vec3::new(0.7, 0.9, 0.5)) * some_stretch(),
+            Vec3::ZERO,
+        ),
     ];
     for u in states {
         for model in NONLINEAR {
@@ -231,10 +243,11 @@ fn uniaxial_strain_matches_the_closed_form_along_and_across_the_fibre() {
         (anisotropic(Vec3::X), l + dl + 2.0 * (m + dm)),
         (anisotropic(Vec3::Y), l + 2.0 * m),
     ];
-    for s in [0.7, 1.0, 1.5, 2.0] {
+    for s in [0.55, 0.7, 1.0, 1.5, 2.0] {
         let f = Mat3::from_diagonal(Vec3::new(s, 1.0, 1.0));
         for (el, modulus) in &cases {
             let p = first_piola(Law::Stvk, el, &f, &mut q0());
+            assert_eq!(in_barrier(&f), s < STVK_BARRIER_J);
             let expect = s * modulus * (s * s - 1.0) / 2.0;
             assert!(
                 (p.x_axis.x - expect).abs() <= 1e-9 * expect.abs().max(1.0),
@@ -275,24 +288,41 @@ fn the_rotation_is_the_polar_one_and_proper_when_inverted() {
 }
 
 #[test]
-fn a_collapsed_stvk_element_is_pushed_back_out() {
-    // Flattened towards vertex 0's face: det F = 0.05, and then inverted.
+fn a_collapsed_or_inverted_element_is_pushed_back_out() {
+    // Flattened (det F = 0.05), inverted, and inverted into StVK's
+    // force-free mirror state (a reflection: F^T F = I; for the
+    // corotational model a saddle where both rotations fit equally, so
+    // only StVK's barrier is checked there).
     let g = tet();
-    for squash in [0.05, -0.3] {
-        let f = Mat3::from_diagonal(Vec3::new(1.0, 1.0, squash));
+    for (f, models) in [
+        (
+            Mat3::from_diagonal(Vec3::new(1.0, 1.0, 0.05)),
+            &NONLINEAR[..],
+        ),
+        (
+            Mat3::from_diagonal(Vec3::new(1.0, 1.0, -0.3)),
+            &NONLINEAR[..],
+        ),
+        (
+            Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0)),
+            &NONLINEAR[..1],
+        ),
+    ] {
+        assert!(in_barrier(&f));
         let u = affine(&g, f, Vec3::ZERO);
-        assert_eq!(Law::at(MaterialModel::Stvk, &f), Law::Corotational);
-        let forces = element_forces(MaterialModel::Stvk, &isotropic(), &g, &u, &mut q0());
-        // d(volume)/d(x_k) = V0 cof(F) m_k: the forces must raise the volume.
-        let cof = Mat3::from_cols(
-            f.y_axis.cross(f.z_axis),
-            f.z_axis.cross(f.x_axis),
-            f.x_axis.cross(f.y_axis),
-        );
-        let power: Real = (0..4).map(|k| forces[k].dot(cof * g.shape[k])).sum();
-        assert!(
-            power > 0.0,
-            "squash {squash}: the forces shrink the element ({power})"
-        );
+        for &model in models {
+            let forces = element_forces(model, &isotropic(), &g, &u, &mut q0());
+            // d(volume)/d(x_k) = V0 cof(F) m_k: the forces must raise the volume.
+            let cof = cofactor(&f);
+            let power: Real = forces
+                .iter()
+                .zip(&g.shape)
+                .map(|(p, m)| p.dot(cof * *m))
+                .sum();
+            assert!(
+                power > 0.0,
+                "{model:?} at {f}: the forces shrink the element ({power})"
+            );
+        }
     }
 }

@@ -157,6 +157,13 @@ impl Hybrid {
             .map(TetId::from)
             .filter(|t| !is_tm[t.idx()] && model.topology().is_alive(*t))
             .collect();
+        model
+            .require_linear(
+                "hybrid backend's precomputed part",
+                "its responses are solved once for the linear stiffness; [hybrid] select must cover the nonlinear tetrahedra",
+                |t| !is_tm[t.idx()],
+            )
+            .map_err(StaticError::from)?;
         if tm_list.is_empty() || part_list.is_empty() {
             return Err(HybridError::Split {
                 selected: tm_list.len(),

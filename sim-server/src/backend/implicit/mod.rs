@@ -115,6 +115,9 @@ pub enum ImplicitError {
         "the implicit backend supports the linear membrane only (its forces are in K); use model = \"linear\" or the tensor-mass backend"
     )]
     NonlinearMembrane,
+    /// A nonlinear material model.
+    #[error(transparent)]
+    LinearOnly(#[from] crate::tensor_mass::LinearOnly),
 }
 
 /// The backward-Euler backend.
@@ -161,6 +164,11 @@ impl Implicit {
         {
             return Err(ImplicitError::NonlinearMembrane);
         }
+        model.require_linear(
+            "implicit backend",
+            "backward Euler on the stiffness K assembled once",
+            |_| true,
+        )?;
         let n = model.vertex_count();
         let z = vec![Vec3::ZERO; n];
         // No thread (rare) means inline rebuilds, as with the option off.
