@@ -3,7 +3,7 @@
 //! so the figure can be read as a fraction of what the memory allows.
 
 use crate::ids::VertexId;
-use crate::material::Material;
+use crate::material::{Material, MaterialModel};
 use crate::material_map::TetMaterials;
 use crate::math::{Real, Vec3};
 use crate::mesh::{BoxSpec, CellSize, GenerateError, rcm_order};
@@ -34,6 +34,8 @@ pub struct BenchConfig {
     pub bound: BoundMethod,
     /// Bytes of the bandwidth probe's buffer (well above the last-level cache).
     pub probe_bytes: usize,
+    /// Strain model of the generated box's tissue.
+    pub model: MaterialModel,
 }
 
 impl Default for BenchConfig {
@@ -46,6 +48,7 @@ impl Default for BenchConfig {
             side_m: 0.1,
             bound: BoundMethod::Element,
             probe_bytes: 256 << 20,
+            model: MaterialModel::Linear,
         }
     }
 }
@@ -87,6 +90,12 @@ pub struct BenchReport {
     pub setup_s: Real,
     /// Per-batch steps per second, in run order.
     pub batch_steps_per_s: Vec<Real>,
+    /// Strain models in the model ("linear", "stvk", "corotational", or
+    /// several joined by "+").
+    pub model: String,
+    /// Tetrahedra with a nonlinear model (their large-strain pass runs
+    /// beside the linear kernel).
+    pub nonlinear_tets: usize,
 }
 
 /// Why the benchmark could not run.
@@ -169,7 +178,7 @@ pub fn box_problem(cfg: &BenchConfig) -> Result<BenchProblem, BenchError> {
     if cfg.reorder {
         mesh = mesh.permuted(&rcm_order(&mesh));
     }
-    let tissue = Material::isotropic(4500.0, 0.45, 1060.0, 10.0)?;
+    let tissue = Material::isotropic(4500.0, 0.45, 1060.0, 10.0)?.with_model(cfg.model);
     let materials = TetMaterials::uniform(tissue, mesh.tet_count());
     let model = ElasticModel::new(mesh, materials)?;
     let mut fixed = Vec::new();
@@ -190,6 +199,22 @@ pub fn box_problem(cfg: &BenchConfig) -> Result<BenchProblem, BenchError> {
     })
 }
 
+/// The strain models a model uses ("+"-joined, sorted) and how many
+/// tetrahedra are nonlinear.
+fn models_of(model: &ElasticModel) -> (String, usize) {
+    let mut names = std::collections::BTreeSet::new();
+    let mut nonlinear = 0;
+    for t in 0..model.mesh().tet_count() {
+        let m = model
+            .materials()
+            .material(crate::ids::TetId::from(t))
+            .model();
+        names.insert(m.name());
+        nonlinear += m.is_nonlinear() as usize;
+    }
+    (names.into_iter().collect::<Vec<_>>().join("+"), nonlinear)
+}
+
 /// Times the explicit step of `problem`.
 pub fn run_bench<S: Storage>(
     problem: BenchProblem,
@@ -201,6 +226,7 @@ pub fn run_bench<S: Storage>(
         ));
     }
     let t0 = Instant::now();
+    let (model_names, nonlinear_tets) = models_of(&problem.model);
     let BenchProblem {
         model,
         fixed,
@@ -274,5 +300,7 @@ pub fn run_bench<S: Storage>(
         substeps: sim.substeps(),
         setup_s,
         batch_steps_per_s: rates,
+        model: model_names,
+        nonlinear_tets,
     })
 }

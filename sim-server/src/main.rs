@@ -5,6 +5,7 @@ mod cli;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use sim_server::bench::{BenchConfig, BenchProblem, BenchReport, box_problem, run_bench};
+use sim_server::material::MaterialModel;
 use sim_server::tensor_mass::BoundMethod;
 use std::path::PathBuf;
 
@@ -23,6 +24,27 @@ struct Cli {
 enum Generator {
     /// A cube split into tetrahedra.
     Box,
+}
+
+/// Strain models on the command line.
+#[derive(Clone, Copy, ValueEnum)]
+enum ModelArg {
+    /// The paper's linearised strain.
+    Linear,
+    /// St Venant-Kirchhoff.
+    Stvk,
+    /// Corotational.
+    Corotational,
+}
+
+impl ModelArg {
+    fn model(self) -> MaterialModel {
+        match self {
+            ModelArg::Linear => MaterialModel::Linear,
+            ModelArg::Stvk => MaterialModel::Stvk,
+            ModelArg::Corotational => MaterialModel::Corotational,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -114,6 +136,10 @@ enum Command {
         /// Keep the generator's vertex order (no reverse Cuthill-McKee).
         #[arg(long)]
         no_reorder: bool,
+        /// Strain model of every tetrahedron (default: linear for the
+        /// generated box, the scene's own with --scene).
+        #[arg(long, value_enum)]
+        model: Option<ModelArg>,
         /// Write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -145,6 +171,7 @@ fn main() -> Result<()> {
             precision,
             bound,
             no_reorder,
+            model,
             json,
         } => {
             if threads == 0 {
@@ -159,6 +186,7 @@ fn main() -> Result<()> {
                     Bound::Element => BoundMethod::Element,
                     Bound::PowerIteration => BoundMethod::PowerIteration,
                 },
+                model: model.map_or(MaterialModel::Linear, ModelArg::model),
                 ..BenchConfig::default()
             };
             let mut problem = match &scene {
@@ -175,6 +203,9 @@ fn main() -> Result<()> {
                 }
                 None => box_problem(&cfg).context("cannot build the benchmark box")?,
             };
+            if let (Some(m), Some(_)) = (model, &scene) {
+                problem.model = problem.model.with_model(m.model());
+            }
             if let Some(dt) = dt_s {
                 if !(dt.is_finite() && dt > 0.0) {
                     bail!("--dt-s must be a positive number of seconds, got {dt}");
@@ -201,6 +232,10 @@ fn print_report(r: &BenchReport) {
     println!(
         "mesh {} tets, {} vertices, {} edges | {} thread(s), {} storage | dt {:.3e} s in {} sub-step(s) ({} bound)",
         r.tets, r.vertices, r.edges, r.threads, r.precision, r.dt_s, r.substeps, r.bound
+    );
+    println!(
+        "model {} ({} nonlinear tetrahedra)",
+        r.model, r.nonlinear_tets
     );
     println!(
         "{:.0} steps/s ({:.1} us/step, median of {} batches) | {:.2} MB/step | probe {:.1} GB/s -> bandwidth bound {:.0} steps/s ({:.2}x of it)",

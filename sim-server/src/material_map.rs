@@ -110,6 +110,14 @@ impl TetMaterials {
         Ok(())
     }
 
+    /// Every material with strain model `model` (constants and fibres kept).
+    pub fn with_model(mut self, model: crate::material::MaterialModel) -> Self {
+        for m in &mut self.table {
+            *m = m.with_model(model);
+        }
+        self
+    }
+
     /// The materials of `tets` (in that order) as a map of their own.
     pub fn subset(&self, tets: &[TetId]) -> Self {
         Self {

@@ -430,7 +430,10 @@ fn material_models_are_chosen_per_table_and_refused_where_a_backend_cannot_run_t
     let models: std::collections::BTreeSet<_> = (0..scene.model.mesh().tet_count())
         .map(|t| mats.material(TetId::from(t)).model().name())
         .collect();
-    assert_eq!(models.into_iter().collect::<Vec<_>>(), ["corotational", "stvk"]);
+    assert_eq!(
+        models.into_iter().collect::<Vec<_>>(),
+        ["corotational", "stvk"]
+    );
     // Default: linear.
     let linear = build(BASE).unwrap();
     assert_eq!(

@@ -147,7 +147,7 @@ impl TetElastic {
 
     /// The stress dW/dE (Pa) of a symmetric strain E: linear in E, so it is
     /// also the elasticity tensor applied to a strain increment.
-    #[inline]
+    #[inline(always)]
     pub fn stress(&self, e: &Mat3) -> Mat3 {
         let i1 = trace(e);
         let mut s = Mat3::from_diagonal(Vec3::splat(self.lambda_pa * i1)) + *e * (2.0 * self.mu_pa);

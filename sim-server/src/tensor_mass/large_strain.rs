@@ -14,7 +14,7 @@
 use super::element::{Geometry, TetElastic};
 use super::kernel::V3;
 use super::model::ElasticModel;
-use super::nonlinear::{Law, deformation_gradient, first_piola, in_barrier};
+use super::nonlinear::{Law, barrier_piola, deformation_gradient, first_piola, in_barrier};
 use super::stability::element_lambda;
 use crate::ids::TetId;
 use crate::material::MaterialModel;
@@ -231,44 +231,52 @@ fn element_range(
 fn element(e: &Element, q: &mut DQuat, out: &mut [V3; 4], u: &[V3]) -> PassReport {
     let du = e.vertices.map(|v| Vec3::from_array(u[v as usize]));
     let f = deformation_gradient(&e.geom, &du);
-    let law = Law::of(e.model);
-    let p = first_piola(law, &e.elastic, &f, q);
-    let lin = first_piola(Law::Linear, &e.elastic, &f, q);
-    let d = (p - lin) * (-e.geom.volume_m3);
+    let (d, lambda, barrier) = match Law::of(e.model) {
+        Law::Stvk => stvk(e, &f),
+        law => {
+            // Corotational: the rotated rest tangent plus the rotation's
+            // terms, which scale with the stress (an estimate, exact at rest).
+            let p = first_piola(law, &e.elastic, &f, q);
+            let lin = first_piola(Law::Linear, &e.elastic, &f, q);
+            let lambda = e.rest_lambda + 2.0 * gershgorin_abs(&p) * e.geometric_per_pa;
+            (p - lin, lambda, false)
+        }
+    };
+    let d = d * (-e.geom.volume_m3);
     for (o, m) in out.iter_mut().zip(&e.geom.shape) {
         *o = (d * *m).to_array();
     }
-    let lambda = match law {
-        // K_T = K_mat + K_geo: the material part is at most
-        // sigma_max(F)^2 times the rest tangent's largest eigenvalue, the
-        // geometric part at most V max(0, lambda_max(S)) sum |m_k|^2.
-        // In the barrier, the estimate uses the stress of the whole P
-        // (the barrier's tangent scales with it too).
-        Law::Stvk if in_barrier(&f) => {
-            gershgorin(&(f.transpose() * f)).max(1.0) * e.rest_lambda
-                + 4.0 * gershgorin_abs(&p) * e.geometric_per_pa
-        }
-        Law::Stvk => {
-            let s = law_stress(&p, &f);
-            gershgorin(&(f.transpose() * f)) * e.rest_lambda
-                + gershgorin(&s).max(0.0) * e.geometric_per_pa
-        }
-        // The rotated rest tangent plus the rotation's terms, which scale
-        // with the stress (an estimate, exact at rest).
-        Law::Corotational | Law::Linear => {
-            e.rest_lambda + 2.0 * gershgorin_abs(&p) * e.geometric_per_pa
-        }
-    };
     PassReport {
         lambda,
-        collapsed: (law == Law::Stvk && in_barrier(&f)) as usize,
+        collapsed: barrier as usize,
     }
 }
 
-/// S = F^-1 P for the StVK law outside the barrier (det F >= 1/2).
+/// StVK's P - sigma_lin, written so the linear stress is not computed
+/// twice: with H = F - I, E = sym H + H^T H / 2 and the stress linear in E,
+/// S = sigma(sym H) + sigma(H^T H / 2) and F S - sigma(sym H) = H S +
+/// sigma(H^T H / 2). Also the tangent bound: the material part is at most
+/// sigma_max(F)^2 (F^T F = I + 2E) times the rest tangent's largest
+/// eigenvalue, the geometric part at most V max(0, lambda_max(S))
+/// sum |m_k|^2; in the barrier the whole stress bounds both.
 #[inline]
-fn law_stress(p: &Mat3, f: &Mat3) -> Mat3 {
-    f.inverse() * *p
+fn stvk(e: &Element, f: &Mat3) -> (Mat3, Real, bool) {
+    let h = *f - Mat3::IDENTITY;
+    let lin = (h + h.transpose()) * 0.5;
+    let quad = h.transpose() * h * 0.5;
+    let sigma_quad = e.elastic.stress(&quad);
+    let s = e.elastic.stress(&lin) + sigma_quad;
+    let mut d = h * s + sigma_quad;
+    let stretch = gershgorin(&(Mat3::IDENTITY + (lin + quad) * 2.0));
+    let barrier = in_barrier(f);
+    let lambda = if barrier {
+        let b = barrier_piola(&e.elastic, f);
+        d += b;
+        stretch.max(1.0) * e.rest_lambda + 4.0 * gershgorin_abs(&(*f * s + b)) * e.geometric_per_pa
+    } else {
+        stretch * e.rest_lambda + gershgorin(&s).max(0.0) * e.geometric_per_pa
+    };
+    (d, lambda, barrier)
 }
 
 /// Gershgorin's upper bound on the largest eigenvalue of a symmetric 3x3.

@@ -219,6 +219,13 @@ impl ElasticModel {
         }
     }
 
+    /// The same model with every material's strain model set to `model`
+    /// (the assembled linear tensors do not depend on it).
+    pub fn with_model(mut self, model: crate::material::MaterialModel) -> Self {
+        self.materials = self.materials.with_model(model);
+        self
+    }
+
     /// Refuses (naming `who` and `why`) when a live tetrahedron that
     /// `in_part` accepts has a nonlinear material model.
     pub fn require_linear(
