@@ -45,6 +45,7 @@ pub mod membrane;
 pub mod mesh;
 pub mod scene;
 pub mod server;
+pub mod static_newton;
 pub mod static_solve;
 pub mod tensor_mass;
 pub mod topology;

@@ -105,38 +105,11 @@ pub fn solve_static(
 ) -> Result<StaticSolution, StaticError> {
     model.require_linear(
         "static solver",
-        "it solves K u = f with the linear stiffness",
+        "it solves K u = f with the linear stiffness; static_newton solves the others",
         |_| true,
     )?;
+    check_inputs(model, dirichlet, loads_n)?;
     let n = model.vertex_count();
-    for (what, got) in [
-        ("loads", loads_n.len()),
-        ("constraints", dirichlet.dofs.len()),
-    ] {
-        if got != n {
-            return Err(StaticError::Size {
-                what,
-                got,
-                expected: n,
-            });
-        }
-    }
-    if let Some(v) = loads_n.iter().position(|f| !f.is_finite()) {
-        return Err(StaticError::NonFinite {
-            what: "load",
-            vertex: v,
-        });
-    }
-    if let Some(v) = dirichlet
-        .dofs
-        .iter()
-        .position(|d| d.iter().flatten().any(|x| !x.is_finite()))
-    {
-        return Err(StaticError::NonFinite {
-            what: "imposed displacement",
-            vertex: v,
-        });
-    }
     let asm = assemble(model, dirichlet);
     let mut u = asm.u.clone();
     let free = &asm.free;
@@ -182,6 +155,44 @@ pub fn solve_static(
         displacement_m,
         force_n,
     })
+}
+
+/// Sizes match the model and every load and imposed value is finite.
+pub(crate) fn check_inputs(
+    model: &ElasticModel,
+    dirichlet: &Dirichlet,
+    loads_n: &[Vec3],
+) -> Result<(), StaticError> {
+    let n = model.vertex_count();
+    for (what, got) in [
+        ("loads", loads_n.len()),
+        ("constraints", dirichlet.dofs.len()),
+    ] {
+        if got != n {
+            return Err(StaticError::Size {
+                what,
+                got,
+                expected: n,
+            });
+        }
+    }
+    if let Some(v) = loads_n.iter().position(|f| !f.is_finite()) {
+        return Err(StaticError::NonFinite {
+            what: "load",
+            vertex: v,
+        });
+    }
+    if let Some(v) = dirichlet
+        .dofs
+        .iter()
+        .position(|d| d.iter().flatten().any(|x| !x.is_finite()))
+    {
+        return Err(StaticError::NonFinite {
+            what: "imposed displacement",
+            vertex: v,
+        });
+    }
+    Ok(())
 }
 
 /// The free block of K (lower triangle) for the imposed degrees of

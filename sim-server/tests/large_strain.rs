@@ -253,3 +253,43 @@ fn backends_that_run_the_linear_model_only_refuse_a_nonlinear_one() {
     );
     assert!(matches!(err, Err(StaticError::LinearOnly(_))), "{err:?}");
 }
+
+#[test]
+fn a_sudden_jump_refines_the_step_it_happens_in() {
+    // One end of a 6 cm StVK beam jumps 3 cm in one 1 ms step: the elements
+    // next to it are sheared 6:1. The sub-step after the jump sees the
+    // tangent and refines before it integrates (a coarse one flung a vertex
+    // 12 cm and then the state went to NaN).
+    let mesh = BoxSpec::new(Vec3::new(0.06, 0.02, 0.02), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let mat = Material::isotropic(4500.0, 0.45, 1060.0, 30.0)
+        .unwrap()
+        .with_model(MaterialModel::Stvk);
+    let model =
+        ElasticModel::new(mesh.clone(), TetMaterials::uniform(mat, mesh.tet_count())).unwrap();
+    let mut s = Explicit::<f32>::new(model, ExplicitConfig::new(1e-3)).unwrap();
+    let before = s.substeps();
+    let p = s.model().mesh().positions_m().to_vec();
+    for (v, q) in p.iter().enumerate() {
+        if q.x < 1e-4 {
+            s.fix(VertexId::from(v));
+        } else if q.x > 0.0599 {
+            s.prescribe(VertexId::from(v), Vec3::new(0.0, 0.0, -0.03));
+        }
+    }
+    for _ in 0..20 {
+        s.step();
+        let u: Vec<Vec3> = s
+            .displacements()
+            .iter()
+            .map(|d| Vec3::from_array(*d))
+            .collect();
+        assert!(
+            u.iter().all(|d| d.is_finite() && d.length() < 0.08),
+            "flung: {:?}",
+            u.iter().map(|d| d.length()).fold(0.0, f64::max)
+        );
+    }
+    assert!(s.substeps() > 4 * before, "{} sub-steps", s.substeps());
+}

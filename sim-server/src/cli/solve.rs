@@ -3,13 +3,16 @@
 //! displacements and loads. The writer follows the extension: VTU or legacy
 //! VTK with the `displacement` and `force` point data, the deformed mesh as
 //! medit, or the deformed surface as OBJ or binary STL; any other extension
-//! is refused before solving.
+//! is refused before solving. A scene with StVK or corotational
+//! tetrahedra is solved by Newton with load increments
+//! ([`sim_server::static_newton`]), the others by one linear solve.
 
 use super::{load_scene, write_json};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use sim_server::math::Vec3;
 use sim_server::mesh::io::{write_medit, write_obj, write_stl, write_vtk, write_vtu};
+use sim_server::static_newton::{NewtonConfig, solve_static_nonlinear};
 use sim_server::static_solve::{Dirichlet, solve_static};
 use std::path::Path;
 use std::time::Instant;
@@ -27,6 +30,9 @@ struct SolveJson {
     total_load_n: [f64; 3],
     total_reaction_n: [f64; 3],
     solve_s: f64,
+    /// Newton iterations (nonlinear materials), absent for a linear solve.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    newton_iterations: Option<usize>,
 }
 
 /// Runs the solve.
@@ -77,8 +83,15 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
         b.loads_n.clone()
     };
     let t0 = Instant::now();
-    let sol = solve_static(model, &bc, &loads)
-        .with_context(|| format!("static solve of {}", src.name))?;
+    let (sol, newton_iterations) = if model.nonlinear_tets() > 0 {
+        let s = solve_static_nonlinear(model, &bc, &loads, NewtonConfig::default())
+            .with_context(|| format!("nonlinear static solve of {}", src.name))?;
+        (s.solution, Some(s.iterations))
+    } else {
+        let s = solve_static(model, &bc, &loads)
+            .with_context(|| format!("static solve of {}", src.name))?;
+        (s, None)
+    };
     let solve_s = t0.elapsed().as_secs_f64();
     let alive: Vec<_> = (0..model.mesh().tet_count())
         .map(sim_server::ids::TetId::from)
@@ -138,6 +151,12 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
         .iter()
         .map(|u| u.length())
         .fold(0.0, f64::max);
+    if let Some(it) = newton_iterations {
+        println!(
+            "nonlinear materials: Newton, {} load increments, {it} iterations",
+            NewtonConfig::default().increments
+        );
+    }
     println!(
         "solved {} ({} vertices, {} tetrahedra) in {:.3} s: max displacement {:.4e} m, total load {:?} N, total reaction {:?} N -> {}",
         src.name,
@@ -164,6 +183,7 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
                 total_load_n: load.to_array(),
                 total_reaction_n: reaction.to_array(),
                 solve_s,
+                newton_iterations,
             },
         )?;
     }

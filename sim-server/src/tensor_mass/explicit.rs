@@ -290,11 +290,60 @@ impl<S: Storage> Explicit<S> {
 
     /// Advances by `dt_s` (in `substeps()` equal sub-steps).
     pub fn step(&mut self) {
-        for _ in 0..self.substeps {
-            self.substep();
+        let mut k = 0;
+        while k < self.substeps {
+            self.membrane_step();
+            k *= self.large_strain_pass();
+            self.kernel_step();
+            k += 1;
         }
         self.steps += 1;
         self.follow_tangent();
+    }
+
+    /// The nonlinear elements' forces at the current state, and the step
+    /// made finer at once when their tangent needs it (see
+    /// [`Explicit::refine_mid_step`]) before the state is advanced with
+    /// them. Returns the refinement factor (1: none).
+    fn large_strain_pass(&mut self) -> usize {
+        let Some(large) = &mut self.large else {
+            return 1;
+        };
+        let u = &self.u;
+        let fnl = &mut self.fnl;
+        match &self.pool {
+            Some(pool) => pool.install(|| large.pass(u, fnl, self.threads)),
+            None => large.pass(u, fnl, 1),
+        }
+        self.refine_mid_step()
+    }
+
+    /// When the nonlinear elements' tangent at the current state needs more
+    /// sub-steps than this step uses (a prescribed jump, a sudden stretch),
+    /// the rest of the step is split finer at once, by a whole factor so
+    /// that it still ends at dt: the sub-step about to be taken already
+    /// uses the finer one (one sub-step at the coarse one was enough to
+    /// fling a vertex 12 cm after a 3 cm jump). Returns the factor (1:
+    /// unchanged).
+    fn refine_mid_step(&mut self) -> usize {
+        let Some(large) = &self.large else {
+            return 1;
+        };
+        let now = large.last().lambda;
+        if !now.is_finite() {
+            return 1;
+        }
+        let needed = self.needed_substeps(now);
+        if needed <= self.substeps {
+            return 1;
+        }
+        let factor = needed
+            .div_ceil(self.substeps)
+            .min(MAX_SUBSTEPS / self.substeps)
+            .max(1);
+        self.tangent_lambda = self.tangent_lambda.max(now);
+        self.resubstep(self.substeps * factor);
+        factor
     }
 
     /// Advances by `dt_s` with the penalty contact `field` evaluated at
@@ -315,11 +364,18 @@ impl<S: Storage> Explicit<S> {
         if self.fmem.len() != self.u.len() {
             self.fmem = huge_vec(self.u.len(), [0.0; 3]);
         }
-        let h = self.dt_s / self.substeps as Real;
-        let every = ((resample_every_s / h).floor() as usize).max(1);
-        for k in 0..self.substeps {
+        let mut h = self.dt_s / self.substeps as Real;
+        let mut every = ((resample_every_s / h).floor() as usize).max(1);
+        let mut k = 0;
+        while k < self.substeps {
             if k > 0 && k % every == 0 {
                 resample(self, field);
+            }
+            let factor = self.large_strain_pass();
+            if factor > 1 {
+                k *= factor;
+                h = self.dt_s / self.substeps as Real;
+                every = ((resample_every_s / h).floor() as usize).max(1);
             }
             // Before the membrane (which zeroes and writes its own vertices).
             field.zero(&mut self.fmem);
@@ -334,6 +390,7 @@ impl<S: Storage> Explicit<S> {
             };
             field.add_forces(rest, &self.u, &self.next, at, &mut self.fmem);
             self.kernel_step();
+            k += 1;
         }
         self.steps += 1;
         self.follow_tangent();
@@ -369,23 +426,34 @@ impl<S: Storage> Explicit<S> {
     }
 
     fn update_bound(&mut self) {
-        let rest = self.elastic_stable.omega_max_rad_s.powi(2);
-        let lambda = rest.max(self.tangent_lambda) + self.contact_omega2;
-        let stable = StableStep::from_lambda(lambda, self.elastic_stable.method);
-        let policy = match self.policy {
-            DtPolicy::Unchecked => DtPolicy::Unchecked,
-            _ => DtPolicy::Substep,
-        };
-        let needed = (substeps_for(self.dt_s, &stable, policy)
-            .unwrap_or(self.substeps)
-            .max(self.elastic_substeps)
-            * self.substep_factor)
-            .min(MAX_SUBSTEPS);
-        self.stable = stable;
+        let needed = self.needed_substeps(self.tangent_lambda);
+        self.stable = self.stable_for(self.tangent_lambda);
         // Keeping the larger count for a while after the springs ease was
         // tried (to save the O(n) re-plans): the 250 Hz box stroke then
         // showed force steps of 0.07 N that the exact count does not.
         self.resubstep(needed);
+    }
+
+    /// The step bound with the nonlinear tangent at `tangent` (1/s^2) and
+    /// the contact springs.
+    fn stable_for(&self, tangent: Real) -> StableStep {
+        let rest = self.elastic_stable.omega_max_rad_s.powi(2);
+        let lambda = rest.max(tangent) + self.contact_omega2;
+        StableStep::from_lambda(lambda, self.elastic_stable.method)
+    }
+
+    /// Sub-steps per step that bound needs (sub-stepping whatever the
+    /// policy, except `unchecked`), at most [`MAX_SUBSTEPS`].
+    fn needed_substeps(&self, tangent: Real) -> usize {
+        let policy = match self.policy {
+            DtPolicy::Unchecked => DtPolicy::Unchecked,
+            _ => DtPolicy::Substep,
+        };
+        (substeps_for(self.dt_s, &self.stable_for(tangent), policy)
+            .unwrap_or(self.substeps)
+            .max(self.elastic_substeps)
+            * self.substep_factor)
+            .min(MAX_SUBSTEPS)
     }
 
     /// The nonlinear elements (none in a linear scene): their last pass's
@@ -428,11 +496,6 @@ impl<S: Storage> Explicit<S> {
         }
     }
 
-    fn substep(&mut self) {
-        self.membrane_step();
-        self.kernel_step();
-    }
-
     fn membrane_step(&mut self) {
         if !self.capsule_vertices.is_empty() {
             for &v in &self.capsule_vertices {
@@ -452,20 +515,12 @@ impl<S: Storage> Explicit<S> {
             target,
             fext,
             fmem,
-            large,
             fnl,
-            threads,
             plans,
             buffers,
             pool,
             ..
         } = self;
-        if let Some(large) = large {
-            match pool {
-                Some(pool) => pool.install(|| large.pass(u, fnl, *threads)),
-                None => large.pass(u, fnl, 1),
-            }
-        }
         let inputs = StepInputs {
             u,
             coef,

@@ -226,6 +226,16 @@ impl ElasticModel {
         self
     }
 
+    /// Live tetrahedra with a nonlinear material model.
+    pub fn nonlinear_tets(&self) -> usize {
+        (0..self.mesh.tet_count())
+            .map(TetId::from)
+            .filter(|t| {
+                self.topo.is_alive(*t) && self.materials.material(*t).model().is_nonlinear()
+            })
+            .count()
+    }
+
     /// Refuses (naming `who` and `why`) when a live tetrahedron that
     /// `in_part` accepts has a nonlinear material model.
     pub fn require_linear(
