@@ -462,3 +462,21 @@ fn material_models_are_chosen_per_table_and_refused_where_a_backend_cannot_run_t
         "hybrid backend's precomputed part runs the linear model only",
     );
 }
+
+#[test]
+fn a_rotate_load_with_a_zero_axis_names_its_line() {
+    fails_at(
+        &format!(
+            "{BASE}\n[[load]]\nselect = {{ box_m = [[0.05, -1.0, -1.0], [1.0, 1.0, 1.0]] }}\nrotate = {{ axis = [0.0, 0.0, 0.0], origin_m = [0.0, 0.0, 0.0], angle_deg = 30.0 }}\n"
+        ),
+        12,
+        "rotate axis must be a finite non-zero vector",
+    );
+    fails_at(
+        &format!(
+            "{BASE}\n[[load]]\nselect = {{ box_m = [[0.05, -1.0, -1.0], [1.0, 1.0, 1.0]] }}\nrotate = {{ axis = [1.0, 0.0, 0.0], angle_deg = 30.0 }}\n"
+        ),
+        12,
+        "missing field `origin_m`",
+    );
+}

@@ -424,11 +424,12 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         let l = load.get_ref();
         let given = l.displacement_m.is_some() as u8
             + l.force_n.is_some() as u8
-            + l.traction_pa.is_some() as u8;
+            + l.traction_pa.is_some() as u8
+            + l.rotate.is_some() as u8;
         if given != 1 {
             return Err(src.error(
                 load.span(),
-                "[[load]] needs exactly one of displacement_m, force_n, traction_pa",
+                "[[load]] needs exactly one of displacement_m, force_n, traction_pa, rotate",
             ));
         }
         let vs = Region::new(src, &l.select)?.vertices(mesh, &physical);
@@ -446,6 +447,15 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         if let Some(d) = &l.displacement_m {
             let d = vector(d)?;
             prescribed.extend(vs.iter().map(|v| (*v, d)));
+            continue;
+        }
+        if let Some(r) = &l.rotate {
+            let (turn, origin) = rotation(src, r.get_ref())?;
+            let p = mesh.positions_m();
+            prescribed.extend(vs.iter().map(|v| {
+                let x = p[v.idx()];
+                (*v, turn * (x - origin) + origin - x)
+            }));
             continue;
         }
         if loads_n.is_empty() {
@@ -640,6 +650,36 @@ fn contact_config(
         ));
     }
     Ok(c)
+}
+
+/// The rotation and the point it turns about of a `rotate` load.
+fn rotation(
+    src: &SceneSource,
+    r: &super::spec::RotateSpec,
+) -> Result<(crate::math::Mat3, Vec3), SceneError> {
+    let axis = Vec3::from_array(*r.axis.get_ref());
+    let length = axis.length();
+    if !(length.is_finite() && length > 0.0) {
+        return Err(src.error(
+            r.axis.span(),
+            "[[load]] rotate axis must be a finite non-zero vector",
+        ));
+    }
+    let origin = Vec3::from_array(*r.origin_m.get_ref());
+    if !origin.is_finite() {
+        return Err(src.error(r.origin_m.span(), "[[load]] rotate origin_m must be finite"));
+    }
+    let angle = *r.angle_deg.get_ref();
+    if !angle.is_finite() {
+        return Err(src.error(
+            r.angle_deg.span(),
+            "[[load]] rotate angle_deg must be finite",
+        ));
+    }
+    Ok((
+        crate::math::Mat3::from_axis_angle(axis / length, angle.to_radians()),
+        origin,
+    ))
 }
 
 /// A scene whose backend cannot run its material models is refused at the

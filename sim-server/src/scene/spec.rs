@@ -324,6 +324,20 @@ pub struct LoadSpec {
     pub force_n: Option<Spanned<[f64; 3]>>,
     /// Traction (Pa) on the selected surface.
     pub traction_pa: Option<Spanned<[f64; 3]>>,
+    /// A rigid rotation of the selection, imposed as displacements.
+    pub rotate: Option<Spanned<RotateSpec>>,
+}
+
+/// `rotate = { axis = [x, y, z], origin_m = [x, y, z], angle_deg = A }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RotateSpec {
+    /// Rotation axis (any length but zero).
+    pub axis: Spanned<[f64; 3]>,
+    /// A point on the axis (m).
+    pub origin_m: Spanned<[f64; 3]>,
+    /// Angle (degrees, right hand about the axis).
+    pub angle_deg: Spanned<f64>,
 }
 
 /// Tool kinds.
