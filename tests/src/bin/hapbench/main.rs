@@ -9,6 +9,7 @@ mod plot;
 mod progress;
 mod stability;
 mod tradeoff;
+mod tradeoff_large;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

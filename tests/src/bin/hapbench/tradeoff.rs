@@ -41,6 +41,10 @@ pub struct Args {
     /// ("default" = the embedded scene).
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Compare the material models (linear, corotational, StVK) under a
+    /// large deformation instead of the backends (see `tradeoff_large`).
+    #[arg(long, conflicts_with = "scene")]
+    pub large: bool,
 }
 
 /// One body to sweep: its model, supports and forces, the probe vertex and
@@ -313,6 +317,23 @@ pub fn run(args: &Args) -> Result<()> {
         args.duration_s.is_finite() && args.duration_s >= 0.2,
         "--duration-s must be at least 0.2"
     );
+    if args.large {
+        let progress = bar(1 + super::tradeoff_large::count(), "tradeoff --large");
+        let u_ref = super::tradeoff_large::reference()?;
+        progress.inc(1);
+        let points = super::tradeoff_large::sweep(u_ref, args.duration_s, &mut || progress.inc(1))?;
+        progress.finish_and_clear();
+        super::tradeoff_large::print(&points, u_ref);
+        if let Some(path) = &args.json {
+            let v = serde_json::json!({
+                "reference_displacement_m": u_ref.to_array(),
+                "models": points,
+            });
+            std::fs::write(path, serde_json::to_string_pretty(&v)? + "\n")
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        return Ok(());
+    }
     let (mut points, u_ref) = match &args.scene {
         Some(path) => {
             let case = scene_case(path)?;
