@@ -56,8 +56,18 @@ fn block(cell_m: f64, model: MaterialModel) -> Result<ElasticModel> {
     )?)
 }
 
+/// The block's supports and load.
+struct Boundary {
+    /// Clamped vertices (x = 0).
+    wall: Vec<VertexId>,
+    /// The end's vertices with their share of the load.
+    loads: Vec<(VertexId, Vec3)>,
+    /// The free end's centre.
+    tip: VertexId,
+}
+
 /// Wall vertices, end loads and the tip vertex.
-fn boundary(m: &ElasticModel) -> Result<(Vec<VertexId>, Vec<(VertexId, Vec3)>, VertexId)> {
+fn boundary(m: &ElasticModel) -> Result<Boundary> {
     let p = m.mesh().positions_m();
     let wall = (0..p.len())
         .filter(|&v| p[v].x < 1e-9)
@@ -73,13 +83,17 @@ fn boundary(m: &ElasticModel) -> Result<(Vec<VertexId>, Vec<(VertexId, Vec3)>, V
         .position(|q| (*q - Vec3::from_array(PROBE)).length() < 1e-9)
         .map(VertexId::from)
         .context("the probe is not a vertex")?;
-    Ok((wall, end.into_iter().map(|v| (v, share)).collect(), tip))
+    Ok(Boundary {
+        wall,
+        loads: end.into_iter().map(|v| (v, share)).collect(),
+        tip,
+    })
 }
 
 /// The converged StVK tip displacement (Newton on the finest cells / 2).
 pub fn reference() -> Result<Vec3> {
     let m = block(CELLS_M[CELLS_M.len() - 1] / 2.0, MaterialModel::Stvk)?;
-    let (wall, loads, tip) = boundary(&m)?;
+    let Boundary { wall, loads, tip } = boundary(&m)?;
     let mut bc = Dirichlet::new(m.vertex_count());
     for v in &wall {
         bc.fix(*v);
@@ -98,7 +112,7 @@ pub fn sweep(u_ref: Vec3, duration_s: f64, tick: &mut dyn FnMut()) -> Result<Vec
     for cell in CELLS_M {
         for model in MODELS {
             let m = block(cell, model)?;
-            let (wall, loads, tip) = boundary(&m)?;
+            let Boundary { wall, loads, tip } = boundary(&m)?;
             let bound = element_bound(&m).dt_max_s;
             let mut sim = Explicit::<f32>::new(m, ExplicitConfig::new(0.9 * bound))?;
             for v in &wall {
