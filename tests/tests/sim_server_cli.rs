@@ -501,3 +501,103 @@ fn a_demo_cleans_up_what_a_killed_one_left() {
         .collect();
     assert_eq!(left, vec!["hapsim-demo-notes.txt".to_string()], "{left:?}");
 }
+
+#[test]
+fn a_nonlinear_scene_runs_solves_and_is_refused_where_a_backend_cannot_run_it() {
+    let dir = scratch_dir("nonlinear");
+    let scene = dir.join("stvk.toml");
+    std::fs::write(
+        &scene,
+        r#"[mesh]
+generate = { shape = "box", size_m = [0.06, 0.02, 0.02], cell_m = 0.005 }
+
+[material]
+young_pa = 4500.0
+poisson = 0.45
+density_kg_m3 = 1060.0
+damping_per_s = 30.0
+model = "stvk"
+
+[[fixed]]
+select = { box_m = [[-1.0, -1.0, -1.0], [0.0001, 1.0, 1.0]] }
+
+[[load]]
+select = { box_m = [[0.0599, -1.0, -1.0], [1.0, 1.0, 1.0]] }
+rotate = { axis = [1.0, 0.0, 0.0], origin_m = [0.0, 0.01, 0.01], angle_deg = 30.0 }
+"#,
+    )
+    .unwrap();
+    let session = format!("nonlin{}", std::process::id());
+    let json = dir.join("run.json");
+    let out = Command::new(binary("sim-server"))
+        .args([
+            "run",
+            "--headless",
+            "--quiet",
+            "--steps",
+            "100",
+            "--session",
+            &session,
+        ])
+        .arg("--scene")
+        .arg(&scene)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run sim-server");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = read_json(&json);
+    assert_eq!(v["nonlinear_tets"], 1152);
+    assert!(v["finite"].as_bool().unwrap());
+    // Static equilibrium by Newton.
+    let solved = dir.join("solve.json");
+    let out = Command::new(binary("sim-server"))
+        .arg("solve")
+        .arg("--scene")
+        .arg(&scene)
+        .arg("--out")
+        .arg(dir.join("twist.vtu"))
+        .arg("--json")
+        .arg(&solved)
+        .output()
+        .expect("run sim-server solve");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = read_json(&solved);
+    assert!(v["newton_iterations"].as_u64().unwrap() >= 10, "{v}");
+    let reaction = v["total_reaction_n"].as_array().unwrap();
+    assert!(
+        reaction.iter().all(|r| r.as_f64().unwrap().abs() < 1e-9),
+        "{v}"
+    );
+    // The implicit backend refuses, naming the model.
+    let out = Command::new(binary("sim-server"))
+        .args([
+            "run",
+            "--backend",
+            "implicit",
+            "--headless",
+            "--quiet",
+            "--steps",
+            "10",
+        ])
+        .args(["--session", &session])
+        .arg("--scene")
+        .arg(&scene)
+        .output()
+        .expect("run sim-server");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("implicit backend runs the linear model only"),
+        "{err}"
+    );
+    assert!(err.contains("model = \"stvk\""), "{err}");
+}

@@ -39,6 +39,9 @@ impl<S: Storage> Backend for Explicit<S> {
     fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         Explicit::remove_tet(self, t)
     }
+    fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
+        Explicit::large_strain(self).map(|l| l.last())
+    }
     fn integrates_contact(&self) -> bool {
         true
     }

@@ -72,6 +72,12 @@ pub trait Backend {
         let _ = t;
         true
     }
+    /// What the last step's large-strain pass found (StVK elements in the
+    /// volume barrier, the tangent's bound), for a backend running
+    /// nonlinear materials; `None` otherwise.
+    fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
+        None
+    }
     /// Whether the backend integrates inertia (false: quasi-static).
     fn dynamic(&self) -> bool {
         true

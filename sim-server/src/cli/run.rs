@@ -112,6 +112,12 @@ pub fn run(args: RunArgs) -> Result<()> {
             String::new()
         }
     );
+    if summary.nonlinear_tets > 0 {
+        println!(
+            "{}: {} nonlinear tetrahedra; at most {} StVK elements squeezed below half their volume at once (their volume barrier acted)",
+            src.name, summary.nonlinear_tets, summary.max_barrier_elements
+        );
+    }
     if let Some(path) = &args.json {
         write_json(path, &summary)?;
     }

@@ -127,6 +127,12 @@ pub struct RunSummary {
     /// Times the daemon-driven tools let go because the pose went stale or
     /// its publisher died.
     pub pose_timeouts: u64,
+    /// Live tetrahedra with a nonlinear (StVK, corotational) model at the start.
+    pub nonlinear_tets: usize,
+    /// Most StVK elements compressed below half their volume (in the
+    /// volume barrier) at the end of any step: tissue squeezed beyond
+    /// what the model is meant for.
+    pub max_barrier_elements: usize,
 }
 
 /// Why a run failed.
@@ -323,6 +329,7 @@ pub fn run<B: Backend>(
 
     let mut summary = RunSummary {
         finite: true,
+        nonlinear_tets: sim.model().nonlinear_tets(),
         ..RunSummary::default()
     };
     let mut topology_version = 1u64;
@@ -381,6 +388,9 @@ pub fn run<B: Backend>(
         // The penalty contact is evaluated inside the step: its cost counts
         // as the step's.
         let reports = contacts.step(&mut sim);
+        if let Some(r) = sim.large_strain() {
+            summary.max_barrier_elements = summary.max_barrier_elements.max(r.collapsed);
+        }
         let step_t1 = monotonic_ns();
         summary.step_s += (step_t1 - step_t0) as Real * 1e-9;
         step_times.record(step_t1 - step_t0);

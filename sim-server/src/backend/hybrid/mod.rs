@@ -326,6 +326,9 @@ impl Backend for Hybrid {
     fn name(&self) -> &'static str {
         "hybrid"
     }
+    fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
+        self.tm.large_strain().map(|l| l.last())
+    }
     fn model(&self) -> &ElasticModel {
         &self.full
     }
