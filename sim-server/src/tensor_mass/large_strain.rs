@@ -13,6 +13,7 @@
 
 use super::element::{Geometry, TetElastic};
 use super::kernel::V3;
+use super::large_strain_lanes::{L, StvkBlock, stvk_block};
 use super::model::ElasticModel;
 use super::nonlinear::{Law, barrier_piola, deformation_gradient, first_piola, in_barrier};
 use super::stability::element_lambda;
@@ -63,6 +64,8 @@ impl PassReport {
 #[derive(Clone, Debug)]
 pub struct LargeStrain {
     elements: Vec<Element>,
+    /// The first StVK elements, four to a block (the rest one at a time).
+    blocks: Vec<StvkBlock>,
     rotations: Vec<DQuat>,
     forces: Vec<[V3; 4]>,
     /// Index of each tetrahedron's element (u32::MAX: linear).
@@ -81,11 +84,16 @@ impl LargeStrain {
         let mesh = model.mesh();
         let mut element_of = vec![u32::MAX; mesh.tet_count()];
         let mut elements = Vec::new();
-        for t in (0..mesh.tet_count()).map(TetId::from) {
+        // StVK elements first, so that they fill whole blocks of four lanes.
+        let stvk_first =
+            (0..mesh.tet_count())
+                .map(TetId::from)
+                .filter(|t| model.materials().material(*t).model() == MaterialModel::Stvk)
+                .chain((0..mesh.tet_count()).map(TetId::from).filter(|t| {
+                    model.materials().material(*t).model() == MaterialModel::Corotational
+                }));
+        for t in stvk_first {
             let material = model.materials().material(t);
-            if !material.model().is_nonlinear() {
-                continue;
-            }
             let (elastic, geom) = model.element(t);
             let quarter_mass = material.density_kg_m3() * geom.volume_m3 / 4.0;
             let shape2: Real = geom.shape.iter().map(|m| m.length_squared()).sum();
@@ -128,7 +136,16 @@ impl LargeStrain {
                 *at += 1;
             }
         }
+        let stvk = elements
+            .iter()
+            .filter(|e| e.model == MaterialModel::Stvk)
+            .count();
+        let blocks = elements[..stvk - stvk % 4]
+            .chunks_exact(4)
+            .map(block)
+            .collect();
         Some(Self {
+            blocks,
             rotations: vec![DQuat::IDENTITY; elements.len()],
             forces: vec![[[0.0; 3]; 4]; elements.len()],
             elements,
@@ -185,6 +202,7 @@ impl LargeStrain {
     pub fn pass(&mut self, u: &[V3], out: &mut [V3], threads: usize) {
         let Self {
             elements,
+            blocks,
             rotations,
             forces,
             vertices,
@@ -193,37 +211,112 @@ impl LargeStrain {
             ..
         } = self;
         let min = MIN_ELEMENTS_PER_TASK.max(elements.len() / threads.max(1) + 1);
-        self.last = element_range(elements, rotations, forces, u, min);
+        let range = Range {
+            elements,
+            rotations,
+            forces,
+            offset: 0,
+        };
+        self.last = element_range(range, blocks, u, min);
         gather(vertices, slot_start, slots, forces, out);
     }
 }
 
-/// The elements of one range, split in halves on the pool down to `min`.
-fn element_range(
-    elements: &[Element],
-    rotations: &mut [DQuat],
-    forces: &mut [[V3; 4]],
-    u: &[V3],
-    min: usize,
-) -> PassReport {
-    if elements.len() > min {
-        let mid = elements.len() / 2;
-        let (ea, eb) = elements.split_at(mid);
-        let (ra, rb) = rotations.split_at_mut(mid);
-        let (fa, fb) = forces.split_at_mut(mid);
+/// A contiguous range of elements and their buffers; `offset` is the
+/// first one's index (a multiple of four).
+struct Range<'a> {
+    elements: &'a [Element],
+    rotations: &'a mut [DQuat],
+    forces: &'a mut [[V3; 4]],
+    offset: usize,
+}
+
+/// The elements of one range, split in halves (at multiples of four, so
+/// blocks stay whole) on the pool down to `min`.
+fn element_range(r: Range<'_>, blocks: &[StvkBlock], u: &[V3], min: usize) -> PassReport {
+    let mid = (r.elements.len() / 2) & !3;
+    if r.elements.len() > min && mid > 0 {
+        let (ea, eb) = r.elements.split_at(mid);
+        let (ra, rb) = r.rotations.split_at_mut(mid);
+        let (fa, fb) = r.forces.split_at_mut(mid);
         let (a, b) = rayon::join(
-            || element_range(ea, ra, fa, u, min),
-            || element_range(eb, rb, fb, u, min),
+            || {
+                let range = Range {
+                    elements: ea,
+                    rotations: ra,
+                    forces: fa,
+                    offset: r.offset,
+                };
+                element_range(range, blocks, u, min)
+            },
+            || {
+                let range = Range {
+                    elements: eb,
+                    rotations: rb,
+                    forces: fb,
+                    offset: r.offset + mid,
+                };
+                element_range(range, blocks, u, min)
+            },
         );
         return a.join(b);
     }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { leaf_avx2(r, blocks, u) };
+    }
+    leaf(r, blocks, u)
+}
+
+/// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn leaf_avx2(r: Range<'_>, blocks: &[StvkBlock], u: &[V3]) -> PassReport {
+    leaf(r, blocks, u)
+}
+
+/// One task's elements: whole blocks of StVK elements four at a time, the
+/// others one at a time.
+#[inline(always)]
+fn leaf(r: Range<'_>, blocks: &[StvkBlock], u: &[V3]) -> PassReport {
     let mut report = PassReport::default();
-    for ((e, q), f) in elements.iter().zip(rotations).zip(forces) {
-        if e.alive {
-            report = report.join(element(e, q, f, u));
+    let mut i = 0;
+    while i < r.elements.len() {
+        let g = r.offset + i;
+        if g.is_multiple_of(4) && g / 4 < blocks.len() && i + 4 <= r.elements.len() {
+            let alive = std::array::from_fn(|k| r.elements[i + k].alive);
+            let (lambda, collapsed) = stvk_block(&blocks[g / 4], alive, u, &mut r.forces[i..i + 4]);
+            report = report.join(PassReport { lambda, collapsed });
+            i += 4;
+        } else {
+            if r.elements[i].alive {
+                let e = element(&r.elements[i], &mut r.rotations[i], &mut r.forces[i], u);
+                report = report.join(e);
+            }
+            i += 1;
         }
     }
     report
+}
+
+/// Four StVK elements' rest data as lanes.
+fn block(four: &[Element]) -> StvkBlock {
+    let lanes = |f: &dyn Fn(&Element) -> Real| -> L { std::array::from_fn(|k| f(&four[k])) };
+    let fiber = |e: &Element| e.elastic.fiber;
+    StvkBlock {
+        vertices: std::array::from_fn(|k| four[k].vertices),
+        m: std::array::from_fn(|k| std::array::from_fn(|c| lanes(&|e| e.geom.shape[k + 1][c]))),
+        volume: lanes(&|e| e.geom.volume_m3),
+        lambda: lanes(&|e| e.elastic.lambda_pa),
+        mu: lanes(&|e| e.elastic.mu_pa),
+        dir: std::array::from_fn(|c| lanes(&|e| fiber(e).map_or(0.0, |f| f.dir[c]))),
+        stretch: lanes(&|e| fiber(e).map_or(0.0, |f| f.stretch_pa)),
+        cross: lanes(&|e| fiber(e).map_or(0.0, |f| f.cross_pa)),
+        shear: lanes(&|e| fiber(e).map_or(0.0, |f| f.shear_pa)),
+        rest_lambda: lanes(&|e| e.rest_lambda),
+        geometric: lanes(&|e| e.geometric_per_pa),
+    }
 }
 
 /// One element's force correction into `out`, and its bound.
@@ -313,5 +406,77 @@ fn gather(vertices: &[u32], slot_start: &[u32], slots: &[u32], forces: &[[V3; 4]
             }
         }
         out[v as usize] = sum;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::{Elasticity, Isotropic, Material, Terms, TransverselyIsotropic};
+    use crate::material_map::TetMaterials;
+    use crate::mesh::{BoxSpec, CellSize};
+
+    /// The four-lane StVK blocks give the scalar path's forces and bound:
+    /// isotropic and anisotropic lanes, a removed element, stretched and
+    /// squeezed (barrier) states.
+    #[test]
+    fn lanes_equal_the_scalar_path() {
+        let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
+            .generate()
+            .unwrap();
+        let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
+        let aniso = TransverselyIsotropic::new(iso, 3000.0, 2500.0, Terms::ALL).unwrap();
+        let stvk = |e| {
+            Material::new(e, 1000.0, 0.0)
+                .unwrap()
+                .with_model(MaterialModel::Stvk)
+        };
+        let mut mats = TetMaterials::uniform(stvk(Elasticity::Isotropic(iso)), mesh.tet_count());
+        let id = mats.add(stvk(Elasticity::Transverse(aniso))).unwrap();
+        for t in (0..mesh.tet_count()).filter(|t| t % 3 == 1) {
+            mats.assign(TetId::from(t), id).unwrap();
+            mats.set_fiber(TetId::from(t), Vec3::new(1.0, 0.3, 0.2))
+                .unwrap();
+        }
+        let mut model = ElasticModel::new(mesh, mats).unwrap();
+        model.remove_tet(TetId(6)).unwrap();
+        let mut large = LargeStrain::new(&model).unwrap();
+        assert!(!large.blocks.is_empty());
+        let p = model.mesh().positions_m();
+        for squash in [1.0, 0.3] {
+            let u: Vec<V3> = p
+                .iter()
+                .map(|x| {
+                    [
+                        0.4 * x.x + 0.1 * x.z,
+                        (squash - 1.0) * x.y,
+                        -0.2 * x.x * x.y / 0.01,
+                    ]
+                })
+                .collect();
+            let mut out = vec![[0.0; 3]; u.len()];
+            large.pass(&u, &mut out, 1);
+            let mut lambda: Real = 0.0;
+            let mut collapsed = 0;
+            for (i, e) in large.elements.iter().enumerate() {
+                let mut f = [[0.0; 3]; 4];
+                if e.alive {
+                    let r = element(e, &mut DQuat::default(), &mut f, &u);
+                    lambda = lambda.max(r.lambda);
+                    collapsed += r.collapsed;
+                }
+                for (a, b) in f.iter().zip(&large.forces[i]) {
+                    for d in 0..3 {
+                        assert!(
+                            (a[d] - b[d]).abs() <= 1e-12 * (1.0 + a[d].abs()),
+                            "element {i}: {a:?} vs {b:?}"
+                        );
+                    }
+                }
+            }
+            assert!((large.last().lambda - lambda).abs() <= 1e-9 * lambda);
+            assert_eq!(large.last().collapsed, collapsed);
+            assert_eq!(collapsed > 0, squash < 0.5, "squash {squash}");
+        }
     }
 }

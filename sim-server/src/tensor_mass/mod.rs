@@ -10,6 +10,7 @@ pub mod explicit;
 pub mod huge_pages;
 pub mod kernel;
 pub mod large_strain;
+mod large_strain_lanes;
 pub mod model;
 pub mod nonlinear;
 pub mod stability;
