@@ -55,6 +55,15 @@ pub struct Precomputed {
 }
 
 impl Precomputed {
+    /// Refuses nonlinear material models (the scene checks with this too).
+    pub fn check_model(model: &ElasticModel) -> Result<(), crate::tensor_mass::LinearOnly> {
+        model.require_linear(
+            "precomputed backend",
+            "its responses are solved once for the linear stiffness",
+            |_| true,
+        )
+    }
+
     /// Precomputes `model` with `fixed` held at rest (reads or writes
     /// `cache_dir` when given; `progress` gets (done, total) solves).
     pub fn new(
@@ -64,13 +73,7 @@ impl Precomputed {
         cache_dir: Option<&Path>,
         mut progress: impl FnMut(usize, usize),
     ) -> Result<Self, PrecomputedError> {
-        model
-            .require_linear(
-                "precomputed backend",
-                "its responses are solved once for the linear stiffness",
-                |_| true,
-            )
-            .map_err(StaticError::from)?;
+        Self::check_model(&model).map_err(StaticError::from)?;
         let n = model.vertex_count();
         let mut slot = vec![NONE; n];
         let mut surface = Vec::new();

@@ -693,26 +693,14 @@ fn backend_runs_models(
 ) -> Result<(), SceneError> {
     let refusal = match backend {
         BackendName::TensorMass => return Ok(()),
-        BackendName::Implicit => model.require_linear(
-            "implicit backend",
-            "backward Euler on the stiffness K assembled once",
-            |_| true,
-        ),
-        BackendName::Precomputed => model.require_linear(
-            "precomputed backend",
-            "its responses are solved once for the linear stiffness",
-            |_| true,
-        ),
+        BackendName::Implicit => crate::backend::Implicit::check_model(model),
+        BackendName::Precomputed => crate::backend::Precomputed::check_model(model),
         BackendName::Hybrid => {
             let mut in_tm = vec![false; model.mesh().tet_count()];
             for t in hybrid_tets.unwrap_or(&[]) {
                 in_tm[t.idx()] = true;
             }
-            model.require_linear(
-                "hybrid backend's precomputed part",
-                "its responses are solved once for the linear stiffness; [hybrid] select must cover the nonlinear tetrahedra",
-                |t| !in_tm[t.idx()],
-            )
+            crate::backend::Hybrid::check_model(model, |t| in_tm[t.idx()])
         }
     };
     let Err(e) = refusal else {

@@ -128,6 +128,19 @@ pub struct Hybrid {
 }
 
 impl Hybrid {
+    /// Refuses nonlinear material models in the precomputed part (the
+    /// tetrahedra `in_tm` does not accept); the scene checks with this too.
+    pub fn check_model(
+        model: &ElasticModel,
+        in_tm: impl Fn(TetId) -> bool,
+    ) -> Result<(), crate::tensor_mass::LinearOnly> {
+        model.require_linear(
+            "hybrid backend's precomputed part",
+            "its responses are solved once for the linear stiffness; [hybrid] select must cover the nonlinear tetrahedra",
+            |t| !in_tm(t),
+        )
+    }
+
     /// Splits `model` into the tensor-mass part `tm_tets` (cuttable) and a
     /// precomputed rest with `fixed` held at rest, and precomputes the rest
     /// (`progress` gets (done, total) solves).
@@ -157,13 +170,7 @@ impl Hybrid {
             .map(TetId::from)
             .filter(|t| !is_tm[t.idx()] && model.topology().is_alive(*t))
             .collect();
-        model
-            .require_linear(
-                "hybrid backend's precomputed part",
-                "its responses are solved once for the linear stiffness; [hybrid] select must cover the nonlinear tetrahedra",
-                |t| !is_tm[t.idx()],
-            )
-            .map_err(StaticError::from)?;
+        Self::check_model(&model, |t| is_tm[t.idx()]).map_err(StaticError::from)?;
         if tm_list.is_empty() || part_list.is_empty() {
             return Err(HybridError::Split {
                 selected: tm_list.len(),

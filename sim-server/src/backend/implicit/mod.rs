@@ -153,6 +153,15 @@ pub struct Implicit {
 }
 
 impl Implicit {
+    /// Refuses nonlinear material models (the scene checks with this too).
+    pub fn check_model(model: &ElasticModel) -> Result<(), crate::tensor_mass::LinearOnly> {
+        model.require_linear(
+            "implicit backend",
+            "backward Euler on the stiffness K assembled once",
+            |_| true,
+        )
+    }
+
     /// A backend over `model` at rest.
     pub fn new(model: ElasticModel, cfg: ImplicitConfig) -> Result<Self, ImplicitError> {
         if !(cfg.dt_s.is_finite() && cfg.dt_s > 0.0) {
@@ -164,11 +173,7 @@ impl Implicit {
         {
             return Err(ImplicitError::NonlinearMembrane);
         }
-        model.require_linear(
-            "implicit backend",
-            "backward Euler on the stiffness K assembled once",
-            |_| true,
-        )?;
+        Self::check_model(&model)?;
         let n = model.vertex_count();
         let z = vec![Vec3::ZERO; n];
         // No thread (rare) means inline rebuilds, as with the option off.

@@ -61,7 +61,7 @@ struct Case {
     hybrid_tets: Option<Vec<TetId>>,
 }
 
-const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
+pub const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
 const LOAD_N: f64 = 0.01;
 const CELLS_M: [f64; 4] = [0.01, 0.005, 0.0025, 0.002];
 
@@ -96,13 +96,18 @@ pub struct Summary {
 }
 
 fn model(cell_m: f64) -> Result<ElasticModel> {
+    block(cell_m, sim_server::material::MaterialModel::Linear)
+}
+
+/// The block on `cell_m` cells with strain model `strain`.
+pub fn block(cell_m: f64, strain: sim_server::material::MaterialModel) -> Result<ElasticModel> {
     let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(cell_m)).generate()?;
-    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0)?;
+    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0)?.with_model(strain);
     let materials = TetMaterials::uniform(tissue, mesh.tet_count());
     Ok(ElasticModel::new(mesh, materials)?)
 }
 
-fn find(m: &ElasticModel, at: [f64; 3]) -> Option<VertexId> {
+pub fn find(m: &ElasticModel, at: [f64; 3]) -> Option<VertexId> {
     m.mesh()
         .positions_m()
         .iter()
@@ -110,8 +115,8 @@ fn find(m: &ElasticModel, at: [f64; 3]) -> Option<VertexId> {
         .map(VertexId::from)
 }
 
-/// (fixed vertices, loaded vertices with their share of the load).
-fn boundary(m: &ElasticModel) -> (Vec<VertexId>, Vec<(VertexId, Vec3)>) {
+/// (fixed vertices, loaded vertices with their share of `load_n` down).
+pub fn boundary(m: &ElasticModel, load_n: f64) -> (Vec<VertexId>, Vec<(VertexId, Vec3)>) {
     let p = m.mesh().positions_m();
     let wall = (0..p.len())
         .filter(|&v| p[v].x < 1e-9)
@@ -121,15 +126,15 @@ fn boundary(m: &ElasticModel) -> (Vec<VertexId>, Vec<(VertexId, Vec3)>) {
         .filter(|&v| p[v].x > SIZE[0] - 1e-9)
         .map(VertexId::from)
         .collect();
-    let share = Vec3::new(0.0, 0.0, -LOAD_N / end.len() as f64);
+    let share = Vec3::new(0.0, 0.0, -load_n / end.len() as f64);
     (wall, end.into_iter().map(|v| (v, share)).collect())
 }
 
-const PROBE: [f64; 3] = [SIZE[0], SIZE[1] / 2.0, SIZE[2] / 2.0];
+pub const PROBE: [f64; 3] = [SIZE[0], SIZE[1] / 2.0, SIZE[2] / 2.0];
 
 fn reference() -> Result<Vec3> {
     let m = model(CELLS_M[CELLS_M.len() - 1] / 2.0)?;
-    let (wall, loads) = boundary(&m);
+    let (wall, loads) = boundary(&m, LOAD_N);
     let u = static_displacements(&m, &wall, &loads)?;
     let probe = find(&m, PROBE).context("the probe is not a vertex of the reference mesh")?;
     Ok(u[probe.idx()])
@@ -156,7 +161,7 @@ fn static_displacements(
 /// hybrid makes the loaded quarter (x > 3 cm) its tensor-mass part.
 fn block_case(cell_m: f64, u_ref: Vec3) -> Result<Case> {
     let m = model(cell_m)?;
-    let (fixed, loads) = boundary(&m);
+    let (fixed, loads) = boundary(&m, LOAD_N);
     let probe = find(&m, PROBE).context("the probe is not a vertex")?;
     let hybrid_tets = (0..m.mesh().tet_count())
         .map(TetId::from)

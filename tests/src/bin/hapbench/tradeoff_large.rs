@@ -18,10 +18,10 @@ use sim_server::static_newton::{NewtonConfig, solve_static_nonlinear};
 use sim_server::tensor_mass::element_bound;
 use std::time::Instant;
 
-const SIZE: [f64; 3] = [0.04, 0.02, 0.02];
+use super::tradeoff::{PROBE, SIZE, block, find};
+
 const LOAD_N: f64 = 0.04;
 const CELLS_M: [f64; 3] = [0.01, 0.005, 0.0025];
-const PROBE: [f64; 3] = [SIZE[0], SIZE[1] / 2.0, SIZE[2] / 2.0];
 const MODELS: [MaterialModel; 3] = [
     MaterialModel::Linear,
     MaterialModel::Corotational,
@@ -47,15 +47,6 @@ pub struct LargePoint {
     pub tip_m: [f64; 3],
 }
 
-fn block(cell_m: f64, model: MaterialModel) -> Result<ElasticModel> {
-    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(cell_m)).generate()?;
-    let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0)?.with_model(model);
-    Ok(ElasticModel::new(
-        mesh.clone(),
-        TetMaterials::uniform(tissue, mesh.tet_count()),
-    )?)
-}
-
 /// The block's supports and load.
 struct Boundary {
     /// Clamped vertices (x = 0).
@@ -66,28 +57,11 @@ struct Boundary {
     tip: VertexId,
 }
 
-/// Wall vertices, end loads and the tip vertex.
+/// `tradeoff`'s supports with this load, and the tip vertex.
 fn boundary(m: &ElasticModel) -> Result<Boundary> {
-    let p = m.mesh().positions_m();
-    let wall = (0..p.len())
-        .filter(|&v| p[v].x < 1e-9)
-        .map(VertexId::from)
-        .collect();
-    let end: Vec<VertexId> = (0..p.len())
-        .filter(|&v| p[v].x > SIZE[0] - 1e-9)
-        .map(VertexId::from)
-        .collect();
-    let share = Vec3::new(0.0, 0.0, -LOAD_N / end.len() as f64);
-    let tip = p
-        .iter()
-        .position(|q| (*q - Vec3::from_array(PROBE)).length() < 1e-9)
-        .map(VertexId::from)
-        .context("the probe is not a vertex")?;
-    Ok(Boundary {
-        wall,
-        loads: end.into_iter().map(|v| (v, share)).collect(),
-        tip,
-    })
+    let (wall, loads) = super::tradeoff::boundary(m, LOAD_N);
+    let tip = find(m, PROBE).context("the probe is not a vertex")?;
+    Ok(Boundary { wall, loads, tip })
 }
 
 /// The converged StVK tip displacement (Newton on the finest cells / 2).
