@@ -149,6 +149,48 @@ fn sliding_across_vertices_is_smooth() {
 }
 
 #[test]
+fn reusing_the_selected_contact_points_changes_no_force() {
+    // Approach, press 3 mm between vertices, slide 6 mm at 20 mm/s,
+    // withdraw: once with the selection kept across steps while it holds,
+    // once selecting afresh every step.
+    let run = |reuse: bool| {
+        let mut p = scene("hook", "");
+        p.tools.set_point_reuse(reuse);
+        let start = between(TOP_M + 0.0025 - 0.003);
+        settle(&mut p, start + Vec3::new(0.0, 0.0, 0.004), 250);
+        let mut forces = Vec::new();
+        for k in 0..1200 {
+            let t = k as f64;
+            let offset = match k {
+                0..200 => Vec3::new(0.0, 0.0, 0.004 * (1.0 - t / 200.0)),
+                200..500 => Vec3::new(0.00002 * (t - 200.0), 0.0, 0.0),
+                500..800 => Vec3::new(0.006, 0.0, 0.0),
+                _ => Vec3::new(0.006, 0.0, 0.00002 * (t - 800.0)),
+            };
+            forces.push(step(&mut p, start + offset, 1.0));
+        }
+        (forces, p.tools.point_selections().unwrap())
+    };
+    let ((a, (replays, selections)), (b, (no_replays, _))) = (run(true), run(false));
+    assert_eq!(no_replays, 0);
+    assert!(
+        replays > 2 * selections,
+        "{replays} steps replayed, {selections} selected afresh"
+    );
+    let peak = a.iter().map(|f| f.length()).fold(0.0, f64::max);
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (*x - *y).length())
+        .fold(0.0, f64::max);
+    assert!(peak > 0.02, "peak {peak}");
+    assert!(
+        worst < 1e-12 * peak,
+        "largest difference {worst} N for a {peak} N peak"
+    );
+}
+
+#[test]
 fn the_force_does_not_depend_on_the_sub_step_count() {
     let run = |factor: usize| {
         let mut p = scene("hook", "");

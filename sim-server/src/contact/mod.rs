@@ -90,6 +90,7 @@ mod geometry;
 mod proxy;
 mod reaction;
 mod sampling;
+mod selection;
 mod stiffness;
 mod stiffness_thread;
 mod surface_index;

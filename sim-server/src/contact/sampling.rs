@@ -10,7 +10,8 @@
 //! uniformly pressed triangle loads its vertices equally whatever n is.
 
 use super::adjacency::Adjacency;
-use super::field::{ContactField, ContactPoint};
+use super::field::{ContactField, ContactPoint, PartSweep};
+use super::selection::{REUSE_MARGIN_OF_RADIUS, SelectionCache};
 use super::surface_index::SurfaceIndex;
 use crate::backend::Backend;
 use crate::ids::VertexId;
@@ -36,6 +37,8 @@ pub struct Sampler {
     face_stamp: Vec<u32>,
     stamp: u32,
     candidates: Vec<VertexId>,
+    /// The last selection, replayed while it holds.
+    cache: SelectionCache,
 }
 
 impl Sampler {
@@ -62,12 +65,64 @@ impl Sampler {
             face_stamp: vec![0; 4 * model.mesh().tet_count()],
             stamp: 0,
             candidates: Vec::new(),
+            cache: SelectionCache::default(),
         }
     }
 
-    /// Adds to `field` the points of the live surface triangles that may
-    /// touch the field's part `part` during the step (within its radius
-    /// plus half of it of the part at either end of the step).
+    /// Adds to `field` the points for each of its parts: the last
+    /// selection again while it holds (see [`SelectionCache`]), else a
+    /// fresh one with the margin that lets the next steps reuse it.
+    pub fn select<B: Backend + ?Sized>(
+        &mut self,
+        sim: &B,
+        index: &SurfaceIndex,
+        adj: &Adjacency,
+        field: &mut ContactField,
+    ) {
+        let topology = sim.model().topology_changes();
+        let position = |v| sim.position(v);
+        let rest = sim.model().mesh().positions_m();
+        if !self
+            .cache
+            .holds(field, index.members(), position, rest, topology)
+        {
+            self.cache.begin(index.members(), position, topology);
+            for part in 0..field.parts().len() {
+                let from = field.points().len();
+                let sweep = field.parts()[part];
+                let extra_m = REUSE_MARGIN_OF_RADIUS * sweep.radius_m;
+                let slack_m = self.sample_part(sim, index, adj, part as u16, field, extra_m);
+                self.cache.record(&sweep, slack_m, field, from);
+            }
+            field.clear_points();
+        } else {
+            self.cache.replayed();
+        }
+        // This step's points: those of the selection within this step's
+        // reach (what a selection without the margin takes), so the
+        // margin costs neither distances in every sub-step nor sub-steps.
+        for part in 0..field.parts().len() {
+            let sweep = field.parts()[part];
+            let to = SegmentQuery::new(&sweep.to);
+            let keep_m = step_keep_m(&sweep);
+            let keep2 = keep_m * keep_m;
+            for p in self.cache.points_of(part) {
+                let x = (0..3).fold(Vec3::ZERO, |x, k| {
+                    x + sim.position(VertexId(p.vertices[k])) * p.weights[k]
+                });
+                if to.distance2(x) < keep2 {
+                    field.push(ContactPoint {
+                        part: part as u16,
+                        ..*p
+                    });
+                }
+            }
+        }
+    }
+
+    /// Adds to `field` the points that may touch part `part` during the
+    /// step, for a selection within the step (no reuse: the selection kept
+    /// for the next steps is forgotten).
     pub fn sample<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
@@ -76,18 +131,40 @@ impl Sampler {
         part: u16,
         field: &mut ContactField,
     ) {
+        self.cache.invalidate();
+        self.sample_part(sim, index, adj, part, field, 0.0);
+    }
+
+    /// How often selections were replayed and made afresh.
+    pub fn selection_counts(&self) -> (u64, u64) {
+        (self.cache.replays(), self.cache.selections())
+    }
+
+    /// Whether a selection may serve later steps (the default).
+    pub fn set_reuse(&mut self, reuse: bool) {
+        self.cache.set_reuse(reuse);
+    }
+
+    /// Adds to `field` the points of the live surface triangles that may
+    /// touch the field's part `part` during the step (within its radius
+    /// plus half of it of the part at either end of the step) or lie
+    /// `extra_m` further. Returns how far beyond that reach points were
+    /// kept, from the part at the end of the step (m).
+    fn sample_part<B: Backend + ?Sized>(
+        &mut self,
+        sim: &B,
+        index: &SurfaceIndex,
+        adj: &Adjacency,
+        part: u16,
+        field: &mut ContactField,
+        extra_m: Real,
+    ) -> Real {
         let sweep = field.parts()[part as usize];
-        // Tissue near the tool moves well under half a radius between two
-        // selections (one step, or a millisecond of a long one).
-        let margin_m = 0.5 * sweep.radius_m;
         let r = sweep.radius_m;
-        let moved_m = (sweep.to.a_m - sweep.from.a_m)
-            .length()
-            .max((sweep.to.b_m - sweep.from.b_m).length());
-        let reach_m = r + margin_m;
-        // A triangle within reach has a vertex within reach + its longest
-        // edge (1.5x the longest rest edge: stretched tissue), anywhere on
-        // the sweep.
+        let keep_m = step_keep_m(&sweep) + extra_m;
+        // A triangle with a point within `keep_m` of the part at the end of
+        // the step has a vertex within that plus its longest edge (1.5x the
+        // longest rest edge: stretched tissue) of the sweep's box.
         let query = super::geometry::Segment {
             a_m: sweep
                 .from
@@ -101,16 +178,8 @@ impl Sampler {
                 .max(sweep.from.b_m.max(sweep.to.b_m)),
         };
         self.candidates.clear();
-        index.candidates(
-            &query,
-            reach_m + 1.5 * self.max_edge_m,
-            &mut self.candidates,
-        );
-        // Within reach of the part at the start of the step is within
-        // reach plus twice the motion of it at the end (each end moved at
-        // most `moved_m`): one distance per point.
+        index.candidates(&query, keep_m + 1.5 * self.max_edge_m, &mut self.candidates);
         let to = SegmentQuery::new(&sweep.to);
-        let keep_m = reach_m + 2.0 * moved_m;
         let keep2 = keep_m * keep_m;
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
@@ -156,16 +225,10 @@ impl Sampler {
                         continue;
                     }
                     let area0 = 0.5 * (x0[1] - x0[0]).cross(x0[2] - x0[0]).length();
-                    // The lattice follows the deformed triangle: a triangle
-                    // stretched around a deep probe must not let it slip
-                    // between its points.
-                    let longest = [(0, 1), (1, 2), (2, 0)]
-                        .iter()
-                        .map(|&(a, b)| x0[a].distance(x0[b]).max(x[a].distance(x[b])))
-                        .fold(0.0, Real::max);
-                    let n = ((longest / spacing_m).ceil() as usize).clamp(1, MAX_SUBDIVISIONS);
-                    let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
+                    let n = subdivisions(&x0, &x, spacing_m);
                     let ids = tri.map(|w| w.0);
+                    self.cache.note_lattice(ids, n, spacing_m);
+                    let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
                     let near = |c: Vec3, r: Real| to.distance2(c).sqrt() < keep_m + r;
                     for_each_centroid_near(n, &x, near, |w| {
                         let p = x[0] * w[0] + x[1] * w[1] + x[2] * w[2];
@@ -181,7 +244,39 @@ impl Sampler {
                 }
             }
         }
+        keep_m - step_reach_m(&sweep)
     }
+}
+
+/// Subdivisions per edge of a triangle at rest `x0`, now at `x`, for
+/// points `spacing_m` apart. The lattice follows the deformed triangle: a
+/// triangle stretched around a deep probe must not let it slip between its
+/// points.
+pub(super) fn subdivisions(x0: &[Vec3; 3], x: &[Vec3; 3], spacing_m: Real) -> usize {
+    let longest = [(0, 1), (1, 2), (2, 0)]
+        .iter()
+        .map(|&(a, b)| x0[a].distance(x0[b]).max(x[a].distance(x[b])))
+        .fold(0.0, Real::max);
+    ((longest / spacing_m).ceil() as usize).clamp(1, MAX_SUBDIVISIONS)
+}
+
+/// How far from a part's segment tissue can touch it during a step (m):
+/// its radius plus half of it, since tissue near the tool moves well under
+/// half a radius between two selections (one step, or a millisecond of a
+/// long one).
+fn step_reach_m(sweep: &PartSweep) -> Real {
+    1.5 * sweep.radius_m
+}
+
+/// How far from the part's segment at the end of the step a point must be
+/// kept (m): within reach of the part at the start of the step is within
+/// reach plus twice the motion of it at the end (each end moved at most
+/// that far), so one distance per point decides.
+fn step_keep_m(sweep: &PartSweep) -> Real {
+    let moved_m = (sweep.to.a_m - sweep.from.a_m)
+        .length()
+        .max((sweep.to.b_m - sweep.from.b_m).length());
+    step_reach_m(sweep) + 2.0 * moved_m
 }
 
 /// A segment ready for many distance queries.

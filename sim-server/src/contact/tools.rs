@@ -283,6 +283,23 @@ impl Tools {
         self.stiffness.as_ref().map(ContactStiffness::solves)
     }
 
+    /// Penalty contact: how many steps replayed the last selection of
+    /// contact points and how many selected afresh (see
+    /// `contact::selection`); `None` under the projection law.
+    pub fn point_selections(&self) -> Option<(u64, u64)> {
+        self.sampler.as_ref().map(Sampler::selection_counts)
+    }
+
+    /// Penalty contact: whether a selection of contact points may serve
+    /// the next steps while nothing moved far enough to change it (the
+    /// default; off, every step selects afresh, to check that it is the
+    /// same).
+    pub fn set_point_reuse(&mut self, reuse: bool) {
+        if let Some(s) = &mut self.sampler {
+            s.set_reuse(reuse);
+        }
+    }
+
     /// No tool ever imposes nor releases `v` (a vertex the scene fixes or
     /// prescribes).
     pub fn reserve(&mut self, v: VertexId) {
@@ -362,10 +379,10 @@ impl Tools {
         if let Some(sampler) = &mut self.sampler {
             for t in &self.tools {
                 for sweep in t.sweeps().into_iter().flatten() {
-                    let part = self.field.add_part(sweep);
-                    sampler.sample(sim, &self.index, &self.adjacency, part, &mut self.field);
+                    self.field.add_part(sweep);
                 }
             }
+            sampler.select(sim, &self.index, &self.adjacency, &mut self.field);
             let omega2 = springs_omega2(
                 &self.field,
                 &mut self.spring_n_per_m,
