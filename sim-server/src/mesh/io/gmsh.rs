@@ -1,12 +1,13 @@
 //! Gmsh MSH: the `$MeshFormat` header that tells the version, the element type
-//! table, and the MSH 2.2 ASCII reader (MSH 4.1 is in `gmsh41.rs`).
+//! table, and the MSH 2.2 ASCII reader (MSH 4.1 is in `gmsh41.rs`, MSH 1 and
+//! binary MSH 2.2 in `gmsh_legacy.rs`).
 //!
 //! MSH 2.2 is one record per line: `$Nodes` holds `tag x y z`, `$Elements`
 //! holds `tag type ntags tag... node...`, whose first tag is the physical group.
 
 use super::error::{Location, MeshIoError};
 use super::text::{Line, Lines, parse_f64, parse_i64, parse_u64, perr, shown};
-use super::{Builder, ImportedMesh, NodeMap, gmsh41};
+use super::{Builder, ImportedMesh, NodeMap, gmsh_legacy, gmsh41};
 
 /// The Gmsh element type 4: the 4-node tetrahedron.
 pub(super) const TET4: i64 = 4;
@@ -88,6 +89,10 @@ pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoErro
     let first = lines
         .next_line()
         .ok_or_else(|| perr(file, Location::Line(1), "empty file, expected $MeshFormat"))?;
+    if first.text.trim() == "$NOD" {
+        // MSH 1 (Gmsh before 2.0; most of SOFA's meshes) has no header.
+        return gmsh_legacy::parse1(file, lines, first);
+    }
     if first.text.trim() != "$MeshFormat" {
         return Err(perr(
             file,
@@ -133,16 +138,14 @@ pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoErro
             expect_end(file, &mut lines, "$EndMeshFormat")?;
             parse22(file, lines)
         }
-        "2.2" | "2.1" | "2" | "2.0" => Err(perr(
-            file,
-            header.at(),
-            "binary MSH 2 is not supported: save as MSH 4.1 or as ASCII",
-        )),
+        "2.2" | "2.1" | "2" | "2.0" => {
+            gmsh_legacy::parse22_binary(file, bytes, lines.pos(), data_size, header.no)
+        }
         _ => Err(perr(
             file,
             header.at(),
             format!(
-                "MSH version {} is not supported (4.1 and 2.2 are)",
+                "MSH version {} is not supported (4.1, 2.2 and 1 are)",
                 shown(version)
             ),
         )),
@@ -216,28 +219,7 @@ fn parse22(file: &str, mut lines: Lines) -> Result<ImportedMesh, MeshIoError> {
                 b.reserve_vertices(n, lines.remaining() / 8);
                 for k in 0..n {
                     let l = record(file, &mut lines, "$EndNodes", "nodes", n, k)?;
-                    let f: Vec<&str> = l.fields().collect();
-                    let parsed = match f[..] {
-                        [tag, x, y, z] => parse_u64(tag).zip(
-                            [x, y, z]
-                                .iter()
-                                .map(|s| parse_f64(s))
-                                .collect::<Option<Vec<f64>>>(),
-                        ),
-                        _ => None,
-                    };
-                    let Some((tag, p)) = parsed else {
-                        return Err(perr(
-                            file,
-                            l.at(),
-                            format!("expected a node 'tag x y z', found {}", shown(l.text)),
-                        ));
-                    };
-                    let index = b.vertex_count() as u32;
-                    b.vertex([p[0], p[1], p[2]], l.at(), &format!("node {tag}"))?;
-                    if !nodes.insert(tag, index) {
-                        return Err(perr(file, l.at(), format!("node {tag} is defined twice")));
-                    }
+                    node_line(file, &l, &mut nodes, &mut b)?;
                 }
                 expect_end(file, &mut lines, "$EndNodes")?;
             }
@@ -267,6 +249,50 @@ fn parse22(file: &str, mut lines: Lines) -> Result<ImportedMesh, MeshIoError> {
         }
     }
     b.finish()
+}
+
+/// One node line of an MSH 1 or 2 ASCII file: `tag x y z`.
+pub(super) fn node_line(
+    file: &str,
+    l: &Line,
+    nodes: &mut NodeMap,
+    b: &mut Builder,
+) -> Result<(), MeshIoError> {
+    let f: Vec<&str> = l.fields().collect();
+    let parsed = match f[..] {
+        [tag, x, y, z] => parse_u64(tag).zip(
+            [x, y, z]
+                .iter()
+                .map(|s| parse_f64(s))
+                .collect::<Option<Vec<f64>>>(),
+        ),
+        _ => None,
+    };
+    let Some((tag, p)) = parsed else {
+        return Err(perr(
+            file,
+            l.at(),
+            format!("expected a node 'tag x y z', found {}", shown(l.text)),
+        ));
+    };
+    node(file, l.at(), tag, [p[0], p[1], p[2]], nodes, b)
+}
+
+/// Node `tag` at `p` becomes the next vertex.
+pub(super) fn node(
+    file: &str,
+    at: Location,
+    tag: u64,
+    p: [f64; 3],
+    nodes: &mut NodeMap,
+    b: &mut Builder,
+) -> Result<(), MeshIoError> {
+    let index = b.vertex_count() as u32;
+    b.vertex(p, at, &format!("node {tag}"))?;
+    if !nodes.insert(tag, index) {
+        return Err(perr(file, at, format!("node {tag} is defined twice")));
+    }
+    Ok(())
 }
 
 /// The `k`-th of `n` records of a section, refusing the section's end marker
@@ -334,18 +360,34 @@ fn element22(file: &str, l: &Line, nodes: &NodeMap, b: &mut Builder) -> Result<(
             )
         })?;
     let (tags, node_tags) = rest.split_at(ntags);
-    let kind = gmsh_type(*t).ok_or_else(|| unsupported(file, l.at(), *t))?;
+    element(file, l.at(), [*tag, *t], tags, node_tags, nodes, b)
+}
+
+/// One element of an MSH 1 or 2 file, ASCII or binary: `[tag, type]`, its
+/// tags (the first is the physical group) and its node tags. A tetrahedron
+/// becomes one; lower-dimensional elements are counted as ignored; other
+/// volume elements are refused.
+pub(super) fn element(
+    file: &str,
+    at: Location,
+    [tag, t]: [i64; 2],
+    tags: &[i64],
+    node_tags: &[i64],
+    nodes: &NodeMap,
+    b: &mut Builder,
+) -> Result<(), MeshIoError> {
+    let kind = gmsh_type(t).ok_or_else(|| unsupported(file, at, t))?;
     if kind.dim < 3 {
         b.ignore(kind.plural, 1);
         return Ok(());
     }
-    if *t != TET4 {
-        return Err(unsupported(file, l.at(), *t));
+    if t != TET4 {
+        return Err(unsupported(file, at, t));
     }
     if node_tags.len() != 4 {
         return Err(perr(
             file,
-            l.at(),
+            at,
             format!(
                 "expected 4 node tags for a tetrahedron, found {}",
                 node_tags.len()
@@ -360,15 +402,14 @@ fn element22(file: &str, l: &Line, nodes: &NodeMap, b: &mut Builder) -> Result<(
             .ok_or_else(|| {
                 perr(
                     file,
-                    l.at(),
+                    at,
                     format!("element {tag} references node {nt}, which is not in $Nodes"),
                 )
             })?;
     }
     let physical = tags.first().map_or(Ok(0), |&p| {
-        i32::try_from(p)
-            .map_err(|_| perr(file, l.at(), format!("physical tag {p} is out of range")))
+        i32::try_from(p).map_err(|_| perr(file, at, format!("physical tag {p} is out of range")))
     })?;
-    b.tet(v, physical, *tag as u64, l.at());
+    b.tet(v, physical, tag as u64, at);
     Ok(())
 }

@@ -16,7 +16,7 @@ use super::{Builder, ImportedMesh, NodeMap};
 use std::collections::HashMap;
 
 /// How a section reads its values.
-trait Input {
+pub(super) trait Input {
     /// Where the next value is.
     fn at(&self) -> Location;
     /// Bytes left: a bound on how many records can follow.
@@ -152,11 +152,49 @@ impl Input for Ascii<'_, '_> {
 }
 
 /// Binary input: native values of the writer's endianness, `size_t` = 8 bytes.
-struct Binary<'a, 'f> {
+pub(super) struct Binary<'a, 'f> {
     file: &'f str,
     src: &'a [u8],
     pos: usize,
     big_endian: bool,
+}
+
+impl<'a, 'f> Binary<'a, 'f> {
+    /// Binary values of `src` from `pos` on, after the endianness mark
+    /// (the int 1 in the writer's byte order) found there.
+    pub(super) fn after_mark(
+        file: &'f str,
+        src: &'a [u8],
+        pos: usize,
+    ) -> Result<Self, MeshIoError> {
+        let one: [u8; 4] = src
+            .get(pos..pos + 4)
+            .and_then(|s| s.try_into().ok())
+            .ok_or_else(|| {
+                perr(
+                    file,
+                    Location::Byte(pos),
+                    "file ends before the endianness mark",
+                )
+            })?;
+        let big_endian = match (u32::from_le_bytes(one), u32::from_be_bytes(one)) {
+            (1, _) => false,
+            (_, 1) => true,
+            _ => {
+                return Err(perr(
+                    file,
+                    Location::Byte(pos),
+                    format!("expected the binary integer 1 (endianness mark), found {one:?}"),
+                ));
+            }
+        };
+        Ok(Self {
+            file,
+            src,
+            pos: pos + 4,
+            big_endian,
+        })
+    }
 }
 
 impl Binary<'_, '_> {
@@ -279,34 +317,7 @@ pub(super) fn parse(
         ));
     }
     // The int 1 written in the writer's byte order tells the endianness.
-    let pos = lines.pos();
-    let one: [u8; 4] = bytes
-        .get(pos..pos + 4)
-        .and_then(|s| s.try_into().ok())
-        .ok_or_else(|| {
-            perr(
-                file,
-                Location::Byte(pos),
-                "file ends before the endianness mark",
-            )
-        })?;
-    let big_endian = match (u32::from_le_bytes(one), u32::from_be_bytes(one)) {
-        (1, _) => false,
-        (_, 1) => true,
-        _ => {
-            return Err(perr(
-                file,
-                Location::Byte(pos),
-                format!("expected the binary integer 1 (endianness mark), found {one:?}"),
-            ));
-        }
-    };
-    let mut input = Binary {
-        file,
-        src: bytes,
-        pos: pos + 4,
-        big_endian,
-    };
+    let mut input = Binary::after_mark(file, bytes, lines.pos())?;
     match input.marker()? {
         Some((_, m)) if m == "$EndMeshFormat" => body(file, input),
         Some((at, m)) => Err(perr(

@@ -1,7 +1,8 @@
-//! Mesh import and export: Gmsh MSH 4.1 (ASCII and binary) and 2.2 (ASCII),
-//! legacy VTK (ASCII unstructured grid), VTU (XML, ascii and base64 inline or
-//! appended raw data) and medit `.mesh` in; VTU + PVD, OBJ, binary STL and
-//! medit out.
+//! Mesh import and export: Gmsh MSH 4.1 and 2.2 (ASCII and binary) and MSH 1,
+//! legacy VTK (ASCII and binary unstructured grid), VTU (XML, ascii and base64
+//! inline or appended raw data, uncompressed or zlib) and medit `.mesh` in (a
+//! file holding XML is read as VTU whatever its extension); VTU + PVD, OBJ,
+//! binary STL and medit out.
 //!
 //! Every parser is written by hand over a byte slice: the formats are simple,
 //! the crates that read them lose the line of a fault or pull in large
@@ -24,10 +25,13 @@ mod error;
 mod export;
 mod gmsh;
 mod gmsh41;
+mod gmsh_legacy;
 mod medit;
 mod text;
 mod vtk;
+mod vtk_binary;
 mod vtk_export;
+mod vtk_zlib;
 mod vtu;
 mod xml;
 
@@ -44,9 +48,9 @@ use std::path::Path;
 /// A mesh file format, detected from the file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MeshFormat {
-    /// Gmsh `.msh`, version 4.1 (ASCII or binary) or 2.2 (ASCII).
+    /// Gmsh `.msh`, version 4.1 or 2.2 (ASCII or binary), or 1.
     Msh,
-    /// Legacy VTK `.vtk`, ASCII unstructured grid.
+    /// Legacy VTK `.vtk`, ASCII or binary unstructured grid.
     VtkLegacy,
     /// VTK XML unstructured grid `.vtu`.
     Vtu,
@@ -101,12 +105,30 @@ pub fn parse_mesh(
     bytes: &[u8],
     format: MeshFormat,
 ) -> Result<ImportedMesh, MeshIoError> {
+    if format != MeshFormat::Vtu && is_xml(bytes) {
+        // VTK XML under another name (SOFA's Bunny.vtk is a VTU).
+        let mut m = vtu::parse(name, bytes)?;
+        m.warnings.push(format!(
+            "{name} holds VTK XML (a VTU file), not the format its name says: read as VTU"
+        ));
+        return Ok(m);
+    }
     match format {
         MeshFormat::Msh => gmsh::parse(name, bytes),
         MeshFormat::VtkLegacy => vtk::parse(name, bytes),
         MeshFormat::Vtu => vtu::parse(name, bytes),
         MeshFormat::Medit => medit::parse(name, bytes),
     }
+}
+
+/// Whether a file holds XML (after an optional byte-order mark and blanks).
+fn is_xml(bytes: &[u8]) -> bool {
+    let b = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let start = b
+        .iter()
+        .position(|c| !c.is_ascii_whitespace())
+        .unwrap_or(b.len());
+    b[start..].starts_with(b"<?xml") || b[start..].starts_with(b"<VTKFile")
 }
 
 /// Collects what a parser found and turns it into an [`ImportedMesh`],

@@ -1,4 +1,5 @@
-//! Legacy VTK, ASCII `DATASET UNSTRUCTURED_GRID`, in both cell layouts: the
+//! Legacy VTK, ASCII `DATASET UNSTRUCTURED_GRID` (binary files are read by
+//! `vtk_binary.rs`), in both cell layouts: the
 //! classic `CELLS n size` (each cell `k i1 .. ik`) and the 5.x `OFFSETS` /
 //! `CONNECTIVITY` pair that meshio writes. Values are free-form (they may
 //! wrap across lines), so the file is read as tokens, each with its line.
@@ -95,13 +96,7 @@ pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoErro
     let encoding = header("ASCII or BINARY")?;
     match encoding.text.trim().to_ascii_uppercase().as_str() {
         "ASCII" => {}
-        "BINARY" => {
-            return Err(perr(
-                file,
-                encoding.at(),
-                "binary legacy VTK is not supported: write ASCII, or VTU",
-            ));
-        }
+        "BINARY" => return super::vtk_binary::parse(file, bytes, lines.pos()),
         other => {
             return Err(perr(
                 file,

@@ -1,5 +1,6 @@
 //! VTK XML unstructured grid (`.vtu`): `DataArray`s in `ascii`, inline base64
-//! `binary` or `appended` raw format, uncompressed, any number of pieces.
+//! `binary` or `appended` raw format, uncompressed or zlib-compressed
+//! (`vtk_zlib.rs`), any number of pieces.
 //!
 //! The markup is scanned first and each array only located (byte ranges, or
 //! offsets into the appended block, which comes last in the file); values are
@@ -10,6 +11,7 @@ use super::base64;
 use super::error::{Location, MeshIoError};
 use super::text::{Tokens, parse_f64, perr, shown};
 use super::vtk::{PHYSICAL_NAMES, add_cells};
+use super::vtk_zlib;
 use super::xml::{Event, LineIndex, Xml};
 use super::{Builder, ImportedMesh};
 use std::ops::Range;
@@ -49,6 +51,8 @@ struct Piece {
 struct Settings {
     big_endian: bool,
     header_bytes: usize,
+    /// `compressor="vtkZLibDataCompressor"`.
+    zlib: bool,
 }
 
 /// Parses a VTU file.
@@ -247,11 +251,16 @@ fn file_settings(attrs: &[(&str, String)]) -> Result<Settings, String> {
             ));
         }
     }
-    if let Some(c) = get("compressor").filter(|c| !c.is_empty()) {
-        return Err(format!(
-            "compressed data ({c}) is not supported: write uncompressed VTU"
-        ));
-    }
+    let zlib = match get("compressor").unwrap_or("") {
+        "" => false,
+        "vtkZLibDataCompressor" => true,
+        c => {
+            return Err(format!(
+                "compressor {} is not supported (vtkZLibDataCompressor is): write zlib-compressed or uncompressed VTU",
+                shown(c)
+            ));
+        }
+    };
     let big_endian = match get("byte_order").unwrap_or("LittleEndian") {
         "LittleEndian" => false,
         "BigEndian" => true,
@@ -265,6 +274,7 @@ fn file_settings(attrs: &[(&str, String)]) -> Result<Settings, String> {
     Ok(Settings {
         big_endian,
         header_bytes,
+        zlib,
     })
 }
 
@@ -324,7 +334,13 @@ impl Decoder<'_> {
                     .copied()
                     .filter(|c| !c.is_ascii_whitespace())
                     .collect();
-                let raw = self.inline_binary(&text, a, what)?;
+                let raw = if self.settings.zlib {
+                    let s = self.settings;
+                    vtk_zlib::inflate_inline(&text, s.header_bytes, s.big_endian)
+                        .map_err(|e| self.err(a.at, format!("{what}: {e}")))?
+                } else {
+                    self.inline_binary(&text, a, what)?
+                };
                 self.convert(&raw, width, &a.ty)
             }
             Data::Appended(offset) => {
@@ -344,12 +360,15 @@ impl Decoder<'_> {
                             format!("{what}: offset {offset} is beyond the appended data"),
                         )
                     })?;
-                let raw = self.with_header(
-                    self.bytes.get(start..region.end).unwrap_or_default(),
-                    a,
-                    what,
-                )?;
-                self.convert(raw, width, &a.ty)
+                let stored = self.bytes.get(start..region.end).unwrap_or_default();
+                if self.settings.zlib {
+                    let s = self.settings;
+                    let raw = vtk_zlib::inflate_array(stored, s.header_bytes, s.big_endian)
+                        .map_err(|e| self.err(a.at, format!("{what}: {e}")))?;
+                    self.convert(&raw, width, &a.ty)
+                } else {
+                    self.convert(self.with_header(stored, a, what)?, width, &a.ty)
+                }
             }
         };
         if values.len() as u64 != count {
