@@ -480,3 +480,66 @@ fn a_rotate_load_with_a_zero_axis_names_its_line() {
         "missing field `origin_m`",
     );
 }
+
+#[test]
+fn a_mesh_file_in_millimetres_is_scaled_into_metres() {
+    // The reference ellipsoid written in millimetres, read back with
+    // `units = "mm"` or `scale = 0.001`: the same body as the metre file.
+    let dir = std::env::temp_dir().join(format!("scene_scale_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let gmsh = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/meshes/ellipsoid_v22.msh"
+    );
+    let metres = sim_server::mesh::io::read_mesh(std::path::Path::new(gmsh)).unwrap();
+    let mm: Vec<_> = metres
+        .mesh
+        .positions_m()
+        .iter()
+        .map(|p| *p * 1000.0)
+        .collect();
+    let file = dir.join("ellipsoid_mm.vtu");
+    sim_server::mesh::io::write_vtu(&file, &mm, metres.mesh.tets(), &[], &[]).unwrap();
+    let scene = |key: &str| {
+        let src = SceneSource {
+            name: "mm.toml".into(),
+            dir: dir.clone(),
+            text: format!(
+                "[mesh]\nfile = \"ellipsoid_mm.vtu\"\n{key}\n[material]\nyoung_pa = 3000.0\npoisson = 0.4\ndensity_kg_m3 = 1000.0\n"
+            ),
+        };
+        build_scene(&src, &src.parse().unwrap())
+    };
+    let (lo0, hi0) = metres.mesh.bounds_m();
+    for key in ["units = \"mm\"", "scale = 0.001"] {
+        let b = scene(key).unwrap();
+        let (lo, hi) = b.model.mesh().bounds_m();
+        assert!(
+            lo.abs_diff_eq(lo0, 1e-15) && hi.abs_diff_eq(hi0, 1e-15),
+            "{key}"
+        );
+    }
+    let unscaled = scene("").unwrap();
+    assert!(unscaled.model.mesh().bounds_m().1.x > 39.0);
+    for (key, needle) in [
+        ("units = \"km\"", "units must be \"m\", \"cm\" or \"mm\""),
+        ("scale = -1.0", "scale must be a positive finite number"),
+        ("scale = 0.001\nunits = \"mm\"", "not both"),
+    ] {
+        let Err(e) = scene(key) else {
+            panic!("{key}: accepted")
+        };
+        let e = e.to_string();
+        assert!(
+            e.starts_with("mm.toml:3:") || e.starts_with("mm.toml:4:"),
+            "{e}"
+        );
+        assert!(e.contains(needle), "{key}: {e}");
+    }
+    fails_at(
+        &BASE.replace("cell_m = 0.005 }", "cell_m = 0.005 }\nunits = \"mm\""),
+        3,
+        "a generated mesh is given in metres",
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -138,6 +138,72 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
 }
 
 #[test]
+fn check_tells_where_a_mesh_is_its_units_and_its_tags() {
+    let dir = scratch_dir("check_extent");
+    let meshes = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../sim-server/tests/data/meshes"
+    );
+    let check = |file: &std::path::Path, json: &std::path::Path| {
+        let out = Command::new(binary("sim-server"))
+            .arg("check")
+            .arg(file)
+            .arg("--json")
+            .arg(json)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    // SOFA's format (MSH 1), in metres: extent, typical edge, tags, no warning.
+    let json = dir.join("v1.json");
+    let text = check(
+        &std::path::Path::new(meshes).join("ellipsoid_v1.msh"),
+        &json,
+    );
+    assert!(
+        text.contains("extent: [-0.0398, -0.0249, -0.0200] .. [0.0396, 0.0249, 0.0200] m"),
+        "{text}"
+    );
+    assert!(
+        text.contains("physical tags of the tetrahedra (count): 1 (2182)"),
+        "{text}"
+    );
+    assert!(!text.contains("not plausibly"), "{text}");
+    let j = read_json(&json);
+    assert_eq!(j["physical_tags"], serde_json::json!([[1, 2182]]));
+    assert!(
+        (j["median_edge_m"].as_f64().unwrap() - 7.275e-3).abs() < 1e-5,
+        "{j}"
+    );
+    // The same body in millimetres: named, with the key that fixes it.
+    let text =
+        std::fs::read_to_string(std::path::Path::new(meshes).join("ellipsoid_v1.msh")).unwrap();
+    let nod_end = text.find("$ENDNOD").unwrap();
+    let scaled: String = text[..nod_end]
+        .lines()
+        .map(|l| match l.split_whitespace().collect::<Vec<_>>()[..] {
+            [tag, x, y, z] => {
+                let mm = |v: &str| v.parse::<f64>().unwrap() * 1000.0;
+                format!("{tag} {} {} {}\n", mm(x), mm(y), mm(z))
+            }
+            _ => format!("{l}\n"),
+        })
+        .collect();
+    let mm = dir.join("ellipsoid_mm.msh");
+    std::fs::write(&mm, scaled + &text[nod_end..]).unwrap();
+    let out = check(&mm, &dir.join("mm.json"));
+    assert!(
+        out.contains("not plausibly an organ in metres") && out.contains("scale = 0.001"),
+        "{out}"
+    );
+}
+
+#[test]
 fn solve_writes_displacement_and_force_and_balances_the_load() {
     let dir = scratch_dir("solve");
     let scene = dir.join("sag.toml");

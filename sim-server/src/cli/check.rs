@@ -3,6 +3,8 @@
 use super::{load_scene, write_json};
 use anyhow::Result;
 use serde::Serialize;
+use sim_server::mesh::TetMesh;
+use sim_server::mesh::extent::{Extent, tag_counts};
 use sim_server::mesh::io::read_mesh;
 use sim_server::mesh::quality::{QualityReport, quality_report};
 use sim_server::scene::BuiltScene;
@@ -28,6 +30,37 @@ struct CheckJson {
     tools: Vec<String>,
     cutting: bool,
     warnings: Vec<String>,
+    /// Bounding box corners (m).
+    bounds_m: [[f64; 3]; 2],
+    /// The median edge length (m).
+    median_edge_m: f64,
+    /// Per physical tag of the tetrahedra, how many carry it (mesh files).
+    physical_tags: Vec<(i32, usize)>,
+}
+
+/// Prints where the mesh is, its typical edge and a warning when that is
+/// not plausibly metres; returns the extent and the warning.
+fn print_extent(mesh: &TetMesh) -> (Extent, Option<String>) {
+    let e = Extent::of(mesh);
+    let (lo, hi) = (e.min_m, e.max_m);
+    println!(
+        "extent: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}] m ({:.4} x {:.4} x {:.4} m), typical edge {:.3e} m",
+        lo.x,
+        lo.y,
+        lo.z,
+        hi.x,
+        hi.y,
+        hi.z,
+        hi.x - lo.x,
+        hi.y - lo.y,
+        hi.z - lo.z,
+        e.median_edge_m
+    );
+    let warning = e.units_warning();
+    if let Some(w) = &warning {
+        println!("warning: {w}");
+    }
+    (e, warning)
 }
 
 fn print_quality(q: &QualityReport) {
@@ -69,7 +102,16 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
         for w in &imported.warnings {
             println!("warning: {w}");
         }
+        let (extent, units) = print_extent(&imported.mesh);
+        let tags = tag_counts(&imported.tet_physical);
+        let listed: Vec<String> = tags.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+        println!(
+            "physical tags of the tetrahedra (count): {}",
+            listed.join(", ")
+        );
         print_quality(&q);
+        let mut warnings = imported.warnings;
+        warnings.extend(units);
         if let Some(j) = json {
             let topo = sim_server::topology::Topology::new(&imported.mesh);
             write_json(
@@ -90,7 +132,10 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
                     membrane: None,
                     tools: Vec::new(),
                     cutting: false,
-                    warnings: imported.warnings,
+                    warnings,
+                    bounds_m: [extent.min_m.to_array(), extent.max_m.to_array()],
+                    median_edge_m: extent.median_edge_m,
+                    physical_tags: tags,
                 },
             )?;
         }
@@ -118,6 +163,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     for w in &r.warnings {
         println!("warning: {w}");
     }
+    let (extent, units) = print_extent(mesh);
     print_quality(&q);
     println!("materials:");
     println!("  default: {}", r.default_material);
@@ -223,7 +269,10 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 membrane: r.membrane.as_ref().map(|(a, m)| format!("{m} {a}")),
                 tools: b.tools.iter().map(|t| t.name.clone()).collect(),
                 cutting,
-                warnings: r.warnings.clone(),
+                warnings: r.warnings.iter().cloned().chain(units).collect(),
+                bounds_m: [extent.min_m.to_array(), extent.max_m.to_array()],
+                median_edge_m: extent.median_edge_m,
+                physical_tags: Vec::new(),
             },
         )?;
     }

@@ -4,6 +4,7 @@
 //! The mesh is immutable; topology that changes with cutting (which tetrahedra
 //! are alive, edges, the surface) lives in [`crate::topology`].
 
+pub mod extent;
 mod generate;
 pub mod io;
 pub mod quality;

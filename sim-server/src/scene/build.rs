@@ -148,6 +148,32 @@ fn unit(src: &SceneSource, v: &toml::Spanned<[Real; 3]>, what: &str) -> Result<V
     }
 }
 
+/// The factor `[mesh] scale` or `units` asks for (`None`: metres as read).
+fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Real>, SceneError> {
+    match (&m.scale, &m.units) {
+        (Some(_), Some(u)) => Err(src.error(u.span(), "give `scale` or `units`, not both")),
+        (Some(s), None) => positive(src, s, "scale").map(Some),
+        (None, Some(u)) => match u.get_ref().as_str() {
+            "m" => Ok(None),
+            "cm" => Ok(Some(0.01)),
+            "mm" => Ok(Some(0.001)),
+            other => Err(src.error(
+                u.span(),
+                format!("units must be \"m\", \"cm\" or \"mm\", got {other:?}"),
+            )),
+        },
+        (None, None) => Ok(None),
+    }
+}
+
+/// `mesh` with every coordinate multiplied by `s`.
+fn scaled(mesh: &TetMesh, s: Real) -> Result<TetMesh, crate::mesh::MeshError> {
+    TetMesh::new(
+        mesh.positions_m().iter().map(|p| *p * s).collect(),
+        mesh.tets().iter().map(|t| t.map(|v| v.0)).collect(),
+    )
+}
+
 fn load_mesh(
     src: &SceneSource,
     spec: &SceneSpec,
@@ -161,7 +187,19 @@ fn load_mesh(
                 io::read_mesh(&path).map_err(|e| src.error(file.span(), e.to_string()))?;
             report.mesh_source = path.display().to_string();
             report.warnings.extend(imported.warnings);
-            (imported.mesh, imported.tet_physical)
+            let mesh = match mesh_scale(src, m)? {
+                Some(s) => {
+                    scaled(&imported.mesh, s).map_err(|e| src.error(file.span(), e.to_string()))?
+                }
+                None => imported.mesh,
+            };
+            (mesh, imported.tet_physical)
+        }
+        (None, Some(g)) if m.scale.is_some() || m.units.is_some() => {
+            return Err(src.error(
+                g.span(),
+                "`scale` and `units` convert a mesh file; a generated mesh is given in metres",
+            ));
         }
         (None, Some(g)) => {
             let gen_span = g.span();

@@ -61,6 +61,12 @@ pub struct MeshSpec {
     pub generate: Option<Spanned<GenerateSpec>>,
     /// Renumber vertices for memory locality (default true).
     pub reorder: Option<bool>,
+    /// Multiplies the file's coordinates into metres (0.001 for a mesh in
+    /// millimetres).
+    pub scale: Option<Spanned<f64>>,
+    /// The file's length unit, "m", "cm" or "mm" (another way to give
+    /// `scale`).
+    pub units: Option<Spanned<String>>,
 }
 
 /// The generators.
