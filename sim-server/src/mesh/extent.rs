@@ -53,11 +53,14 @@ impl Extent {
         let size = self.max_m - self.min_m;
         let (lo, hi) = PLAUSIBLE_EDGE_M;
         let guess = if e > hi {
-            // Millimetres give edges of 0.1-50 "m"; centimetres 0.01-5.
-            if e >= 0.5 {
-                "millimetres? set [mesh] scale = 0.001 (or units = \"mm\")"
+            // Edges cannot tell millimetres from centimetres (1 mm cells in
+            // mm and 1 cm cells in cm are both 1): the body can. The unit
+            // that makes it closest to a typical organ (15 cm across) first.
+            let across = |s: Real| ((size.length() * s) / 0.15).log10().abs();
+            if across(0.001) <= across(0.01) {
+                "millimetres? set [mesh] scale = 0.001 (or units = \"mm\"); centimetres: 0.01"
             } else {
-                "centimetres? set [mesh] scale = 0.01 (or units = \"cm\")"
+                "centimetres? set [mesh] scale = 0.01 (or units = \"cm\"); millimetres: 0.001"
             }
         } else if e < lo && e > 0.0 {
             "a unit smaller than the metre? set [mesh] scale to what makes it metres"
@@ -106,10 +109,12 @@ mod tests {
             "{m:?}"
         );
         assert_eq!(m.units_warning(), None);
+        // A 4 cm block in millimetres (40 units across) and in
+        // centimetres (4 units): the unit that makes it organ-sized first.
         let mm = Extent::of(&block(1000.0)).units_warning().unwrap();
-        assert!(mm.contains("scale = 0.001"), "{mm}");
+        assert!(mm.contains("millimetres? set [mesh] scale = 0.001"), "{mm}");
         let cm = Extent::of(&block(100.0)).units_warning().unwrap();
-        assert!(cm.contains("scale = 0.01"), "{cm}");
+        assert!(cm.contains("centimetres? set [mesh] scale = 0.01"), "{cm}");
         assert!(Extent::of(&block(1e-3)).units_warning().is_some());
     }
 
