@@ -68,6 +68,12 @@ pub struct PartSweep {
 }
 
 impl PartSweep {
+    /// How far the part moves during the step (m): its ends' largest
+    /// displacement.
+    pub fn motion_m(&self) -> Real {
+        self.to.end_shift_m(&self.from)
+    }
+
     /// The segment at fraction `s` of the step.
     fn at(&self, s: Real) -> Segment {
         Segment {

@@ -18,6 +18,15 @@ pub struct Segment {
 }
 
 impl Segment {
+    /// The larger of the two ends' distances to `other`'s (m): no point of
+    /// one segment is further than this from the other (the Hausdorff
+    /// distance between two segments is at most their ends' displacement).
+    pub fn end_shift_m(&self, other: &Segment) -> Real {
+        self.a_m
+            .distance(other.a_m)
+            .max(self.b_m.distance(other.b_m))
+    }
+
     /// A cheap rejection before [`Segment::distance_m`]: false when `x_m`
     /// is outside the segment's bounding box grown by `r_m` (then it is
     /// certainly farther than `r_m`).

@@ -273,10 +273,7 @@ fn step_reach_m(sweep: &PartSweep) -> Real {
 /// reach plus twice the motion of it at the end (each end moved at most
 /// that far), so one distance per point decides.
 fn step_keep_m(sweep: &PartSweep) -> Real {
-    let moved_m = (sweep.to.a_m - sweep.from.a_m)
-        .length()
-        .max((sweep.to.b_m - sweep.from.b_m).length());
-    step_reach_m(sweep) + 2.0 * moved_m
+    step_reach_m(sweep) + 2.0 * sweep.motion_m()
 }
 
 /// A segment ready for many distance queries.

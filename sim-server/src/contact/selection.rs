@@ -89,6 +89,7 @@ impl SelectionCache {
     /// Forgets the selection: the next step selects afresh.
     pub fn invalidate(&mut self) {
         self.valid = false;
+        self.lattices.clear();
     }
 
     /// Whether selections may be reused (the default).
@@ -156,7 +157,10 @@ impl SelectionCache {
     /// Notes a triangle the selection looked at, split `n` times per edge
     /// for points `spacing_m` apart.
     pub fn note_lattice(&mut self, tri: [u32; 3], n: usize, spacing_m: Real) {
-        self.lattices.push((tri, n, spacing_m));
+        // A selection within a step (invalidated) is never replayed.
+        if self.valid {
+            self.lattices.push((tri, n, spacing_m));
+        }
     }
 
     /// Part `k`'s points (their `part` is the index at the selection).
@@ -212,15 +216,7 @@ impl SelectionCache {
 /// step is kept if it is within reach plus twice that motion of the part at
 /// the end of the step; see [`super::sampling`]).
 fn part_motion_m(selected: &Segment, p: &PartSweep) -> Real {
-    let shift =
-        p.to.a_m
-            .distance(selected.a_m)
-            .max(p.to.b_m.distance(selected.b_m));
-    let within =
-        p.to.a_m
-            .distance(p.from.a_m)
-            .max(p.to.b_m.distance(p.from.b_m));
-    shift + 2.0 * within
+    p.to.end_shift_m(selected) + 2.0 * p.motion_m()
 }
 
 #[cfg(test)]
