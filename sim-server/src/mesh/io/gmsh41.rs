@@ -318,14 +318,24 @@ pub(super) fn parse(
     }
     // The int 1 written in the writer's byte order tells the endianness.
     let mut input = Binary::after_mark(file, bytes, lines.pos())?;
+    expect_marker(file, &mut input, "$EndMeshFormat")?;
+    body(file, input)
+}
+
+/// Reads the next marker line and checks that it is `end`.
+pub(super) fn expect_marker(
+    file: &str,
+    input: &mut impl Input,
+    end: &str,
+) -> Result<(), MeshIoError> {
     match input.marker()? {
-        Some((_, m)) if m == "$EndMeshFormat" => body(file, input),
+        Some((_, m)) if m == end => Ok(()),
         Some((at, m)) => Err(perr(
             file,
             at,
-            format!("expected $EndMeshFormat, found {}", shown(&m)),
+            format!("expected {end}, found {}", shown(&m)),
         )),
-        None => Err(perr(file, input.at(), "file ends before $EndMeshFormat")),
+        None => Err(perr(file, input.at(), format!("file ends before {end}"))),
     }
 }
 
@@ -354,18 +364,7 @@ fn body(file: &str, mut input: impl Input) -> Result<ImportedMesh, MeshIoError> 
                 ));
             }
         }
-        let end = format!("$End{}", &marker[1..]);
-        match input.marker()? {
-            Some((_, m)) if m == end => {}
-            Some((at, m)) => {
-                return Err(perr(
-                    file,
-                    at,
-                    format!("expected {end}, found {}", shown(&m)),
-                ));
-            }
-            None => return Err(perr(file, input.at(), format!("file ends before {end}"))),
-        }
+        expect_marker(file, &mut input, &format!("$End{}", &marker[1..]))?;
     }
     b.finish()
 }

@@ -15,7 +15,7 @@ use super::error::{Location, MeshIoError};
 use super::gmsh::{
     count_line, element, expect_end, gmsh_type, node, node_line, record, unsupported,
 };
-use super::gmsh41::{Binary, Input};
+use super::gmsh41::{Binary, Input, expect_marker};
 use super::text::{Line, Lines, parse_i64, perr, shown};
 use super::{Builder, ImportedMesh, NodeMap};
 
@@ -146,17 +146,7 @@ pub(super) fn parse22_binary(
         ));
     }
     let mut input = Binary::after_mark(file, bytes, pos)?;
-    match input.marker()? {
-        Some((_, m)) if m == "$EndMeshFormat" => {}
-        Some((at, m)) => {
-            return Err(perr(
-                file,
-                at,
-                format!("expected $EndMeshFormat, found {}", shown(&m)),
-            ));
-        }
-        None => return Err(perr(file, input.at(), "file ends before $EndMeshFormat")),
-    }
+    expect_marker(file, &mut input, "$EndMeshFormat")?;
     let mut b = Builder::new(file, "element");
     let mut nodes = NodeMap::new();
     while let Some((at, marker)) = input.marker()? {
@@ -176,13 +166,13 @@ pub(super) fn parse22_binary(
                         .map_err(|_| perr(file, at, format!("node tag {tag} is negative")))?;
                     node(file, at, tag, p, &mut nodes, &mut b)?;
                 }
-                end_marker(file, &mut input, "$EndNodes")?;
+                expect_marker(file, &mut input, "$EndNodes")?;
             }
             "$Elements" => {
                 let n = count(file, &mut input, "elements")?;
                 b.reserve_tets(n, input.remaining() / 20);
                 element_blocks(file, &mut input, n, &nodes, &mut b)?;
-                end_marker(file, &mut input, "$EndElements")?;
+                expect_marker(file, &mut input, "$EndElements")?;
             }
             s if s.starts_with("$End") => {
                 return Err(perr(file, at, format!("unexpected {}", shown(s))));
@@ -267,18 +257,5 @@ fn count(file: &str, input: &mut Binary, what: &str) -> Result<u64, MeshIoError>
             input.at(),
             format!("file ends before the number of {what}"),
         )),
-    }
-}
-
-/// The section's end marker.
-fn end_marker(file: &str, input: &mut Binary, end: &str) -> Result<(), MeshIoError> {
-    match input.marker()? {
-        Some((_, m)) if m == end => Ok(()),
-        Some((at, m)) => Err(perr(
-            file,
-            at,
-            format!("expected {end}, found {}", shown(&m)),
-        )),
-        None => Err(perr(file, input.at(), format!("file ends before {end}"))),
     }
 }
