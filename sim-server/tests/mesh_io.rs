@@ -808,6 +808,21 @@ fn broken_interop_files_are_errors_never_panics() {
         e.contains("element block") && e.starts_with("t.msh:"),
         "{e}"
     );
+    // Binary legacy VTK physical tags must be integers, as in ASCII files:
+    // the int array's bits read as floats are tiny fractions.
+    let vtk = std::fs::read(PathBuf::from(MESHES).join("ellipsoid_bin42.vtk")).unwrap();
+    let key = b"gmsh:physical 1 2944 int\n";
+    let at = vtk.windows(key.len()).position(|w| w == key).unwrap();
+    let mut floats = vtk[..at].to_vec();
+    floats.extend_from_slice(b"gmsh:physical 1 2944 float\n");
+    floats.extend_from_slice(&vtk[at + key.len()..]);
+    let e = parse_mesh("t.vtk", &floats, MeshFormat::VtkLegacy)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("is not a 32-bit integer") && e.contains("byte"),
+        "{e}"
+    );
     let msh1 = std::fs::read_to_string(PathBuf::from(MESHES).join("ellipsoid_v1.msh")).unwrap();
     let elm = msh1.lines().position(|l| l == "$ELM").unwrap() + 3;
     let broken = with_line(&msh1, elm, "1 4 1 1 3 1 2 3 4");

@@ -233,42 +233,84 @@ pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoErro
             "the file has CELLS but no CELL_TYPES",
         )
     })?;
-    let n_cells = cells.lines.len();
-    if types.len() != n_cells {
+    let physical = physical.map(|(_, tags, line)| (tags, Location::Line(line)));
+    add_cell_lists(
+        &mut b,
+        file,
+        CellLists {
+            types: &types,
+            types_at: Location::Line(types_line),
+            offsets: &cells.offsets,
+            connectivity: &cells.connectivity,
+            physical: physical.as_ref().map(|(t, at)| (t.as_slice(), *at)),
+        },
+        |c| Location::Line(cells.lines[c]),
+    )?;
+    b.finish()
+}
+
+/// The cells a legacy VTK file (ASCII or binary) described: cell `c` has
+/// type `types[c]` and points `connectivity[offsets[c]..offsets[c + 1]]`.
+pub(super) struct CellLists<'c> {
+    /// The cell types.
+    pub types: &'c [i64],
+    /// Where `CELL_TYPES` is.
+    pub types_at: Location,
+    /// One more than there are cells, non-decreasing, within `connectivity`.
+    pub offsets: &'c [usize],
+    /// The cells' points.
+    pub connectivity: &'c [i64],
+    /// The physical tag array and where it is.
+    pub physical: Option<(&'c [i32], Location)>,
+}
+
+/// Checks that the cell types and the physical tags match the cells, then
+/// adds the cells ([`add_cells`]); `at(c)` is where cell `c` is.
+pub(super) fn add_cell_lists(
+    b: &mut Builder,
+    file: &str,
+    cells: CellLists,
+    at: impl Fn(usize) -> Location,
+) -> Result<(), MeshIoError> {
+    let n_cells = cells.offsets.len().saturating_sub(1);
+    if cells.types.len() != n_cells {
         return Err(perr(
             file,
-            Location::Line(types_line),
+            cells.types_at,
             format!(
                 "CELL_TYPES has {} entries but CELLS has {n_cells} cells",
-                types.len()
+                cells.types.len()
             ),
         ));
     }
-    if let Some((_, tags, line)) = &physical
+    if let Some((tags, tags_at)) = cells.physical
         && tags.len() != n_cells
     {
         return Err(perr(
             file,
-            Location::Line(*line),
+            tags_at,
             format!(
                 "the physical tag array has {} values for {n_cells} cells",
                 tags.len()
             ),
         ));
     }
-    let tags = physical.map(|(_, tags, _)| tags);
     add_cells(
-        &mut b,
+        b,
         file,
-        &types,
+        cells.types,
         |c| {
             let (s, e) = (cells.offsets[c], cells.offsets[c + 1]);
             cells.connectivity.get(s..e).unwrap_or_default()
         },
-        |c| Location::Line(cells.lines[c]),
-        tags.as_deref(),
-    )?;
-    b.finish()
+        at,
+        cells.physical.map(|(t, _)| t),
+    )
+}
+
+/// A physical tag read as a number: a 32-bit integer, or `None`.
+pub(super) fn physical_tag(v: f64) -> Option<i32> {
+    (v.fract() == 0.0 && v.abs() <= i32::MAX as f64).then_some(v as i32)
 }
 
 /// Adds VTK cells to a builder: tetrahedra, ignored lower-dimensional cells,
@@ -492,15 +534,13 @@ impl<'a> Reader<'_, 'a> {
         for _ in 0..count {
             let (v, at) = self.float("an attribute value")?;
             if keep {
-                let tag = (v.fract() == 0.0 && v.abs() <= i32::MAX as f64)
-                    .then_some(v as i32)
-                    .ok_or_else(|| {
-                        perr(
-                            self.file,
-                            at,
-                            format!("physical tag {v} is not a 32-bit integer"),
-                        )
-                    })?;
+                let tag = physical_tag(v).ok_or_else(|| {
+                    perr(
+                        self.file,
+                        at,
+                        format!("physical tag {v} is not a 32-bit integer"),
+                    )
+                })?;
                 tags.push(tag);
             }
         }

@@ -7,7 +7,7 @@
 
 use super::error::{Location, MeshIoError};
 use super::text::{as_text, perr, shown};
-use super::vtk::{PHYSICAL_NAMES, add_cells};
+use super::vtk::{CellLists, PHYSICAL_NAMES, add_cell_lists, physical_tag};
 use super::{Builder, ImportedMesh};
 
 /// Byte width of a legacy VTK data type name.
@@ -126,7 +126,7 @@ pub(super) fn parse(file: &str, bytes: &[u8], pos: usize) -> Result<ImportedMesh
         None => return Err(r.err(pos, "file ends before DATASET")),
     }
     let mut b = Builder::new(file, "cell");
-    let mut offsets: Option<Vec<i64>> = None;
+    let mut offsets: Option<(Vec<i64>, usize)> = None;
     let mut connectivity: Vec<i64> = Vec::new();
     let mut types: Option<(Vec<i64>, usize)> = None;
     let mut physical: Option<(usize, Vec<f64>, usize)> = None;
@@ -163,7 +163,7 @@ pub(super) fn parse(file: &str, bytes: &[u8], pos: usize) -> Result<ImportedMesh
                         };
                         let ty = h.get(1).copied().unwrap_or("");
                         connectivity = ints(r.values(size, ty, "CONNECTIVITY")?);
-                        offsets = Some(o);
+                        offsets = Some((o, at));
                     }
                     _ => {
                         // Classic: each cell `k i1 .. ik`, all int32.
@@ -183,7 +183,7 @@ pub(super) fn parse(file: &str, bytes: &[u8], pos: usize) -> Result<ImportedMesh
                                 r.err(at, format!("CELLS: {n} cells do not fill {size} values"))
                             );
                         }
-                        offsets = Some(o);
+                        offsets = Some((o, at));
                     }
                 }
             }
@@ -249,44 +249,39 @@ pub(super) fn parse(file: &str, bytes: &[u8], pos: usize) -> Result<ImportedMesh
     })?;
     let (types, types_at) =
         types.ok_or_else(|| r.err(r.pos, "the file has CELLS but no CELL_TYPES"))?;
-    let n_cells = offsets.len() - 1;
-    if types.len() != n_cells {
-        return Err(r.err(
-            types_at,
-            format!(
-                "CELL_TYPES has {} entries but CELLS has {n_cells} cells",
-                types.len()
-            ),
-        ));
-    }
-    let tags: Option<Vec<i32>> = match physical {
-        Some((_, v, at)) if v.len() != n_cells => {
-            return Err(r.err(
-                at,
-                format!(
-                    "the physical tag array has {} values for {n_cells} cells",
-                    v.len()
-                ),
-            ));
-        }
-        Some((_, v, _)) => Some(v.iter().map(|&x| x as i32).collect()),
-        None => None,
-    };
+    let (offsets, cells_at) = offsets;
+    let mut starts = Vec::with_capacity(offsets.len());
     for w in offsets.windows(2) {
         if !(0 <= w[0] && w[0] <= w[1] && w[1] as usize <= connectivity.len()) {
             return Err(r.err(
-                pos,
+                cells_at,
                 format!("OFFSETS {} .. {} out of order or range", w[0], w[1]),
             ));
         }
+        starts.push(w[0] as usize);
     }
-    add_cells(
+    starts.extend(offsets.last().map(|&o| o as usize));
+    let tags = match physical {
+        Some((_, v, at)) => {
+            let tags = v.iter().map(|&x| {
+                physical_tag(x)
+                    .ok_or_else(|| r.err(at, format!("physical tag {x} is not a 32-bit integer")))
+            });
+            Some((tags.collect::<Result<Vec<i32>, _>>()?, Location::Byte(at)))
+        }
+        None => None,
+    };
+    add_cell_lists(
         &mut b,
         file,
-        &types,
-        |c| &connectivity[offsets[c] as usize..offsets[c + 1] as usize],
+        CellLists {
+            types: &types,
+            types_at: Location::Byte(types_at),
+            offsets: &starts,
+            connectivity: &connectivity,
+            physical: tags.as_ref().map(|(t, at)| (t.as_slice(), *at)),
+        },
         |_| Location::Byte(types_at),
-        tags.as_deref(),
     )?;
     b.finish()
 }
