@@ -6,8 +6,8 @@
 use sim_server::ids::{TetId, VertexId};
 use sim_server::math::Vec3;
 use sim_server::mesh::io::{
-    ImportedMesh, MeshFormat, MeshIoError, parse_mesh, read_mesh, write_medit, write_obj,
-    write_pvd, write_stl, write_vtk, write_vtu,
+    DataArray, ImportedMesh, MeshFormat, MeshIoError, parse_mesh, read_mesh, write_medit,
+    write_obj, write_pvd, write_stl, write_vtk, write_vtu, write_vtu_zlib,
 };
 use std::path::{Path, PathBuf};
 
@@ -128,7 +128,7 @@ fn legacy_vtk_round_trip_is_exact() {
         &path,
         m.mesh.positions_m(),
         m.mesh.tets(),
-        &[("displacement", &disp)],
+        &[("displacement", DataArray::Vectors(&disp))],
     )
     .unwrap();
     let back = read_mesh(&path).unwrap();
@@ -142,7 +142,7 @@ fn legacy_vtk_round_trip_is_exact() {
             &bad,
             m.mesh.positions_m(),
             m.mesh.tets(),
-            &[("two words", &disp)]
+            &[("two words", DataArray::Vectors(&disp))]
         ),
         Err(MeshIoError::BadInput { .. })
     ));
@@ -151,7 +151,7 @@ fn legacy_vtk_round_trip_is_exact() {
             &bad,
             m.mesh.positions_m(),
             m.mesh.tets(),
-            &[("u", &disp[1..])]
+            &[("u", DataArray::Vectors(&disp[1..]))]
         ),
         Err(MeshIoError::BadInput { .. })
     ));
@@ -169,10 +169,13 @@ fn vtu_round_trip_is_exact() {
         &path,
         m.mesh.positions_m(),
         m.mesh.tets(),
-        &[("displacement", &disp)],
+        &[("displacement", DataArray::Vectors(&disp))],
         &[
-            ("physical", &physical),
-            ("stress", &vec![0.25; m.mesh.tet_count()]),
+            ("physical", DataArray::Scalars(&physical)),
+            (
+                "stress",
+                DataArray::Scalars(&vec![0.25; m.mesh.tet_count()]),
+            ),
         ],
     )
     .unwrap();
@@ -204,11 +207,51 @@ fn vtu_round_trip_is_exact() {
             &path,
             m.mesh.positions_m(),
             m.mesh.tets(),
-            &[("d", &disp[1..])],
+            &[("d", DataArray::Vectors(&disp[1..]))],
             &[]
         ),
         Err(MeshIoError::BadInput { .. })
     ));
+}
+
+#[test]
+fn compressed_vtu_round_trip_is_exact_and_smaller() {
+    let m = reference("box_v41.msh");
+    let (plain, packed) = (scratch("plain.vtu"), scratch("packed.vtu"));
+    let n = m.mesh.vertex_count();
+    let disp: Vec<Vec3> = (0..n).map(|i| Vec3::new(i as f64, -0.5, 1e-300)).collect();
+    let ids: Vec<u32> = (0..n as u32).rev().collect();
+    let physical: Vec<f64> = m.tet_physical.iter().map(|&p| f64::from(p)).collect();
+    let point_data = [
+        ("displacement", DataArray::Vectors(&disp)),
+        ("original_id", DataArray::Ids(&ids)),
+    ];
+    let cell_data = [("physical", DataArray::Scalars(&physical))];
+    for (path, write) in [
+        (&plain, write_vtu as fn(_, _, _, _, _) -> _),
+        (&packed, write_vtu_zlib),
+    ] {
+        write(
+            path,
+            m.mesh.positions_m(),
+            m.mesh.tets(),
+            &point_data,
+            &cell_data,
+        )
+        .unwrap();
+        let back = read_mesh(path).unwrap();
+        assert_eq!(back.mesh.positions_m(), m.mesh.positions_m());
+        assert_eq!(back.mesh.tets(), m.mesh.tets());
+        assert_eq!(back.tet_physical, m.tet_physical);
+        assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+    }
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    assert!(
+        size(&packed) * 2 < size(&plain),
+        "{} compressed vs {} bytes",
+        size(&packed),
+        size(&plain)
+    );
 }
 
 #[test]

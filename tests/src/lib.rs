@@ -71,6 +71,27 @@ pub fn read_json(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// What meshio (an independent reader; `scripts/setup.sh` installs it)
+/// finds in each file: `tests/python/read_with_meshio.py`'s JSON, one
+/// object per file (points, tetrahedra, triangles, arrays with their shapes,
+/// largest vector lengths, whether integer arrays are permutations).
+/// Panics with meshio's own error if it refuses a file.
+pub fn meshio_describe(files: &[&std::path::Path]) -> Vec<serde_json::Value> {
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python/read_with_meshio.py");
+    let out = std::process::Command::new("python3")
+        .arg(&script)
+        .args(files)
+        .output()
+        .expect("python3 (scripts/setup.sh installs it with meshio)");
+    assert!(
+        out.status.success(),
+        "meshio could not read {files:?} (is meshio installed? scripts/setup.sh installs it): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("the script prints JSON")
+}
+
 /// Waits for `child` at most `limit`: a process that hangs is a test
 /// failure, not a stuck CI, so past the limit it is killed and the test
 /// panics naming `what`.

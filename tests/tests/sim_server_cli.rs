@@ -298,6 +298,23 @@ force_n = [0.0, 0.0, -0.01]
     let medit = solved("sag.mesh");
     let text = std::fs::read_to_string(&medit).unwrap();
     assert!(text.starts_with("MeshVersionFormatted 2") && text.contains("Tetrahedra"));
+    // meshio, an independent reader, reads every file solve wrote: the
+    // counts of the JSON, the displacement's largest length, the vertices'
+    // original ids (the generated box was renumbered) as a permutation.
+    let seen = system_tests::meshio_describe(&[&vtu, &vtk, &medit, &obj, &stl]);
+    let (tets, max_u) = (v["tets"].clone(), v["max_displacement_m"].as_f64().unwrap());
+    for s in &seen[..2] {
+        assert_eq!(s["tetrahedra"], tets, "{s}");
+        let u = s["point_data"]["displacement"]["max_norm"]
+            .as_f64()
+            .unwrap();
+        assert!((u - max_u).abs() <= 1e-12 * max_u, "{s}: {u} vs {max_u}");
+        assert_eq!(s["point_data"]["force"]["shape"][1], 3, "{s}");
+        assert_eq!(s["point_data"]["original_id"]["permutation"], true, "{s}");
+    }
+    assert_eq!(seen[2]["tetrahedra"], tets, "{}", seen[2]);
+    assert_eq!(seen[3]["triangles"], count, "{}", seen[3]);
+    assert_eq!(seen[4]["triangles"], count, "{}", seen[4]);
     // Any other extension is refused before solving, naming what works.
     let (ply, out) = solve_to("sag.ply");
     assert!(!out.status.success());
@@ -666,4 +683,51 @@ rotate = { axis = [1.0, 0.0, 0.0], origin_m = [0.0, 0.01, 0.01], angle_deg = 30.
         "{err}"
     );
     assert!(err.contains("model = \"stvk\""), "{err}");
+}
+
+#[test]
+fn save_frames_writes_a_series_or_says_why_it_cannot() {
+    let dir = scratch_dir("save-frames");
+    let frames = dir.join("run frames");
+    let session = format!("frames{}", std::process::id());
+    // Headless: 400 steps, a frame every 1 ms of simulated time at most.
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--headless", "--quiet", "--steps", "400"])
+        .args(["--viewer-rate", "100", "--session", &session])
+        .arg("--save-frames")
+        .arg(&frames)
+        .output()
+        .expect("run sim-server");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let pvd = std::fs::read_to_string(frames.join("frames.pvd")).unwrap();
+    let listed = pvd.matches("<DataSet").count();
+    assert!(
+        listed > 0 && stdout.contains(&format!("{listed} frames saved")),
+        "{stdout}\n{pvd}"
+    );
+    assert!(frames.join(format!("frame_{:06}.vtu", listed - 1)).exists());
+    // A directory that cannot be made: refused at start, naming the flag.
+    let out = Command::new(binary("sim-server"))
+        .args([
+            "run",
+            "--headless",
+            "--quiet",
+            "--steps",
+            "10",
+            "--session",
+            &session,
+        ])
+        .args(["--save-frames", "/dev/null/frames"])
+        .output()
+        .expect("run sim-server");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--save-frames /dev/null/frames"),
+        "{err}"
+    );
 }

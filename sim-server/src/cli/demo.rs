@@ -36,6 +36,10 @@ pub struct DemoArgs {
     /// scene's.
     #[arg(long)]
     pub backend: Option<String>,
+    /// Save the run as a ParaView series: a VTU per mesh frame (30 Hz) and
+    /// `frames.pvd`, in this directory (created).
+    #[arg(long, value_name = "DIR")]
+    pub save_frames: Option<PathBuf>,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -215,6 +219,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         status: !args.headless,
         scripts: vec![cavitron_script()],
         pose_timeout_ns: sim_server::server::poses::DEFAULT_POSE_TIMEOUT_NS,
+        save_frames: args.save_frames.clone(),
     };
     let result = super::run_scene(scene, backend, &cfg, stop.clone());
     if let Some(v) = &mut viewer {

@@ -11,7 +11,7 @@ use super::{load_scene, write_json};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use sim_server::math::Vec3;
-use sim_server::mesh::io::{write_medit, write_obj, write_stl, write_vtk, write_vtu};
+use sim_server::mesh::io::{DataArray, write_medit, write_obj, write_stl, write_vtk, write_vtu};
 use sim_server::static_newton::{NewtonConfig, solve_static_nonlinear};
 use sim_server::static_solve::{Dirichlet, solve_static};
 use std::path::Path;
@@ -98,26 +98,16 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
         .filter(|t| model.topology().is_alive(*t))
         .map(|t| model.mesh().tets()[t.idx()])
         .collect();
+    let mut point_data = vec![
+        ("displacement", DataArray::Vectors(&sol.displacement_m)),
+        ("force", DataArray::Vectors(&sol.force_n)),
+    ];
+    if let Some(ids) = &b.original_vertex_ids {
+        point_data.push(("original_id", DataArray::Ids(ids)));
+    }
     match format {
-        OutFormat::Vtu => write_vtu(
-            out,
-            model.mesh().positions_m(),
-            &alive,
-            &[
-                ("displacement", &sol.displacement_m),
-                ("force", &sol.force_n),
-            ],
-            &[],
-        )?,
-        OutFormat::Vtk => write_vtk(
-            out,
-            model.mesh().positions_m(),
-            &alive,
-            &[
-                ("displacement", &sol.displacement_m),
-                ("force", &sol.force_n),
-            ],
-        )?,
+        OutFormat::Vtu => write_vtu(out, model.mesh().positions_m(), &alive, &point_data, &[])?,
+        OutFormat::Vtk => write_vtk(out, model.mesh().positions_m(), &alive, &point_data)?,
         OutFormat::Medit | OutFormat::Obj | OutFormat::Stl => {
             // Formats without point data: the deformed geometry itself.
             let deformed: Vec<Vec3> = model

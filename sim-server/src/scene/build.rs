@@ -101,6 +101,10 @@ pub struct BuiltScene {
     pub contact: crate::contact::ContactConfig,
     /// Summary.
     pub report: SceneReport,
+    /// Each vertex's index in the mesh as read or generated, when the
+    /// scene renumbered the vertices (RCM, `[mesh] reorder`): outputs write
+    /// it as the `original_id` point array. `None`: the file's order kept.
+    pub original_vertex_ids: Option<Vec<u32>>,
 }
 
 fn describe(m: &crate::material::Material) -> String {
@@ -174,11 +178,20 @@ fn scaled(mesh: &TetMesh, s: Real) -> Result<TetMesh, crate::mesh::MeshError> {
     )
 }
 
+/// A scene's mesh, renumbered, with what it said about itself.
+struct LoadedMesh {
+    mesh: TetMesh,
+    /// Per tetrahedron, its physical tag (0: none).
+    physical: Vec<i32>,
+    /// Per vertex, its index before renumbering (`None`: not renumbered).
+    original_ids: Option<Vec<u32>>,
+}
+
 fn load_mesh(
     src: &SceneSource,
     spec: &SceneSpec,
     report: &mut SceneReport,
-) -> Result<(TetMesh, Vec<i32>), SceneError> {
+) -> Result<LoadedMesh, SceneError> {
     let m = spec.mesh.get_ref();
     let (mesh, physical) = match (&m.file, &m.generate) {
         (Some(file), None) => {
@@ -277,18 +290,29 @@ fn load_mesh(
             mesh.reoriented()
         ));
     }
-    let mesh = if m.reorder.unwrap_or(true) {
-        mesh.permuted(&rcm_order(&mesh))
-    } else {
-        mesh
-    };
-    Ok((mesh, physical))
+    if !m.reorder.unwrap_or(true) {
+        return Ok(LoadedMesh {
+            mesh,
+            physical,
+            original_ids: None,
+        });
+    }
+    let order = rcm_order(&mesh);
+    Ok(LoadedMesh {
+        mesh: mesh.permuted(&order),
+        physical,
+        original_ids: Some(order.iter().map(|v| v.0).collect()),
+    })
 }
 
 /// Builds everything `spec` declares.
 pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, SceneError> {
     let mut report = SceneReport::default();
-    let (mesh, physical) = load_mesh(src, spec, &mut report)?;
+    let LoadedMesh {
+        mesh,
+        physical,
+        original_ids: original_vertex_ids,
+    } = load_mesh(src, spec, &mut report)?;
     let n_tets = mesh.tet_count();
 
     // Materials: default, then regions in order, then vessels.
@@ -603,6 +627,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         hybrid_tets,
         settings,
         report,
+        original_vertex_ids,
     })
 }
 

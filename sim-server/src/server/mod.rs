@@ -12,6 +12,7 @@
 //! missed time is dropped, not fast-forwarded. A pose older than
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 
+pub mod frames;
 pub mod pacing;
 pub mod poses;
 pub mod step_time;
@@ -55,6 +56,9 @@ pub struct RunConfig {
     /// A pose older than this (ns, its `t_ns` against now) drives no tool;
     /// scripted tools are not affected.
     pub pose_timeout_ns: u64,
+    /// Save the mesh frames (at the viewer rate) as a VTU series with
+    /// `frames.pvd` in this directory ([`frames`]).
+    pub save_frames: Option<std::path::PathBuf>,
 }
 
 /// A scripted tool: tip position and jaw opening against simulated time,
@@ -133,6 +137,11 @@ pub struct RunSummary {
     /// volume barrier) at the end of any step: tissue squeezed beyond
     /// what the model is meant for.
     pub max_barrier_elements: usize,
+    /// With `--save-frames`: frames written to the VTU series.
+    pub frames_saved: u64,
+    /// With `--save-frames`: frames not written because the disk was
+    /// behind (the step is never delayed for them).
+    pub frames_dropped: u64,
 }
 
 /// Why a run failed.
@@ -147,6 +156,9 @@ pub enum RunError {
     /// The implicit backend refused the scene.
     #[error(transparent)]
     Implicit(#[from] crate::backend::ImplicitError),
+    /// `--save-frames` could not start or write.
+    #[error(transparent)]
+    Frames(#[from] frames::FramesError),
     /// A peer sent another protocol version.
     #[error(transparent)]
     Version(#[from] shared::protocol::VersionError),
@@ -203,6 +215,8 @@ pub struct Prepared<B: Backend> {
     pub tools: Tools,
     /// The step (s).
     pub dt_s: Real,
+    /// Each vertex's index before the scene renumbered them, if it did.
+    pub original_vertex_ids: Option<Vec<u32>>,
 }
 
 /// Sets `scene` up for stepping with the explicit tensor-mass integrator at
@@ -245,6 +259,7 @@ pub fn prepare_with<B: Backend, E: std::error::Error + 'static>(
         tools,
         settings,
         contact,
+        original_vertex_ids,
         ..
     } = scene;
     // The bound only when no step is given: backends that need it compute
@@ -276,6 +291,7 @@ pub fn prepare_with<B: Backend, E: std::error::Error + 'static>(
         sim,
         tools: contacts,
         dt_s,
+        original_vertex_ids,
     })
 }
 
@@ -289,6 +305,7 @@ pub fn run<B: Backend>(
         mut sim,
         tools: mut contacts,
         dt_s,
+        original_vertex_ids,
     } = prepared;
     if cfg.status {
         let (cut, live) = crate::backend::cuttable(&sim);
@@ -325,6 +342,14 @@ pub fn run<B: Backend>(
     let topo_pub =
         services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?;
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(max_tris);
+    let mut recorder = match &cfg.save_frames {
+        Some(dir) => Some(frames::FrameRecorder::start(
+            dir,
+            sim.model(),
+            original_vertex_ids,
+        )?),
+        None => None,
+    };
     let rest = sim.model().mesh().positions_m().to_vec();
 
     let mut summary = RunSummary {
@@ -511,6 +536,9 @@ pub fn run<B: Backend>(
             .send()
             .map_err(|e| publish_err("mesh state")(format!("{e:?}")))?;
             summary.frames_published += 1;
+            if let Some(r) = &mut recorder {
+                r.offer(summary.steps as Real * dt_s, sim.model(), u);
+            }
         }
         if cfg.status && now - last_status >= 1_000_000_000 {
             let secs = (now - start_ns) as Real * 1e-9;
@@ -579,6 +607,15 @@ pub fn run<B: Backend>(
     summary.step_us = step_times.percentiles_us();
     summary.dropped_time_s = pacing.dropped_ns() as Real * 1e-9;
     summary.stalls = pacing.stalls();
+    if let Some(r) = recorder {
+        let (counts, error) = r.finish();
+        summary.frames_saved = counts.saved;
+        summary.frames_dropped = counts.dropped;
+        if let Some(e) = error {
+            // The run's own results stand; the series stops where it failed.
+            eprintln!("sim-server: {e} (the frames before it are kept)");
+        }
+    }
     match diverged_at {
         Some(step) => Err(RunError::Diverged {
             step,

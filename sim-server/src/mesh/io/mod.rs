@@ -36,7 +36,7 @@ mod vtu;
 mod xml;
 
 pub use error::{Location, MeshIoError};
-pub use export::{write_obj, write_pvd, write_stl, write_vtu};
+pub use export::{DataArray, write_obj, write_pvd, write_stl, write_vtu, write_vtu_zlib};
 pub use medit::write_medit;
 pub use vtk_export::write_vtk;
 

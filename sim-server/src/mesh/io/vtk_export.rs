@@ -1,11 +1,11 @@
 //! The legacy VTK writer: ASCII `UNSTRUCTURED_GRID` in the classic `CELLS`
-//! layout, point data as `VECTORS` (ParaView, VisIt, meshio and our own
+//! layout, point data as `VECTORS` or `SCALARS` (ParaView, VisIt, meshio and our own
 //! reader read it). Values are written with Rust's shortest round-trip
 //! formatting, so a re-read gives back the same f64. Indices are checked
 //! before the file is created, as in [`super::export`].
 
 use super::error::MeshIoError;
-use super::export::{check_indices, write_with};
+use super::export::{DataArray, check_indices, check_lengths, write_with};
 use crate::ids::VertexId;
 use crate::math::Vec3;
 use std::io::Write;
@@ -14,31 +14,38 @@ use std::path::Path;
 /// The VTK cell type of the linear tetrahedron.
 const VTK_TETRA: u8 = 10;
 
-/// Writes a legacy ASCII VTK file: linear tetrahedra and `point_data` as
-/// 3-component `VECTORS` (one per position). Names must be one word
-/// (letters, digits, `_`): legacy VTK separates fields by spaces.
+/// Writes a legacy ASCII VTK file: linear tetrahedra and `point_data` (one
+/// value per position: vectors as `VECTORS`, scalars and ids as `SCALARS`).
+/// Names must be one word (letters, digits, `_`): legacy VTK separates
+/// fields by spaces.
 pub fn write_vtk(
     path: &Path,
     positions_m: &[Vec3],
     tets: &[[VertexId; 4]],
-    point_data: &[(&str, &[Vec3])],
+    point_data: &[(&str, DataArray)],
 ) -> Result<(), MeshIoError> {
     let file = path.display().to_string();
     check_indices(&file, positions_m.len(), tets.iter().flatten())?;
-    for (name, values) in point_data {
-        if values.len() != positions_m.len()
-            || name.is_empty()
-            || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-        {
-            return Err(MeshIoError::BadInput {
-                file,
-                message: format!(
-                    "point data {name:?}: {} values for {} positions (and the name must be one word)",
-                    values.len(),
-                    positions_m.len()
-                ),
-            });
-        }
+    check_lengths(&file, "point", point_data, positions_m.len(), "points")?;
+    if let Some((name, _)) = point_data
+        .iter()
+        .find(|(n, _)| n.is_empty() || !n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'))
+    {
+        return Err(MeshIoError::BadInput {
+            file,
+            message: format!("point data {name:?}: a legacy VTK name must be one word"),
+        });
+    }
+    if let Some((name, _)) = point_data.iter().find(|(_, a)| match a {
+        DataArray::Ids(v) => v.iter().any(|&i| i > i32::MAX as u32),
+        _ => false,
+    }) {
+        return Err(MeshIoError::BadInput {
+            file,
+            message: format!(
+                "point data {name:?}: an id above 2^31 - 1 does not fit legacy VTK's int"
+            ),
+        });
     }
     write_with(&file, path, |w| {
         writeln!(w, "# vtk DataFile Version 3.0")?;
@@ -60,9 +67,25 @@ pub fn write_vtk(
         if !point_data.is_empty() {
             writeln!(w, "POINT_DATA {}", positions_m.len())?;
             for (name, values) in point_data {
-                writeln!(w, "VECTORS {name} double")?;
-                for v in *values {
-                    writeln!(w, "{} {} {}", v.x, v.y, v.z)?;
+                match values {
+                    DataArray::Vectors(v) => {
+                        writeln!(w, "VECTORS {name} double")?;
+                        for v in *v {
+                            writeln!(w, "{} {} {}", v.x, v.y, v.z)?;
+                        }
+                    }
+                    DataArray::Scalars(v) => {
+                        writeln!(w, "SCALARS {name} double 1\nLOOKUP_TABLE default")?;
+                        for x in *v {
+                            writeln!(w, "{x}")?;
+                        }
+                    }
+                    DataArray::Ids(v) => {
+                        writeln!(w, "SCALARS {name} int 1\nLOOKUP_TABLE default")?;
+                        for x in *v {
+                            writeln!(w, "{x}")?;
+                        }
+                    }
                 }
             }
         }

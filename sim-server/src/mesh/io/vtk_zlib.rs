@@ -18,6 +18,37 @@ use std::io::Read;
 /// Deflate's largest expansion (a stream of one repeated byte): 1032:1.
 const MAX_RATIO: u64 = 1032;
 
+/// Block size of the compressed arrays this crate writes (VTK's default).
+pub(super) const WRITE_BLOCK: usize = 1 << 15;
+
+/// `payload` compressed as VTK stores it, in blocks of `block_size` bytes
+/// with a header of `hb`-byte little-endian integers (4: UInt32, 8:
+/// UInt64): the header's bytes and the blocks' bytes (base64-encoded apart
+/// when inline). Fast compression: frames are written while a simulation
+/// runs.
+pub(super) fn deflate_array(payload: &[u8], block_size: usize, hb: usize) -> (Vec<u8>, Vec<u8>) {
+    let chunks: Vec<&[u8]> = payload.chunks(block_size).collect();
+    let mut header: Vec<u64> = vec![
+        chunks.len() as u64,
+        block_size as u64,
+        chunks.last().map_or(0, |c| c.len() as u64),
+    ];
+    let mut blocks = Vec::with_capacity(payload.len() / 2);
+    for c in &chunks {
+        let before = blocks.len();
+        let mut z = flate2::write::ZlibEncoder::new(&mut blocks, flate2::Compression::fast());
+        // Writing to a Vec cannot fail.
+        let _ = std::io::Write::write_all(&mut z, c);
+        let _ = z.finish();
+        header.push((blocks.len() - before) as u64);
+    }
+    let header = header
+        .iter()
+        .flat_map(|h| h.to_le_bytes().into_iter().take(hb))
+        .collect();
+    (header, blocks)
+}
+
 /// The uncompressed bytes of one compressed array stored raw (appended
 /// data, or inline data once decoded); `hb` is the header integer width
 /// and `big_endian` the file's byte order. The error says what is wrong.
@@ -117,34 +148,6 @@ pub(super) fn inflate_inline(text: &[u8], hb: usize, big_endian: bool) -> Result
     inflate_array(&raw, hb, big_endian)
 }
 
-/// Compresses `data` as VTK does, in blocks of `block_size` bytes, with
-/// UInt32 headers, little-endian (for the tests of the reader).
-#[cfg(test)]
-pub(super) fn deflate_array(data: &[u8], block_size: usize) -> Vec<u8> {
-    use std::io::Write;
-    let chunks: Vec<&[u8]> = data.chunks(block_size).collect();
-    let blocks: Vec<Vec<u8>> = chunks
-        .iter()
-        .map(|c| {
-            let mut e = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
-            e.write_all(c).unwrap();
-            e.finish().unwrap()
-        })
-        .collect();
-    let last = chunks.last().map_or(0, |c| c.len());
-    let mut out = Vec::new();
-    for v in [chunks.len(), block_size, last]
-        .into_iter()
-        .chain(blocks.iter().map(Vec::len))
-    {
-        out.extend((v as u32).to_le_bytes());
-    }
-    for b in &blocks {
-        out.extend(b);
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,7 +157,8 @@ mod tests {
         let data: Vec<u8> = (0..10_000u32)
             .flat_map(|i| (i % 97).to_le_bytes())
             .collect();
-        let packed = deflate_array(&data, 4096);
+        let (header, blocks) = deflate_array(&data, 4096, 4);
+        let packed = [header, blocks].concat();
         assert_eq!(inflate_array(&packed, 4, false).unwrap(), data);
         // Header and blocks as two base64 streams, as VTK writes inline.
         let blocks = u32::from_le_bytes(packed[..4].try_into().unwrap()) as usize;
