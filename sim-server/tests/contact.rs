@@ -54,13 +54,18 @@ impl Single {
 }
 
 fn setup(kind: ToolKind) -> (Explicit<f64>, Single) {
+    setup_at(kind, 1e-3)
+}
+
+/// [`setup`] stepping `dt_s`.
+fn setup_at(kind: ToolKind, dt_s: f64) -> (Explicit<f64>, Single) {
     let mesh = BoxSpec::new(Vec3::new(0.04, 0.04, HEIGHT_M), CellSize::EdgeM(0.004))
         .generate()
         .unwrap();
     let tissue = Material::isotropic(4500.0, 0.45, 1060.0, 20.0).unwrap();
     let materials = TetMaterials::uniform(tissue, mesh.tet_count());
     let model = ElasticModel::new(mesh, materials).unwrap();
-    let mut sim = Explicit::<f64>::new(model, ExplicitConfig::new(1e-3)).unwrap();
+    let mut sim = Explicit::<f64>::new(model, ExplicitConfig::new(dt_s)).unwrap();
     let decl = ToolDecl {
         name: "tool".into(),
         kind,
@@ -318,6 +323,29 @@ fn cavitron_removes_exactly_the_tetrahedra_touching_its_tip() {
     let report = tool.update(&mut sim, at, 1.0);
     assert_eq!(report.tets_removed, again.len());
     assert!(sim.displacements().iter().flatten().all(|x| x.is_finite()));
+}
+
+#[test]
+fn the_cavitron_burns_every_millisecond_of_simulated_time() {
+    // At 0.25 ms steps it burns at the first update in tissue and every
+    // fourth after, each time exactly what touches its tip then.
+    let (mut sim, mut tool) = setup_at(ToolKind::Cavitron, 2.5e-4);
+    let mut burnt_at = Vec::new();
+    for k in 0..12 {
+        let at = tip(0.002, 0.008 + 0.002 * k as f64, 0.013);
+        let expected = touching_tip(&sim, &tool, at);
+        let report = tool.update(&mut sim, at, 1.0);
+        if report.tets_removed > 0 {
+            assert_eq!(report.tets_removed, expected.len(), "update {k}");
+            burnt_at.push(k);
+        }
+        sim.step();
+    }
+    assert_eq!(burnt_at, [0, 4, 8]);
+    // Withdrawn and back: it burns at once.
+    tool.0.update(&mut sim, &[None]);
+    let at = tip(0.002, 0.03, 0.03);
+    assert!(tool.update(&mut sim, at, 1.0).tets_removed > 0);
 }
 
 #[test]

@@ -731,3 +731,36 @@ fn save_frames_writes_a_series_or_says_why_it_cannot() {
         "{err}"
     );
 }
+
+#[test]
+fn run_takes_the_step_from_the_command_line() {
+    let dir = scratch_dir("run-dt");
+    let json = dir.join("run.json");
+    let session = format!("dt{}", std::process::id());
+    let run = |dt: &str| {
+        Command::new(binary("sim-server"))
+            .args(["run", "--headless", "--quiet", "--steps", "400"])
+            .args(["--dt-s", dt, "--session", &session])
+            .arg("--json")
+            .arg(&json)
+            .output()
+            .expect("run sim-server")
+    };
+    let out = run("0.00025");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = read_json(&json);
+    let sim_time = v["sim_time_s"].as_f64().unwrap();
+    assert!((sim_time - 0.1).abs() < 1e-12, "{v}");
+    for bad in ["0", "-0.001", "NaN", "1"] {
+        let out = run(bad);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains("--dt-s"),
+            "{bad}: {err}"
+        );
+    }
+}

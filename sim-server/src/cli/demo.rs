@@ -40,6 +40,9 @@ pub struct DemoArgs {
     /// `frames.pvd`, in this directory (created).
     #[arg(long, value_name = "DIR")]
     pub save_frames: Option<PathBuf>,
+    /// The step (s) instead of the scene's (as `sim-server run --dt-s`).
+    #[arg(long)]
+    pub dt_s: Option<f64>,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -162,7 +165,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         bail!("--duration-s must be positive");
     }
     let backend = super::parse_backend(args.backend.as_deref())?;
-    let (src, scene) = load_scene(None)?;
+    let (src, mut scene) = load_scene(None)?;
+    super::override_step(&mut scene, args.dt_s)?;
     if scene.tools.len() < 2 {
         bail!("the demo scene needs two tools");
     }

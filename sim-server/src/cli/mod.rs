@@ -175,6 +175,18 @@ fn progress_line() -> impl FnMut(usize, usize) {
 
 /// The step of backends not bound by the explicit stability limit: the
 /// scene's `dt_s`, else one period of its rate (1 kHz by default).
+/// `--dt-s`: the step instead of the scene's, if given (a positive finite
+/// number of seconds, at most 0.1 s).
+fn override_step(scene: &mut BuiltScene, dt_s: Option<f64>) -> Result<()> {
+    if let Some(dt) = dt_s {
+        if !(dt.is_finite() && dt > 0.0 && dt <= 0.1) {
+            anyhow::bail!("--dt-s must be a step in seconds, above 0 and at most 0.1, got {dt}");
+        }
+        scene.settings.dt_s = Some(dt);
+    }
+    Ok(())
+}
+
 fn real_time_step(scene: &BuiltScene) -> f64 {
     scene
         .settings

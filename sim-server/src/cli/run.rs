@@ -52,6 +52,12 @@ pub struct RunArgs {
     /// frames (counted), never delays a step.
     #[arg(long, value_name = "DIR")]
     pub save_frames: Option<PathBuf>,
+    /// The step (s) instead of the scene's `[simulation] dt_s`: the period
+    /// of force samples and of pose intake. A shorter step answers a pose
+    /// sooner (device -> force) for more CPU and a larger contact share;
+    /// README, Measurements, Latency.
+    #[arg(long)]
+    pub dt_s: Option<f64>,
 }
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
@@ -68,7 +74,8 @@ pub fn run(args: RunArgs) -> Result<()> {
     if !(args.pose_timeout_ms.is_finite() && args.pose_timeout_ms > 0.0) {
         bail!("--pose-timeout-ms must be a positive number of milliseconds");
     }
-    let (src, scene) = load_scene(args.scene.as_deref())?;
+    let (src, mut scene) = load_scene(args.scene.as_deref())?;
+    super::override_step(&mut scene, args.dt_s)?;
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;

@@ -75,10 +75,14 @@ impl Sampler {
     pub fn select<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
-        index: &SurfaceIndex,
+        index: &mut SurfaceIndex,
         adj: &Adjacency,
         field: &mut ContactField,
     ) {
+        if field.parts().is_empty() {
+            // No tool part: nothing to select, nothing to check.
+            return;
+        }
         let topology = sim.model().topology_changes();
         let position = |v| sim.position(v);
         let rest = sim.model().mesh().positions_m();
@@ -86,6 +90,7 @@ impl Sampler {
             .cache
             .holds(field, index.members(), position, rest, topology)
         {
+            index.refit(sim);
             self.cache.begin(index.members(), position, topology);
             for part in 0..field.parts().len() {
                 let from = field.points().len();

@@ -367,8 +367,15 @@ impl Tools {
                 input(i).map(|p| (p.tip_m, p.jaw_opening)),
             );
         }
-        // After the cuts: the index follows them and the new positions.
-        self.index.refit(sim);
+        // After the cuts: the index follows them, and the new positions
+        // where a query comes (the projection law's detection; the
+        // penalty law refits only to select its points afresh, which most
+        // steps do not).
+        if self.law == ContactLaw::Projection {
+            self.index.refit(sim);
+        } else {
+            self.index.sync(sim);
+        }
         for t in &mut self.tools {
             t.hold(sim, &mut self.claims);
         }
@@ -382,7 +389,7 @@ impl Tools {
                     self.field.add_part(sweep);
                 }
             }
-            sampler.select(sim, &self.index, &self.adjacency, &mut self.field);
+            sampler.select(sim, &mut self.index, &self.adjacency, &mut self.field);
             let omega2 = springs_omega2(
                 &self.field,
                 &mut self.spring_n_per_m,

@@ -48,6 +48,10 @@ pub struct Args {
     /// The simulation's scene (default: sim-server's embedded liver).
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// The simulation's step (s), instead of the scene's (`sim-server run
+    /// --dt-s`).
+    #[arg(long)]
+    pub dt_s: Option<f64>,
 }
 
 /// Flags of the hidden probe publisher (the baseline's other process).
@@ -226,6 +230,10 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(scene) = &args.scene {
         sim_args.push("--scene".to_string());
         sim_args.push(scene.display().to_string());
+    }
+    if let Some(dt) = args.dt_s {
+        sim_args.push("--dt-s".to_string());
+        sim_args.push(dt.to_string());
     }
     let sim_args: Vec<&str> = sim_args.iter().map(String::as_str).collect();
     let mut sim = spawn(&sim_args, sibling("sim-server")?)?;
