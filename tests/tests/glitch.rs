@@ -1,11 +1,13 @@
 //! A device glitch through the real processes (issue 15's acceptance):
 //! `sim-server run` (real time) on a stiff, damped box and `haptic-daemon run`
-//! replaying a hand that presses a probe 15 mm into it (its end 5 mm above
-//! the fixed bottom) and holds still, with a 5 ms glitch of the device's pose
-//! (1 m away, or 20 mm deeper) in the middle of the hold. Over the hold after
-//! the glitch, the force the daemon renders (its record CSV) is back within
-//! 20% of the force just before the glitch, and never below half nor above
-//! 1.5x of it.
+//! replaying a hand that presses a 5 mm-radius probe 15 mm into it (its end
+//! 25 mm above the fixed bottom; 3.8 N) and holds still, with a 5 ms glitch
+//! of the device's pose (1 m away, or 20 mm deeper) in the middle of the
+//! hold. Over the hold after the glitch, the force the daemon renders (its
+//! record CSV) is back within 20% of the force just before the glitch, and
+//! never below half nor above 1.5x of it. A third test lets the glitch
+//! through the daemon to the simulation, whose proxy alone must bring the
+//! contact back as it was and stay under 1.5x.
 //!
 //! The daemon runs with its defaults (extrapolation, pose plausibility,
 //! passivity); the simulation in real time (the daemon does not render
@@ -20,12 +22,15 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 use system_tests::{binary, daemon_run, finish, read_json, scratch_dir, wait_bounded};
 
-/// tests/data/box-probe.toml made stiffer (5 -> 20 kPa) and more damped
-/// (20 -> 40 /s): a 60 x 40 x 20 mm block on 5 mm cells, bottom fixed, a
-/// 2.5 mm probe entering from above.
+/// tests/data/box-probe.toml made stiffer (5 -> 20 kPa), more damped
+/// (20 -> 40 /s), twice as thick and probed with a 5 mm probe: a 60 x 40 x
+/// 40 mm block on 5 mm cells, bottom fixed, the probe entering from above.
+/// (The box's own 2.5 mm probe, half a cell wide, slips off the vertex it
+/// presses past about 13 mm on these cells: a limit of the discretisation
+/// that README's penalty-law section states, not of the glitch handling.)
 const STIFF_BOX: &str = r#"
 [mesh]
-generate = { shape = "box", size_m = [0.06, 0.04, 0.02], cell_m = 0.005 }
+generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }
 
 [material]
 young_pa = 20000.0
@@ -42,7 +47,7 @@ name = "probe"
 kind = "hook"
 fulcrum_m = [0.03, 0.02, 0.15]
 length_m = 0.3
-radius_m = 0.0025
+radius_m = 0.005
 tip_length_m = 0.01
 
 [simulation]
@@ -50,21 +55,18 @@ dt_s = 0.001
 "#;
 
 /// The block's top face (m).
-const TOP_M: f64 = 0.02;
+const TOP_M: f64 = 0.04;
 /// Where the probe presses (x, y; m): the middle of the block.
 const AT_M: [f64; 2] = [0.03, 0.02];
 /// The tip waits this far above the top (m) while the proxy comes in from
 /// its fulcrum (1 m/s at most: 0.12 m in well under the wait).
 const ABOVE_M: f64 = 0.01;
 /// How deep the probe's end (the lowest point of its round tip) is held
-/// below the top (m); the tool's tip point is the centre of that
-/// hemisphere, `RADIUS_M` above it. The issue asks for 15 mm; on this
-/// 5 mm-cell, 20 mm-thick box a 2.5 mm probe pressed past about 13 mm can
-/// slip off the vertex it presses (README, the penalty law's known
-/// limits), so the glitch is tested 10 mm deep, where the press holds.
-const DEPTH_M: f64 = 0.010;
+/// below the top (m), as the issue asks; the tool's tip point is the
+/// centre of that hemisphere, `RADIUS_M` above it.
+const DEPTH_M: f64 = 0.015;
 /// The probe's radius (m).
-const RADIUS_M: f64 = 0.0025;
+const RADIUS_M: f64 = 0.005;
 /// The tip point while held (m).
 const HELD_Z_M: f64 = TOP_M + RADIUS_M - DEPTH_M;
 /// Replay times (s): waiting above, then the press at 20 mm/s (22.5 mm),
@@ -204,7 +206,18 @@ fn wait_until_simulating(session: &str, sim: &mut Child) {
 
 /// Runs the simulation and the daemon replaying a 5 ms glitch of `offset_m`;
 /// checks the acceptance on the record.
-fn glitch(tag: &str, offset_m: [f64; 3]) {
+/// Who stops the glitch: the daemon's pose plausibility check (the system
+/// as shipped), or the simulation's proxy alone (the daemon's check opened
+/// so wide that the glitch reaches the simulation, and the daemon rendering
+/// the simulation's samples as they come: its local model would otherwise
+/// extrapolate the glitched pose itself).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Guard {
+    System,
+    ProxyOnly,
+}
+
+fn glitch(tag: &str, offset_m: [f64; 3], guard: Guard) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let session = format!("glitch{tag}{}", std::process::id());
     let dir = scratch_dir(&format!("glitch-{tag}"));
@@ -233,6 +246,19 @@ fn glitch(tag: &str, offset_m: [f64; 3]) {
         .arg(p("rec.csv"))
         .arg("--json")
         .arg(p("daemon.json"))
+        .args(match guard {
+            Guard::System => &[][..],
+            // The rendered force is then the simulation's latest sample:
+            // what the simulation alone makes of the glitch.
+            Guard::ProxyOnly => &[
+                "--max-speed-m-s",
+                "1e6",
+                "--max-accel-m-s2",
+                "1e12",
+                "--extrapolation",
+                "constant",
+            ][..],
+        })
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -404,12 +430,22 @@ fn glitch(tag: &str, offset_m: [f64; 3]) {
         (f1 - f0).abs() <= 0.2 * f0 && back <= 0.2 * f0,
         "not back: |F| {f1} N after, {f0} N before, the mean force {back} N from before\n{report}"
     );
-    // Never below half, never above 1.5x while the hand holds still.
-    assert!(
-        low.force() >= 0.5 * f0,
-        "fell to {} N of {f0} N\n{report}",
-        low.force()
-    );
+    // Never below half, never above 1.5x while the hand holds still. With
+    // the glitch let through, the proxy follows the device's jump at its
+    // bounded speed for the 5 ms (1 m/s: 5 mm of the 15 mm) and the force
+    // falls for that long: only the way back and the ceiling are asked.
+    if guard == Guard::System {
+        assert!(
+            low.force() >= 0.5 * f0,
+            "fell to {} N of {f0} N\n{report}",
+            low.force()
+        );
+    } else {
+        assert!(
+            d["poses_rejected"] == 0,
+            "the daemon rejected the glitch: {d}"
+        );
+    }
     assert!(
         high.force() <= 1.5 * f0,
         "rose to {} N of {f0} N\n{report}",
@@ -420,10 +456,16 @@ fn glitch(tag: &str, offset_m: [f64; 3]) {
 
 #[test]
 fn a_5_ms_glitch_1_m_away_leaves_the_held_force_as_it_was() {
-    glitch("away", [0.0, 0.0, 1.0]);
+    glitch("away", [0.0, 0.0, 1.0], Guard::System);
 }
 
 #[test]
 fn a_5_ms_glitch_20_mm_deeper_leaves_the_held_force_as_it_was() {
-    glitch("deeper", [0.0, 0.0, -0.02]);
+    glitch("deeper", [0.0, 0.0, -0.02], Guard::System);
+}
+
+#[test]
+fn a_glitch_the_daemon_lets_through_is_held_by_the_simulation_proxy() {
+    glitch("proxy-away", [0.0, 0.0, 1.0], Guard::ProxyOnly);
+    glitch("proxy-deeper", [0.0, 0.0, -0.02], Guard::ProxyOnly);
 }
