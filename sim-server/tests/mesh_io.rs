@@ -78,13 +78,13 @@ fn reference_meshes_agree_across_formats() {
                 &m.tet_physical[..5]
             );
             assert_eq!(m.tet_physical.len(), tets);
+            // The boundary (physical surface 2) is kept for selections;
+            // the lines and points Gmsh also wrote are ignored.
             assert!(
-                m.warnings
-                    .iter()
-                    .any(|w| w.contains("triangles") && w.contains("ignored")),
-                "{name}: {:?}",
-                m.warnings
+                !m.surface_physical.is_empty() && m.surface_physical.iter().all(|(_, t)| *t == 2),
+                "{name}"
             );
+            assert!(m.warnings.is_empty(), "{name}: {:?}", m.warnings);
         }
         // The ASCII files print 16 significant digits, the binary one stores
         // the exact doubles: the same geometry up to the last bit.
@@ -364,6 +364,14 @@ fn msh41_small_file_and_its_faults() {
     assert_eq!((m.mesh.vertex_count(), m.mesh.tet_count()), (5, 2));
     assert_eq!(m.tet_physical, [3, 3]);
     assert_eq!(m.mesh.tets()[1].map(|v| v.0)[0], 1, "tag 20 is vertex 1");
+    // The triangle is on surface 5, physical group 2: kept for surface
+    // selections, not ignored.
+    assert_eq!(m.surface_physical, [([0, 1, 2], 2)]);
+    assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    // On a surface in no physical group it is ignored, with a warning.
+    let untagged = MSH41.replace("5 0 0 0 1 1 1 1 2 0", "5 0 0 0 1 1 1 0 0");
+    let m = parse_mesh("t.x", untagged.as_bytes(), MeshFormat::Msh).unwrap();
+    assert!(m.surface_physical.is_empty());
     assert!(
         m.warnings.iter().any(|w| w.contains("ignored 1 triangles")),
         "{:?}",
@@ -611,7 +619,16 @@ fn medit_small_file_and_its_faults() {
     let m = parse_mesh("t.x", MEDIT.as_bytes(), MeshFormat::Medit).unwrap();
     assert_eq!((m.mesh.vertex_count(), m.mesh.tet_count()), (5, 2));
     assert_eq!(m.tet_physical, [3, 3]);
+    // The triangle's reference 2 makes it a surface for selections; a
+    // triangle past the vertices is an error at its line.
+    assert_eq!(m.surface_physical, [([0, 1, 2], 2)]);
     let f = MeshFormat::Medit;
+    fails_at(
+        &with_line(MEDIT, 12, "1 2 9 2"),
+        f,
+        12,
+        "triangle 1 references vertex 9",
+    );
     fails_at(
         &with_line(MEDIT, 16, "2 3 4 6 3"),
         f,
@@ -805,6 +822,12 @@ fn files_from_meshio_sofa_and_paraview_read_as_the_reference() {
             assert!(p.abs_diff_eq(*q, 1e-17), "{name}: {p} != {q}");
         }
         assert!(m.tet_physical.iter().all(|&p| p == 1), "{name}");
+        // The boundary triangles (physical surface 2) where the file keeps
+        // them: the same 762 triangles as Gmsh's own file.
+        if name != "ellipsoid_zlib_appended.vtu" {
+            assert_eq!(m.surface_physical, gmsh.surface_physical, "{name}");
+            assert_eq!(m.surface_physical.len(), 762, "{name}");
+        }
         let xml_warning = m.warnings.iter().any(|w| w.contains("holds VTK XML"));
         assert_eq!(
             xml_warning,

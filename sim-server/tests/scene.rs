@@ -543,3 +543,57 @@ fn a_mesh_file_in_millimetres_is_scaled_into_metres() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_surface_physical_tag_selects_that_surface_s_vertices() {
+    // The Gmsh reference box: volume group 1, boundary group 2. Fixing
+    // `surface_physical = 2` holds exactly the boundary vertices (after the
+    // scene's renumbering), in any format that keeps the triangles' tags.
+    let meshes = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/meshes");
+    let scene = |file: &str, fixed: &str| {
+        let src = SceneSource {
+            name: "surface.toml".into(),
+            dir: std::path::PathBuf::from(meshes),
+            text: format!(
+                "[mesh]\nfile = \"{file}\"\n[material]\nyoung_pa = 3000.0\npoisson = 0.4\ndensity_kg_m3 = 1000.0\n{fixed}"
+            ),
+        };
+        build_scene(&src, &src.parse().unwrap())
+    };
+    for file in [
+        "box_v41.msh",
+        "box_v22.msh",
+        "ellipsoid_v1.msh",
+        "ellipsoid_bin42.vtk",
+    ] {
+        let b = scene(file, "[[fixed]]\nselect = { surface_physical = 2 }\n").unwrap();
+        let m = &b.model;
+        let mut boundary: Vec<sim_server::ids::VertexId> =
+            m.topology().surface_triangles(m.mesh()).flatten().collect();
+        boundary.sort_unstable();
+        boundary.dedup();
+        assert_eq!(b.fixed, boundary, "{file}");
+        assert!(b.fixed.len() < m.vertex_count(), "{file}");
+    }
+    // A tag no triangle carries selects nothing; a surface tag cannot
+    // choose tetrahedra.
+    let Err(e) = scene(
+        "box_v41.msh",
+        "[[fixed]]\nselect = { surface_physical = 7 }\n",
+    ) else {
+        panic!("a missing surface tag was accepted")
+    };
+    assert!(e.to_string().contains("selects no vertex"), "{e}");
+    let Err(e) = scene(
+        "box_v41.msh",
+        "[[region]]\nselect = { surface_physical = 2 }\nyoung_pa = 1.0\n",
+    ) else {
+        panic!("a surface tag chose tetrahedra")
+    };
+    assert!(
+        e.to_string()
+            .contains("surface_physical selects the vertices")
+            && e.to_string().contains("surface.toml:"),
+        "{e}"
+    );
+}

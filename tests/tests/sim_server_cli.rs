@@ -176,6 +176,7 @@ fn check_tells_where_a_mesh_is_its_units_and_its_tags() {
     assert!(!text.contains("not plausibly"), "{text}");
     let j = read_json(&json);
     assert_eq!(j["physical_tags"], serde_json::json!([[1, 2182]]));
+    assert_eq!(j["surface_physical_tags"], serde_json::json!([[2, 762]]));
     assert!(
         (j["median_edge_m"].as_f64().unwrap() - 7.275e-3).abs() < 1e-5,
         "{j}"

@@ -36,6 +36,9 @@ struct CheckJson {
     median_edge_m: f64,
     /// Per physical tag of the tetrahedra, how many carry it (mesh files).
     physical_tags: Vec<(i32, usize)>,
+    /// Per physical tag of the surface triangles, how many carry it (mesh
+    /// files; `select = { surface_physical = N }` takes their vertices).
+    surface_physical_tags: Vec<(i32, usize)>,
 }
 
 /// Prints where the mesh is, its typical edge and a warning when that is
@@ -109,6 +112,18 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
             "physical tags of the tetrahedra (count): {}",
             listed.join(", ")
         );
+        let surface: Vec<i32> = imported.surface_physical.iter().map(|(_, t)| *t).collect();
+        let surface_tags = tag_counts(&surface);
+        if !surface_tags.is_empty() {
+            let listed: Vec<String> = surface_tags
+                .iter()
+                .map(|(t, n)| format!("{t} ({n})"))
+                .collect();
+            println!(
+                "physical tags of the surface triangles (count; select = {{ surface_physical = N }}): {}",
+                listed.join(", ")
+            );
+        }
         print_quality(&q);
         let mut warnings = imported.warnings;
         warnings.extend(units);
@@ -136,6 +151,7 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
                     bounds_m: [extent.min_m.to_array(), extent.max_m.to_array()],
                     median_edge_m: extent.median_edge_m,
                     physical_tags: tags,
+                    surface_physical_tags: surface_tags,
                 },
             )?;
         }
@@ -273,6 +289,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 bounds_m: [extent.min_m.to_array(), extent.max_m.to_array()],
                 median_edge_m: extent.median_edge_m,
                 physical_tags: Vec::new(),
+                surface_physical_tags: Vec::new(),
             },
         )?;
     }

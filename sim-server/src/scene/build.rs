@@ -3,7 +3,7 @@
 //! the scene declares is built.
 
 use super::materials::resolve;
-use super::select::{Region, distance_to_segment, segment_crosses_tet};
+use super::select::{Region, Tags, distance_to_segment, segment_crosses_tet};
 use super::spec::{
     BackendName, BoundName, DtPolicyName, LatticeKind, MaterialModelName, MembraneModelName,
     PrecisionName, SceneSpec, ShapeKind, ToolKind,
@@ -181,8 +181,8 @@ fn scaled(mesh: &TetMesh, s: Real) -> Result<TetMesh, crate::mesh::MeshError> {
 /// A scene's mesh, renumbered, with what it said about itself.
 struct LoadedMesh {
     mesh: TetMesh,
-    /// Per tetrahedron, its physical tag (0: none).
-    physical: Vec<i32>,
+    /// Physical tags of tetrahedra and surface triangles.
+    physical: Tags,
     /// Per vertex, its index before renumbering (`None`: not renumbered).
     original_ids: Option<Vec<u32>>,
 }
@@ -206,7 +206,15 @@ fn load_mesh(
                 }
                 None => imported.mesh,
             };
-            (mesh, imported.tet_physical)
+            let tags = Tags {
+                tets: imported.tet_physical,
+                surface: imported
+                    .surface_physical
+                    .into_iter()
+                    .map(|(t, tag)| (t.map(VertexId), tag))
+                    .collect(),
+            };
+            (mesh, tags)
         }
         (None, Some(g)) if m.scale.is_some() || m.units.is_some() => {
             return Err(src.error(
@@ -275,7 +283,11 @@ fn load_mesh(
             }
             report.mesh_source = format!("generated {:?}", g.shape).to_lowercase();
             let n = mesh.tet_count();
-            (mesh, vec![0; n])
+            let tags = Tags {
+                tets: vec![0; n],
+                surface: Vec::new(),
+            };
+            (mesh, tags)
         }
         _ => {
             return Err(src.error(
@@ -298,6 +310,14 @@ fn load_mesh(
         });
     }
     let order = rcm_order(&mesh);
+    let mut new_of_old = vec![VertexId(0); order.len()];
+    for (new, old) in order.iter().enumerate() {
+        new_of_old[old.idx()] = VertexId::from(new);
+    }
+    let mut physical = physical;
+    for (tri, _) in &mut physical.surface {
+        *tri = tri.map(|v| new_of_old[v.idx()]);
+    }
     Ok(LoadedMesh {
         mesh: mesh.permuted(&order),
         physical,
@@ -353,7 +373,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         };
         let keys = r.material_keys().over(default_keys);
         let material = resolve(src, &keys, fiber.is_some(), region.span(), &what)?;
-        let tets = Region::new(src, &r.select)?.tets(&mesh, &physical);
+        let tets = Region::for_tets(src, &r.select)?.tets(&mesh, &physical);
         if tets.is_empty() {
             return Err(src.error(r.select.span(), format!("{what} selects no tetrahedron")));
         }
@@ -464,7 +484,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
     let hybrid_tets = match &spec.hybrid {
         Some(h) => {
             let select = &h.get_ref().select;
-            let tets = Region::new(src, select)?.tets(mesh, &physical);
+            let tets = Region::for_tets(src, select)?.tets(mesh, &physical);
             if tets.is_empty() || tets.len() == mesh.tet_count() {
                 return Err(src.error(
                     select.span(),

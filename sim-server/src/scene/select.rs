@@ -1,5 +1,6 @@
-//! Selections (box, sphere, physical tag) of vertices and tetrahedra, and
-//! the tetrahedra a vessel segment crosses.
+//! Selections (box, sphere, physical tag of tetrahedra or of surface
+//! triangles) of vertices and tetrahedra, and the tetrahedra a vessel
+//! segment crosses.
 
 use super::spec::Selection;
 use super::{SceneError, SceneSource};
@@ -8,6 +9,16 @@ use crate::math::{Real, Vec3};
 use crate::mesh::{TET_FACES, TetMesh};
 use toml::Spanned;
 
+/// The physical tags a mesh file gave.
+#[derive(Clone, Debug, Default)]
+pub struct Tags {
+    /// Per tetrahedron (0: none).
+    pub tets: Vec<i32>,
+    /// The tagged surface triangles (Gmsh physical surfaces, medit
+    /// triangle references, tagged VTK triangles) and their tags.
+    pub surface: Vec<([VertexId; 3], i32)>,
+}
+
 /// A checked selection.
 #[derive(Clone, Copy, Debug)]
 pub enum Region {
@@ -15,21 +26,28 @@ pub enum Region {
     Box(Vec3, Vec3),
     /// Sphere (centre, radius).
     Sphere(Vec3, Real),
-    /// Physical tag.
+    /// Physical tag of tetrahedra.
     Physical(i32),
+    /// Physical tag of surface triangles (vertices only).
+    Surface(i32),
 }
 
 impl Region {
     /// Checks that exactly one key is given and the values make sense.
     pub fn new(src: &SceneSource, sel: &Spanned<Selection>) -> Result<Self, SceneError> {
         let s = sel.get_ref();
-        let given =
-            s.box_m.is_some() as u8 + s.sphere_m.is_some() as u8 + s.physical.is_some() as u8;
+        let given = s.box_m.is_some() as u8
+            + s.sphere_m.is_some() as u8
+            + s.physical.is_some() as u8
+            + s.surface_physical.is_some() as u8;
         if given != 1 {
             return Err(src.error(
                 sel.span(),
-                "`select` needs exactly one of box_m, sphere_m, physical",
+                "`select` needs exactly one of box_m, sphere_m, physical, surface_physical",
             ));
+        }
+        if let Some(tag) = s.surface_physical {
+            return Ok(Region::Surface(tag));
         }
         if let Some([a, b]) = s.box_m {
             let (a, b) = (Vec3::from_array(a), Vec3::from_array(b));
@@ -51,20 +69,34 @@ impl Region {
         Ok(Region::Physical(s.physical.expect("one key is given")))
     }
 
+    /// [`Region::new`] for a selection of tetrahedra (a region, the
+    /// hybrid's part): a surface tag selects vertices only, and is refused.
+    pub fn for_tets(src: &SceneSource, sel: &Spanned<Selection>) -> Result<Self, SceneError> {
+        match Self::new(src, sel)? {
+            Region::Surface(_) => Err(src.error(
+                sel.span(),
+                "surface_physical selects the vertices of a surface ([[fixed]], [[load]]); tetrahedra are selected by box_m, sphere_m or physical",
+            )),
+            r => Ok(r),
+        }
+    }
+
     fn contains(&self, p: Vec3) -> bool {
         match *self {
             Region::Box(a, b) => p.cmpge(a).all() && p.cmple(b).all(),
             Region::Sphere(c, r) => p.distance_squared(c) <= r * r,
-            Region::Physical(_) => false,
+            Region::Physical(_) | Region::Surface(_) => false,
         }
     }
 
-    /// Tetrahedra selected: by centroid, or by physical tag.
-    pub fn tets(&self, mesh: &TetMesh, physical: &[i32]) -> Vec<TetId> {
+    /// Tetrahedra selected: by centroid, or by physical tag (none by a
+    /// surface tag: see [`Region::for_tets`]).
+    pub fn tets(&self, mesh: &TetMesh, tags: &Tags) -> Vec<TetId> {
         (0..mesh.tet_count())
             .map(TetId::from)
             .filter(|t| match *self {
-                Region::Physical(tag) => physical.get(t.idx()) == Some(&tag),
+                Region::Physical(tag) => tags.tets.get(t.idx()) == Some(&tag),
+                Region::Surface(_) => false,
                 _ => {
                     let p = mesh.tet_points(*t);
                     self.contains((p[0] + p[1] + p[2] + p[3]) / 4.0)
@@ -73,13 +105,21 @@ impl Region {
             .collect()
     }
 
-    /// Vertices selected: by rest position, or belonging to a tetrahedron of the tag.
-    pub fn vertices(&self, mesh: &TetMesh, physical: &[i32]) -> Vec<VertexId> {
+    /// Vertices selected: by rest position, belonging to a tetrahedron of
+    /// the tag, or to a surface triangle of the surface tag.
+    pub fn vertices(&self, mesh: &TetMesh, tags: &Tags) -> Vec<VertexId> {
         let mut hit = vec![false; mesh.vertex_count()];
         match *self {
             Region::Physical(_) => {
-                for t in self.tets(mesh, physical) {
+                for t in self.tets(mesh, tags) {
                     for v in mesh.tets()[t.idx()] {
+                        hit[v.idx()] = true;
+                    }
+                }
+            }
+            Region::Surface(tag) => {
+                for (tri, _) in tags.surface.iter().filter(|(_, t)| *t == tag) {
+                    for v in tri {
                         hit[v.idx()] = true;
                     }
                 }

@@ -282,8 +282,11 @@ pub struct Selection {
     pub box_m: Option<[[f64; 3]; 2]>,
     /// Sphere [cx, cy, cz, r] (m).
     pub sphere_m: Option<[f64; 4]>,
-    /// A physical tag of the imported mesh.
+    /// A physical tag of the imported mesh's tetrahedra.
     pub physical: Option<i32>,
+    /// A physical tag of the imported mesh's surface triangles (a Gmsh
+    /// physical surface, a medit triangle reference): its vertices.
+    pub surface_physical: Option<i32>,
 }
 
 /// Membrane model names.

@@ -11,6 +11,8 @@ use super::{Builder, ImportedMesh, NodeMap, gmsh_legacy, gmsh41};
 
 /// The Gmsh element type 4: the 4-node tetrahedron.
 pub(super) const TET4: i64 = 4;
+/// Gmsh's 3-node triangle.
+pub(super) const TRI3: i64 = 2;
 
 /// What the importer knows about a Gmsh element type.
 #[derive(Clone, Copy, Debug)]
@@ -377,6 +379,15 @@ pub(super) fn element(
     b: &mut Builder,
 ) -> Result<(), MeshIoError> {
     let kind = gmsh_type(t).ok_or_else(|| unsupported(file, at, t))?;
+    let physical = tags.first().map_or(Ok(0), |&p| {
+        i32::try_from(p).map_err(|_| perr(file, at, format!("physical tag {p} is out of range")))
+    })?;
+    if t == TRI3 && physical != 0 {
+        // A triangle of a physical surface: kept for surface selections.
+        let v = vertices::<3>(file, at, tag, node_tags, nodes, "a triangle")?;
+        b.triangle(v, physical);
+        return Ok(());
+    }
     if kind.dim < 3 {
         b.ignore(kind.plural, 1);
         return Ok(());
@@ -384,17 +395,31 @@ pub(super) fn element(
     if t != TET4 {
         return Err(unsupported(file, at, t));
     }
-    if node_tags.len() != 4 {
+    let v = vertices::<4>(file, at, tag, node_tags, nodes, "a tetrahedron")?;
+    b.tet(v, physical, tag as u64, at);
+    Ok(())
+}
+
+/// The vertices of element `tag`'s `K` node tags (`what`: "a tetrahedron").
+fn vertices<const K: usize>(
+    file: &str,
+    at: Location,
+    tag: i64,
+    node_tags: &[i64],
+    nodes: &NodeMap,
+    what: &str,
+) -> Result<[u32; K], MeshIoError> {
+    if node_tags.len() != K {
         return Err(perr(
             file,
             at,
             format!(
-                "expected 4 node tags for a tetrahedron, found {}",
+                "expected {K} node tags for {what}, found {}",
                 node_tags.len()
             ),
         ));
     }
-    let mut v = [0u32; 4];
+    let mut v = [0u32; K];
     for (slot, &nt) in v.iter_mut().zip(node_tags) {
         *slot = u64::try_from(nt)
             .ok()
@@ -407,9 +432,5 @@ pub(super) fn element(
                 )
             })?;
     }
-    let physical = tags.first().map_or(Ok(0), |&p| {
-        i32::try_from(p).map_err(|_| perr(file, at, format!("physical tag {p} is out of range")))
-    })?;
-    b.tet(v, physical, tag as u64, at);
-    Ok(())
+    Ok(v)
 }

@@ -10,7 +10,7 @@
 //! and `$Entities` gives that entity's physical groups.
 
 use super::error::{Location, MeshIoError};
-use super::gmsh::{TET4, expect_end, gmsh_type, unsupported};
+use super::gmsh::{TET4, TRI3, expect_end, gmsh_type, unsupported};
 use super::text::{Lines, as_text, parse_f64, parse_i64, parse_u64, perr, shown};
 use super::{Builder, ImportedMesh, NodeMap};
 use std::collections::HashMap;
@@ -343,12 +343,12 @@ pub(super) fn expect_marker(
 fn body(file: &str, mut input: impl Input) -> Result<ImportedMesh, MeshIoError> {
     let mut b = Builder::new(file, "element");
     let mut nodes = NodeMap::new();
-    let mut volume_physical: HashMap<i32, i32> = HashMap::new();
+    let mut physical = EntityPhysical::default();
     while let Some((at, marker)) = input.marker()? {
         match marker.as_str() {
-            "$Entities" => entities(&mut input, &mut volume_physical, &mut b)?,
+            "$Entities" => entities(&mut input, &mut physical, &mut b)?,
             "$Nodes" => node_blocks(file, &mut input, &mut nodes, &mut b)?,
-            "$Elements" => element_blocks(file, &mut input, &nodes, &volume_physical, &mut b)?,
+            "$Elements" => element_blocks(file, &mut input, &nodes, &physical, &mut b)?,
             m if m.starts_with("$End") => {
                 return Err(perr(file, at, format!("unexpected {}", shown(m))));
             }
@@ -369,10 +369,17 @@ fn body(file: &str, mut input: impl Input) -> Result<ImportedMesh, MeshIoError> 
     b.finish()
 }
 
-/// `$Entities`: keeps the first physical tag of each volume.
+/// The first physical tag of each volume and surface entity.
+#[derive(Default)]
+struct EntityPhysical {
+    volumes: HashMap<i32, i32>,
+    surfaces: HashMap<i32, i32>,
+}
+
+/// `$Entities`: keeps the first physical tag of each volume and surface.
 fn entities(
     input: &mut impl Input,
-    volume_physical: &mut HashMap<i32, i32>,
+    physical: &mut EntityPhysical,
     b: &mut Builder,
 ) -> Result<(), MeshIoError> {
     input.record("the entity counts")?;
@@ -405,14 +412,19 @@ fn entities(
                 }
             }
             input.end_record()?;
-            if dim == 3 {
+            if dim >= 2 {
+                let (what, map) = if dim == 3 {
+                    ("volume", &mut physical.volumes)
+                } else {
+                    ("surface", &mut physical.surfaces)
+                };
                 if n_physical > 1 {
                     b.warn(format!(
-                        "volume {tag} is in {n_physical} physical groups; its tetrahedra get the first, {}",
+                        "{what} {tag} is in {n_physical} physical groups; its elements get the first, {}",
                         first.unwrap_or(0)
                     ));
                 }
-                volume_physical.insert(tag, first.unwrap_or(0));
+                map.insert(tag, first.unwrap_or(0));
             }
         }
     }
@@ -488,12 +500,53 @@ fn node_blocks(
     Ok(())
 }
 
+/// Reads `n` element records of `K` nodes each (`what`: "a tetrahedron"),
+/// handing each one's vertices, tag and place to `add`.
+fn read_elements<const K: usize>(
+    file: &str,
+    input: &mut impl Input,
+    nodes: &NodeMap,
+    n: u64,
+    what: &str,
+    mut add: impl FnMut([u32; K], u64, Location),
+) -> Result<(), MeshIoError> {
+    for _ in 0..n {
+        let fields = input.record(what)?;
+        let at = input.at();
+        if let Some(f) = fields.filter(|&f| f != K + 1) {
+            return Err(perr(
+                file,
+                at,
+                format!(
+                    "expected {K} node tags for {what}, found {}",
+                    f.saturating_sub(1)
+                ),
+            ));
+        }
+        let tag = input.size("an element tag")?;
+        let mut v = [0u32; K];
+        for slot in &mut v {
+            let nt = input.size("a node tag")?;
+            *slot = nodes.get(nt).ok_or_else(|| {
+                perr(
+                    file,
+                    at,
+                    format!("element {tag} references node {nt}, which is not in $Nodes"),
+                )
+            })?;
+        }
+        input.end_record()?;
+        add(v, tag, at);
+    }
+    Ok(())
+}
+
 /// `$Elements`: blocks of one element type on one entity.
 fn element_blocks(
     file: &str,
     input: &mut impl Input,
     nodes: &NodeMap,
-    volume_physical: &HashMap<i32, i32>,
+    physical: &EntityPhysical,
     b: &mut Builder,
 ) -> Result<(), MeshIoError> {
     let at = input.at();
@@ -515,6 +568,14 @@ fn element_blocks(
         input.end_record()?;
         found = found.saturating_add(n);
         let kind = gmsh_type(t.into()).ok_or_else(|| unsupported(file, block_at, t.into()))?;
+        // Triangles of a physical surface are kept for surface selections.
+        let surface = physical.surfaces.get(&entity).copied().unwrap_or(0);
+        if i64::from(t) == TRI3 && dim == 2 && surface != 0 {
+            read_elements(file, input, nodes, n, "a triangle", |v: [u32; 3], _, _| {
+                b.triangle(v, surface)
+            })?;
+            continue;
+        }
         if kind.dim < 3 && dim < 3 {
             input.skip_records(n, 1 + kind.nodes, kind.plural)?;
             b.ignore(kind.plural, usize::try_from(n).unwrap_or(usize::MAX));
@@ -523,35 +584,10 @@ fn element_blocks(
         if i64::from(t) != TET4 {
             return Err(unsupported(file, block_at, t.into()));
         }
-        let physical = volume_physical.get(&entity).copied().unwrap_or(0);
-        for _ in 0..n {
-            let fields = input.record("a tetrahedron")?;
-            let at = input.at();
-            if let Some(f) = fields.filter(|&f| f != 5) {
-                return Err(perr(
-                    file,
-                    at,
-                    format!(
-                        "expected 4 node tags for a tetrahedron, found {}",
-                        f.saturating_sub(1)
-                    ),
-                ));
-            }
-            let tag = input.size("an element tag")?;
-            let mut v = [0u32; 4];
-            for slot in &mut v {
-                let nt = input.size("a node tag")?;
-                *slot = nodes.get(nt).ok_or_else(|| {
-                    perr(
-                        file,
-                        at,
-                        format!("element {tag} references node {nt}, which is not in $Nodes"),
-                    )
-                })?;
-            }
-            input.end_record()?;
-            b.tet(v, physical, tag, at);
-        }
+        let volume = physical.volumes.get(&entity).copied().unwrap_or(0);
+        read_elements(file, input, nodes, n, "a tetrahedron", |v, tag, at| {
+            b.tet(v, volume, tag, at)
+        })?;
     }
     if found != total {
         return Err(perr(

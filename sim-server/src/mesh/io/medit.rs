@@ -19,6 +19,8 @@ use std::path::Path;
 enum Section {
     Vertices,
     Tetrahedra,
+    /// Kept for surface selections when their reference is not 0.
+    Triangles,
     /// Lower-dimensional elements (plural noun for the warning) or annotations
     /// such as corners and ridges (empty noun: not elements, no warning), skipped.
     Skip(usize, &'static str),
@@ -35,7 +37,7 @@ fn section(keyword: &str) -> Option<Section> {
         "Vertices" => Vertices,
         "Tetrahedra" => Tetrahedra,
         "Edges" => Skip(3, "edges"),
-        "Triangles" => Skip(4, "triangles"),
+        "Triangles" => Triangles,
         "Quadrilaterals" => Skip(5, "quadrilaterals"),
         "EdgesP2" => Skip(4, "quadratic edges"),
         "TrianglesP2" => Skip(7, "quadratic triangles"),
@@ -151,38 +153,16 @@ pub(super) fn parse<'a>(file: &str, bytes: &'a [u8]) -> Result<ImportedMesh, Mes
                         let nv = b.vertex_count();
                         for _ in 0..n {
                             tet_number += 1;
-                            let mut int = |what: &str| -> Result<(i64, Location), MeshIoError> {
-                                let tok = next(&mut t, what)?;
-                                parse_i64(tok.text).map(|v| (v, tok.at())).ok_or_else(|| {
-                                    perr(
-                                        file,
-                                        tok.at(),
-                                        format!(
-                                            "expected {what} of tetrahedron {tet_number}, found {}",
-                                            shown(tok.text)
-                                        ),
-                                    )
-                                })
-                            };
-                            let mut v = [0u32; 4];
-                            let mut first = None;
-                            for slot in &mut v {
-                                let (value, at) = int("a vertex index")?;
-                                first.get_or_insert(at);
-                                *slot = usize::try_from(value)
-                                    .ok()
-                                    .filter(|&i| (1..=nv).contains(&i))
-                                    .map(|i| (i - 1) as u32)
-                                    .ok_or_else(|| {
-                                        perr(file, at, format!("tetrahedron {tet_number} references vertex {value}, but there are {nv} vertices (Vertices must come first)"))
-                                    })?;
-                            }
-                            let (value, at) = int("the reference")?;
-                            let physical = i32::try_from(value).map_err(|_| {
-                                perr(file, at, format!("reference {value} is out of range"))
-                            })?;
-                            let at = first.unwrap_or(at);
+                            let (v, physical, at) =
+                                element::<4>(&mut t, file, nv, "tetrahedron", tet_number)?;
                             b.tet(v, physical, tet_number, at);
+                        }
+                    }
+                    Section::Triangles => {
+                        let nv = b.vertex_count();
+                        for k in 1..=n {
+                            let (v, physical, _) = element::<3>(&mut t, file, nv, "triangle", k)?;
+                            b.triangle(v, physical);
                         }
                     }
                     Section::Skip(per, plural) => {
@@ -208,6 +188,48 @@ pub(super) fn parse<'a>(file: &str, bytes: &'a [u8]) -> Result<ImportedMesh, Mes
         }
     }
     b.finish()
+}
+
+/// One element of `K` 1-based vertex indices and a reference (`noun`
+/// `number` in messages): the 0-based vertices, the reference as a physical
+/// tag and the place of its first index.
+fn element<const K: usize>(
+    t: &mut Tokens,
+    file: &str,
+    nv: usize,
+    noun: &str,
+    number: u64,
+) -> Result<([u32; K], i32, Location), MeshIoError> {
+    let mut int = |what: &str| -> Result<(i64, Location), MeshIoError> {
+        let tok = next_token(t, file, what)?;
+        parse_i64(tok.text).map(|v| (v, tok.at())).ok_or_else(|| {
+            perr(
+                file,
+                tok.at(),
+                format!(
+                    "expected {what} of {noun} {number}, found {}",
+                    shown(tok.text)
+                ),
+            )
+        })
+    };
+    let mut v = [0u32; K];
+    let mut first = None;
+    for slot in &mut v {
+        let (value, at) = int("a vertex index")?;
+        first.get_or_insert(at);
+        *slot = usize::try_from(value)
+            .ok()
+            .filter(|&i| (1..=nv).contains(&i))
+            .map(|i| (i - 1) as u32)
+            .ok_or_else(|| {
+                perr(file, at, format!("{noun} {number} references vertex {value}, but there are {nv} vertices (Vertices must come first)"))
+            })?;
+    }
+    let (value, at) = int("the reference")?;
+    let physical = i32::try_from(value)
+        .map_err(|_| perr(file, at, format!("reference {value} is out of range")))?;
+    Ok((v, physical, first.unwrap_or(at)))
 }
 
 /// The next token, or an error at the line where the file ends.

@@ -82,6 +82,12 @@ pub struct ImportedMesh {
     /// reference, VTK cell data `physical` / `gmsh:physical` /
     /// `CellEntityIds`); 0 when the file has none.
     pub tet_physical: Vec<i32>,
+    /// The file's triangles that carry a physical tag (a Gmsh physical
+    /// surface, a medit reference, a tagged VTK triangle cell): 0-based
+    /// vertex indices and the tag, for selections by surface
+    /// (`select = { surface_physical = N }`). Untagged triangles are
+    /// ignored like the other lower-dimensional elements.
+    pub surface_physical: Vec<([u32; 3], i32)>,
     /// What the import changed or left out, for the user to see.
     pub warnings: Vec<String>,
 }
@@ -140,6 +146,7 @@ pub(crate) struct Builder<'f> {
     positions: Vec<Vec3>,
     tets: Vec<[u32; 4]>,
     tet_physical: Vec<i32>,
+    surface_physical: Vec<([u32; 3], i32)>,
     /// Each tetrahedron's number in the file and where it is.
     tet_origin: Vec<(u64, Location)>,
     /// Lower-dimensional elements ignored, by kind (plural noun).
@@ -156,6 +163,7 @@ impl<'f> Builder<'f> {
             positions: Vec::new(),
             tets: Vec::new(),
             tet_physical: Vec::new(),
+            surface_physical: Vec::new(),
             tet_origin: Vec::new(),
             ignored: Vec::new(),
             warnings: Vec::new(),
@@ -209,6 +217,17 @@ impl<'f> Builder<'f> {
         self.tets.push(v);
         self.tet_physical.push(physical);
         self.tet_origin.push((number, at));
+    }
+
+    /// Adds a triangle of 0-based vertex indices (already checked to be in
+    /// range by the caller) with its physical tag: kept for surface
+    /// selections when the tag is not 0, else counted as ignored.
+    pub fn triangle(&mut self, v: [u32; 3], physical: i32) {
+        if physical == 0 {
+            self.ignore("triangles", 1);
+        } else {
+            self.surface_physical.push((v, physical));
+        }
     }
 
     /// Counts `n` ignored lower-dimensional elements of a kind (plural noun).
@@ -286,6 +305,7 @@ impl<'f> Builder<'f> {
         Ok(ImportedMesh {
             mesh,
             tet_physical: self.tet_physical,
+            surface_physical: self.surface_physical,
             warnings: self.warnings,
         })
     }

@@ -29,6 +29,9 @@ pub(super) enum CellKind {
 }
 
 /// Classifies a VTK cell type.
+/// VTK's linear triangle.
+const VTK_TRIANGLE: i64 = 5;
+
 pub(super) fn cell_kind(t: i64) -> CellKind {
     let lower = match t {
         VTK_TETRA => return CellKind::Tet,
@@ -325,8 +328,32 @@ pub(super) fn add_cells<'c>(
     physical: Option<&[i32]>,
 ) -> Result<(), MeshIoError> {
     let n_vertices = b.vertex_count();
+    // A cell's points as vertex indices, each checked against the points.
+    let indices = |c: usize, out: &mut [u32]| -> Result<(), MeshIoError> {
+        for (slot, &i) in out.iter_mut().zip(points(c)) {
+            *slot = usize::try_from(i)
+                .ok()
+                .filter(|&i| i < n_vertices)
+                .map(|i| i as u32)
+                .ok_or_else(|| {
+                    perr(
+                        file,
+                        at(c),
+                        format!("cell {c} references point {i}, but there are {n_vertices} points"),
+                    )
+                })?;
+        }
+        Ok(())
+    };
     for (c, &t) in types.iter().enumerate() {
+        let tag = physical.and_then(|p| p.get(c)).copied().unwrap_or(0);
         match cell_kind(t) {
+            // A tagged linear triangle: kept for surface selections.
+            CellKind::Lower(_) if t == VTK_TRIANGLE && tag != 0 && points(c).len() == 3 => {
+                let mut v = [0u32; 3];
+                indices(c, &mut v)?;
+                b.triangle(v, tag);
+            }
             CellKind::Lower(kind) => b.ignore(kind, 1),
             CellKind::Unsupported(element) => {
                 return Err(MeshIoError::UnsupportedElement {
@@ -337,7 +364,7 @@ pub(super) fn add_cells<'c>(
             }
             CellKind::Tet => {
                 let p = points(c);
-                let &[a, bb, cc, d] = p else {
+                if p.len() != 4 {
                     return Err(perr(
                         file,
                         at(c),
@@ -346,22 +373,9 @@ pub(super) fn add_cells<'c>(
                             p.len()
                         ),
                     ));
-                };
-                let mut v = [0u32; 4];
-                for (slot, i) in v.iter_mut().zip([a, bb, cc, d]) {
-                    *slot = usize::try_from(i)
-                        .ok()
-                        .filter(|&i| i < n_vertices)
-                        .map(|i| i as u32)
-                        .ok_or_else(|| {
-                            perr(
-                                file,
-                                at(c),
-                                format!("cell {c} references point {i}, but there are {n_vertices} points"),
-                            )
-                        })?;
                 }
-                let tag = physical.and_then(|p| p.get(c)).copied().unwrap_or(0);
+                let mut v = [0u32; 4];
+                indices(c, &mut v)?;
                 b.tet(v, tag, c as u64, at(c));
             }
         }
