@@ -158,6 +158,8 @@ pub fn run_io(
             && p.seq != last_pose_seq
         {
             last_pose_seq = p.seq;
+            // Pose seq starts at 1: a force sample's pose_seq 0 means "no pose".
+            pose_msgs += 1;
             let mut msg = PoseMsg {
                 version: PROTOCOL_VERSION,
                 tool_count: 1,
@@ -171,7 +173,6 @@ pub fn run_io(
             msg.tools[0].flags = TOOL_PRESENT;
             let _ = pose_pub.send_copy(msg);
             let _ = pose_ready.notify();
-            pose_msgs += 1;
         }
         {
             let mut s = stats.lock().expect("stats lock");

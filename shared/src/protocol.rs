@@ -54,8 +54,9 @@ pub fn check_version(stream: &'static str, found: u32) -> Result<(), VersionErro
 pub struct ToolPose {
     /// Tool tip position (m), scene frame.
     pub tip_m: [f64; 3],
-    /// Unit shaft direction, from the fulcrum towards the tip (zero: derive it
-    /// from the scene's fulcrum).
+    /// Reserved, written as zeros and never read: a tool's shaft always runs
+    /// from the scene's fulcrum (its trocar) to the tip. Kept so the
+    /// layout (and protocol version 1) stays as published.
     pub shaft_dir: [f64; 3],
     /// Jaw opening, 0 closed to 1 fully open.
     pub jaw_opening: f64,
@@ -77,7 +78,8 @@ pub struct PoseMsg {
     pub version: u32,
     /// Tools in use (<= `MAX_TOOLS`).
     pub tool_count: u32,
-    /// Increments by one per message (gaps show losses).
+    /// Increments by one per message (gaps show losses), starting at 1: a
+    /// force sample's `pose_seq` 0 means no pose.
     pub seq: u64,
     /// `CLOCK_MONOTONIC` (ns) when the device was read.
     pub t_ns: u64,
@@ -96,7 +98,7 @@ pub struct ToolForce {
     pub force_n: [f64; 3],
     /// Contact stiffness (N/m), row-major: dF = -K dP for a small tool motion dP.
     pub stiffness_n_per_m: [[f64; 3]; 3],
-    /// `seq` of the pose this step used.
+    /// `seq` of the pose this step used; 0: none (no live pose).
     pub pose_seq: u64,
     /// [`CONTACT`], [`GRIPPING`], [`CUTTING`] bits.
     pub flags: u32,

@@ -37,6 +37,9 @@ struct Got {
     sim_time_ns: u64,
     force_n: f64,
     contact: bool,
+    /// Tool 0's `pose_seq` and whether its `position_m` is zero.
+    pose_seq: u64,
+    at_origin: bool,
 }
 
 /// Receives force samples for `d`, polling every 100 us.
@@ -51,6 +54,8 @@ fn pump(sub: &services::ForceSubscriber, d: Duration, out: &mut Vec<Got>) {
                 sim_time_ns: s.sim_time_ns,
                 force_n: (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt(),
                 contact: s.tools[0].flags & CONTACT != 0,
+                pose_seq: s.tools[0].pose_seq,
+                at_origin: s.tools[0].position_m == [0.0; 3],
             });
         }
         std::thread::sleep(Duration::from_micros(100));
@@ -235,6 +240,14 @@ fn a_tool_lets_go_when_its_pose_publisher_stops_and_when_it_is_killed() {
         "the tool still pressed {} ms after its publisher was killed",
         (held[0].t_ns - killed) / MS
     );
+    // The protocol's "no pose": pose_seq 0 and the position zero, before the
+    // daemon came and after its publisher died; its poses count from 1.
+    let first = got[0];
+    assert!(first.pose_seq == 0 && first.at_origin, "{first:?}");
+    let last = got[got.len() - 1];
+    assert!(last.pose_seq == 0 && last.at_origin, "{last:?}");
+    let pressed = got.iter().find(|g| g.contact).expect("a pressing sample");
+    assert!(pressed.pose_seq >= 1 && !pressed.at_origin, "{pressed:?}");
     let s = read_json(&json);
     assert!(s["pose_timeouts"].as_u64().unwrap() >= 2, "{s}");
 }

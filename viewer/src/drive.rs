@@ -32,7 +32,8 @@ impl Driver {
     pub fn new(tool_count: usize, tip_m: [f64; 3]) -> Self {
         Self {
             publisher: None,
-            seq: 0,
+            // Pose seq starts at 1: a force sample's pose_seq 0 means "no pose".
+            seq: 1,
             tool: 0,
             tool_count: tool_count.min(MAX_TOOLS),
             tip_m,
