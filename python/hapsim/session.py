@@ -1,0 +1,293 @@
+"""A client's side of a hapsim session: read force samples and mesh frames
+as numpy arrays, publish tool poses. Written from docs/protocol.md on
+iceoryx2's Python package (the same version as the Rust crate)."""
+
+import ctypes
+import dataclasses
+import time
+from typing import List, Optional, Sequence, Tuple
+
+import iceoryx2 as iox2
+import numpy as np
+
+from .protocol import (
+    MAX_TOOLS,
+    PROTOCOL_VERSION,
+    TOOL_PRESENT,
+    ForceMsg,
+    MeshHeader,
+    PoseMsg,
+    Position,
+    TopologyHeader,
+    Triangle,
+)
+
+#: A pose older than this (s) drives no tool (the simulation's default
+#: timeout is 50 ms): publish at least this often, even when still.
+POSE_TIMEOUT_S = 0.05
+
+
+class ProtocolError(RuntimeError):
+    """A peer sent a payload of another protocol version."""
+
+
+@dataclasses.dataclass
+class ForceSample:
+    """One simulation step's force sample (`ForceMsg`), per tool as numpy
+    arrays over the scene's `tool_count` tools."""
+
+    seq: int
+    #: CLOCK_MONOTONIC (ns) when the step finished.
+    t_ns: int
+    #: Simulated time (ns).
+    sim_time_ns: int
+    #: (tools, 3): force of the tissue on each tool (N).
+    force_n: np.ndarray
+    #: (tools, 3): the tool position each step used (m; zeros: no pose).
+    position_m: np.ndarray
+    #: (tools, 3, 3): contact stiffness, dF = -K dP (N/m).
+    stiffness_n_per_m: np.ndarray
+    #: (tools,): seq of the pose the step used (0: none).
+    pose_seq: np.ndarray
+    #: (tools,): CONTACT | GRIPPING | CUTTING bits.
+    flags: np.ndarray
+
+    @staticmethod
+    def from_msg(m: ForceMsg) -> "ForceSample":
+        n = min(int(m.tool_count), MAX_TOOLS)
+        tools = m.tools[:n]
+        return ForceSample(
+            seq=int(m.seq),
+            t_ns=int(m.t_ns),
+            sim_time_ns=int(m.sim_time_ns),
+            force_n=np.array([list(t.force_n) for t in tools], dtype=float).reshape(n, 3),
+            position_m=np.array([list(t.position_m) for t in tools], dtype=float).reshape(n, 3),
+            stiffness_n_per_m=np.array(
+                [[list(r) for r in t.stiffness_n_per_m] for t in tools], dtype=float
+            ).reshape(n, 3, 3),
+            pose_seq=np.array([t.pose_seq for t in tools], dtype=np.uint64),
+            flags=np.array([t.flags for t in tools], dtype=np.uint32),
+        )
+
+
+@dataclasses.dataclass
+class MeshFrame:
+    """The organ's state: positions of every vertex (m) and the current
+    outward surface triangles (vertex indices)."""
+
+    frame_seq: int
+    t_ns: int
+    topology_version: int
+    #: (vertices, 3) float64, metres, scene frame.
+    positions_m: np.ndarray
+    #: (triangles, 3) uint32, or None until the topology has arrived.
+    triangles: Optional[np.ndarray]
+
+    def bounds_m(self) -> Tuple[np.ndarray, np.ndarray]:
+        """Bounding box (min, max) of the surface vertices (all vertices
+        before the topology arrived), m."""
+        if self.triangles is not None and len(self.triangles):
+            p = self.positions_m[np.unique(self.triangles)]
+        else:
+            p = self.positions_m
+        return p.min(axis=0), p.max(axis=0)
+
+
+def _verifier() -> "iox2.AttributeVerifier":
+    return iox2.AttributeVerifier.new().require(
+        iox2.AttributeKey.new("hapsim.protocol"),
+        iox2.AttributeValue.new(str(PROTOCOL_VERSION)),
+    )
+
+
+class Session:
+    """Attach to session `name` (sim-server's `--session`, default
+    "default"). Opens the streams a client uses with the protocol's
+    settings (any start order: until the simulation runs, nothing arrives).
+
+    >>> with Session("default") as s:          # doctest: +SKIP
+    ...     frame = s.wait_mesh()
+    ...     s.publish_pose(frame.bounds_m()[1])
+    ...     print(s.latest_force())
+    """
+
+    def __init__(self, name: str = "default", node_name: str = "hapsim-python") -> None:
+        iox2.set_log_level(iox2.LogLevel.Error)
+        self.name = name
+        self._node = (
+            iox2.NodeBuilder.new()
+            .name(iox2.NodeName.new(node_name))
+            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+            .create(iox2.ServiceType.Ipc)
+        )
+        self._forces = (
+            self._service("force", ForceMsg, 1024).subscriber_builder().buffer_size(1024).create()
+        )
+        self._pose_service = self._service("pose", PoseMsg, 1)
+        self._pose_pub = None
+        self._mesh = self._slice_service("mesh", Position, MeshHeader).subscriber_builder().create()
+        self._topology = (
+            self._slice_service("topology", Triangle, TopologyHeader).subscriber_builder().create()
+        )
+        self._pose_ready = (
+            self._node.service_builder(iox2.ServiceName.new(f"hapsim/{name}/pose-ready"))
+            .event()
+            .max_notifiers(2)
+            .max_listeners(8)
+            .open_or_create_with_attributes(_verifier())
+            .notifier_builder()
+            .create()
+        )
+        self._seq = 0
+        self._triangles: Optional[np.ndarray] = None
+        self._topology_version = -1
+        self._frame: Optional[MeshFrame] = None
+
+    # -- services ---------------------------------------------------------
+
+    def _service(self, stream: str, payload, buffer: int):
+        return (
+            self._node.service_builder(iox2.ServiceName.new(f"hapsim/{self.name}/{stream}"))
+            .publish_subscribe(payload)
+            .max_publishers(2)
+            .max_subscribers(8)
+            .history_size(1)
+            .subscriber_max_buffer_size(buffer)
+            .enable_safe_overflow(True)
+            .open_or_create_with_attributes(_verifier())
+        )
+
+    def _slice_service(self, stream: str, element, header):
+        return (
+            self._node.service_builder(iox2.ServiceName.new(f"hapsim/{self.name}/{stream}"))
+            .publish_subscribe(iox2.Slice[element])
+            .user_header(header)
+            .max_publishers(2)
+            .max_subscribers(8)
+            .history_size(1)
+            .subscriber_max_buffer_size(2)
+            .enable_safe_overflow(True)
+            .open_or_create_with_attributes(_verifier())
+        )
+
+    # -- forces -----------------------------------------------------------
+
+    def forces(self) -> List[ForceSample]:
+        """Every force sample received since the last call, oldest first
+        (up to 1024 are kept between calls; `seq` gaps show losses)."""
+        out = []
+        while True:
+            sample = self._forces.receive()
+            if sample is None:
+                return out
+            m = sample.payload().contents
+            if m.version != PROTOCOL_VERSION:
+                raise ProtocolError(f"force sample of protocol version {m.version}")
+            out.append(ForceSample.from_msg(m))
+
+    def latest_force(self) -> Optional[ForceSample]:
+        """The newest force sample (older ones are dropped), or None."""
+        got = self.forces()
+        return got[-1] if got else None
+
+    # -- mesh -------------------------------------------------------------
+
+    def _receive_topology(self) -> None:
+        while True:
+            sample = self._topology.receive()
+            if sample is None:
+                return
+            h = sample.user_header().contents
+            if h.version != PROTOCOL_VERSION:
+                raise ProtocolError(f"topology of protocol version {h.version}")
+            n = int(h.triangle_count)
+            view = sample.payload().as_memory_view()
+            tris = np.frombuffer(view, dtype=np.uint32, count=3 * n).reshape(n, 3).copy()
+            self._triangles, self._topology_version = tris, int(h.topology_version)
+
+    def mesh(self) -> Optional[MeshFrame]:
+        """The newest mesh frame (None before the first): positions copied
+        out of shared memory, with the newest surface triangles."""
+        self._receive_topology()
+        while True:
+            sample = self._mesh.receive()
+            if sample is None:
+                break
+            h = sample.user_header().contents
+            if h.version != PROTOCOL_VERSION:
+                raise ProtocolError(f"mesh frame of protocol version {h.version}")
+            n = int(h.vertex_count)
+            view = sample.payload().as_memory_view()
+            positions = np.frombuffer(view, dtype=np.float32, count=3 * n).reshape(n, 3)
+            self._frame = MeshFrame(
+                frame_seq=int(h.frame_seq),
+                t_ns=int(h.t_ns),
+                topology_version=int(h.topology_version),
+                positions_m=positions.astype(np.float64),
+                triangles=None,
+            )
+        if self._frame is not None and self._topology_version == self._frame.topology_version:
+            self._frame.triangles = self._triangles
+        return self._frame
+
+    def wait_mesh(self, timeout_s: float = 10.0, with_surface: bool = True) -> MeshFrame:
+        """Waits for a mesh frame (and, by default, its surface triangles)."""
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            frame = self.mesh()
+            if frame is not None and (frame.triangles is not None or not with_surface):
+                return frame
+            time.sleep(0.005)
+        raise TimeoutError(f"no mesh frame on session {self.name!r} within {timeout_s} s: is sim-server running?")
+
+    def organ_bounds_m(self, timeout_s: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:
+        """The organ's bounding box (min, max; m) from its surface now."""
+        return self.wait_mesh(timeout_s).bounds_m()
+
+    # -- poses ------------------------------------------------------------
+
+    def publish_pose(
+        self,
+        tip_m: Sequence[float],
+        jaw_opening: float = 1.0,
+        tool: int = 0,
+        tool_count: int = 1,
+    ) -> int:
+        """Publishes tool `tool`'s tip (m, scene frame) and jaw opening
+        (0 closed .. 1 open); tools other than `tool` are withdrawn. Returns
+        the pose's seq (counting from 1). Publish again within
+        POSE_TIMEOUT_S, or the tool lets go. The session has at most two pose
+        publishers (a running haptic-daemon is one)."""
+        if not 0 <= tool < tool_count <= MAX_TOOLS:
+            raise ValueError(f"tool {tool} of {tool_count}: at most {MAX_TOOLS} tools")
+        tip = [float(x) for x in tip_m]
+        if len(tip) != 3 or not all(np.isfinite(tip)) or not np.isfinite(jaw_opening):
+            raise ValueError(f"tip_m must be 3 finite numbers, got {tip_m!r}")
+        if self._pose_pub is None:
+            self._pose_pub = self._pose_service.publisher_builder().create()
+        self._seq += 1
+        msg = PoseMsg(version=PROTOCOL_VERSION, tool_count=tool_count, seq=self._seq)
+        msg.t_ns = time.monotonic_ns()
+        t = msg.tools[tool]
+        t.tip_m[:] = tip
+        t.jaw_opening = min(max(float(jaw_opening), 0.0), 1.0)
+        t.flags = TOOL_PRESENT
+        self._pose_pub.send_copy(msg)
+        self._pose_ready.notify()
+        return self._seq
+
+    # -- lifetime ---------------------------------------------------------
+
+    def close(self) -> None:
+        """Releases the ports (also on garbage collection)."""
+        for attr in ("_pose_pub", "_forces", "_mesh", "_topology", "_pose_ready"):
+            port = getattr(self, attr, None)
+            if port is not None and hasattr(port, "delete"):
+                port.delete()
+            setattr(self, attr, None)
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
