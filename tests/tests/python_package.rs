@@ -16,7 +16,13 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
     let site = dir.join("site");
     // Installable with pip from the checkout (into a scratch directory).
     let out = Command::new("python3")
-        .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check"])
+        .args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+        ])
         .args(["--no-deps", "--target"])
         .arg(&site)
         .arg(root.join("python"))

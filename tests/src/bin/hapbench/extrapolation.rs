@@ -26,7 +26,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::phases::{Phase, away_from_snaps, classify, dropouts, near_snaps, rms_by_phase};
-use crate::plot::{Series, chart};
+use crate::plot::{Log, Series, chart};
 use crate::progress::bar;
 
 /// The default hand path (tool 0).
@@ -401,17 +401,9 @@ pub fn run(args: &Args) -> Result<()> {
                 .map(|(k, v)| (k as f64 * h, norm(*v)))
                 .collect()
         };
-        let mut series = vec![Series {
-            name: "truth",
-            color: "#000",
-            points: curve(&truth_f),
-        }];
+        let mut series = vec![Series::line("truth", "#000", curve(&truth_f))];
         for (i, (name, r)) in rendered_all.iter().enumerate() {
-            series.push(Series {
-                name,
-                color: colors[i % colors.len()],
-                points: curve(r),
-            });
+            series.push(Series::line(name, colors[i % colors.len()], curve(r)));
         }
         let title = format!(
             "|F| on tool 0: simulation {} Hz, haptic {} Hz",
@@ -421,7 +413,15 @@ pub fn run(args: &Args) -> Result<()> {
             ("extrapolation.svg", 0.0, duration),
             ("extrapolation-zoom.svg", 1.0, 2.0),
         ] {
-            let svg = chart(&title, "time (s)", "|F| (N)", x0, x1.min(duration), &series);
+            let svg = chart(
+                &title,
+                "time (s)",
+                "|F| (N)",
+                x0,
+                x1.min(duration),
+                &series,
+                Log::default(),
+            );
             let path = dir.join(file);
             std::fs::write(&path, svg)
                 .with_context(|| format!("cannot write {}", path.display()))?;

@@ -30,7 +30,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use crate::plot::{Series, chart};
+use crate::plot::{Log, Series, chart};
 use crate::progress::bar;
 
 /// Flags of `hapbench latency`.
@@ -363,15 +363,14 @@ pub fn run(args: &Args) -> Result<()> {
             .map(|(name, color, mut v)| {
                 v.sort_by(f64::total_cmp);
                 let n = v.len().max(1) as f64;
-                Series {
+                Series::line(
                     name,
                     color,
-                    points: v
-                        .iter()
+                    v.iter()
                         .enumerate()
                         .map(|(i, x)| (100.0 * i as f64 / n, *x))
                         .collect(),
-                }
+                )
             })
             .collect();
         let svg = chart(
@@ -381,6 +380,7 @@ pub fn run(args: &Args) -> Result<()> {
             0.0,
             99.0,
             &series,
+            Log::default(),
         );
         let path = dir.join("latency.svg");
         std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;

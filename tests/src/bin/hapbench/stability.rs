@@ -14,7 +14,7 @@ use sim_server::server::prepare;
 use sim_server::tensor_mass::element_bound;
 use std::path::PathBuf;
 
-use crate::plot::{Series, chart};
+use crate::plot::{Log, Series, chart};
 use crate::progress::bar;
 use indicatif::ProgressBar;
 
@@ -53,38 +53,31 @@ fn plot(dir: &std::path::Path, cases: &[Case]) -> Result<()> {
                 .map(|c| (x(c.value), f(c)))
                 .collect()
         };
-        let series = [
-            Series {
-                name: "bound (us)",
-                color: "#1f77b4",
-                points: pts(&|c| c.dt_bound_s * 1e6),
-            },
-            Series {
-                name: "max u (mm)",
-                color: "#d62728",
-                points: pts(&|c| c.max_displacement_m * 1e3),
-            },
-        ];
         let xs: Vec<f64> = of.iter().map(|c| x(c.value)).collect();
         let (x0, x1) = (
             xs.iter().copied().fold(f64::INFINITY, f64::min),
             xs.iter().copied().fold(f64::NEG_INFINITY, f64::max),
         );
-        let label = if log {
-            format!("log10 {family}")
-        } else {
-            family.to_string()
-        };
-        let svg = chart(
-            &format!("Stable cases: {family}"),
-            &label,
-            "us / mm",
-            x0,
-            x1,
-            &series,
-        );
-        let path = dir.join(format!("stability-{family}.svg"));
-        std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+        // One unit per chart: the stable step, then the largest displacement.
+        let bound = Series::markers("stable step", "#1f77b4", pts(&|c| c.dt_bound_s * 1e6));
+        let moved = Series::markers("max |u|", "#d62728", pts(&|c| c.max_displacement_m * 1e3));
+        for (what, series, unit) in [
+            ("bound", bound, "element bound on the step (us)"),
+            ("displacement", moved, "largest displacement (mm)"),
+        ] {
+            let svg = chart(
+                &format!("Stable cases: {family}"),
+                family,
+                unit,
+                x0 - 0.05 * (x1 - x0),
+                x1 + 0.05 * (x1 - x0),
+                &[series],
+                Log { x: log, y: false },
+            );
+            let path = dir.join(format!("stability-{family}-{what}.svg"));
+            std::fs::write(&path, svg)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
     }
     Ok(())
 }

@@ -22,7 +22,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::plot::{Series, chart};
+use crate::plot::{Log, Series, chart};
 use crate::progress::bar;
 
 /// Flags of `hapbench tradeoff`.
@@ -421,39 +421,39 @@ pub fn run(args: &Args) -> Result<()> {
             ("precomputed", "#2ca02c"),
             ("hybrid", "#9467bd"),
         ];
+        let at = |p: &Point| (p.realtime_factor.log10(), p.error.max(1e-6).log10());
         let mut series = Vec::new();
         for (name, color) in colors {
-            let mut pts: Vec<(f64, f64)> = points
+            let pts: Vec<(f64, f64)> = points
                 .iter()
                 .filter(|p| p.backend == name)
-                .map(|p| (p.realtime_factor.log10(), (p.error.max(1e-6)).log10()))
+                .map(at)
                 .collect();
-            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-            series.push(Series {
-                name,
-                color,
-                points: pts,
-            });
+            series.push(Series::markers(name, color, pts));
         }
-        let x0 = points
+        // The Pareto front: the points no other beats on both speed and
+        // error, joined from slow to fast.
+        let mut front: Vec<(f64, f64)> = points.iter().filter(|p| p.pareto).map(at).collect();
+        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        series.push(Series::line("Pareto front", "#000", front));
+        let (x0, x1) = points
             .iter()
-            .map(|p| p.realtime_factor.log10())
-            .fold(f64::INFINITY, f64::min);
-        let x1 = points
-            .iter()
-            .map(|p| p.realtime_factor.log10())
-            .fold(f64::NEG_INFINITY, f64::max);
+            .map(|p| at(p).0)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                (lo.min(x), hi.max(x))
+            });
         let svg = chart(
             if args.scene.is_some() {
                 "Speed against accuracy (scene, against its static solution)"
             } else {
                 "Speed against accuracy (block under an end load)"
             },
-            "log10 real-time factor",
-            "log10 relative error",
+            "simulated seconds per wall second (real-time factor)",
+            "relative error",
             x0 - 0.1,
             x1 + 0.1,
             &series,
+            Log { x: true, y: true },
         );
         let path = dir.join("tradeoff.svg");
         std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
