@@ -145,10 +145,13 @@ fn positive(src: &SceneSource, v: &toml::Spanned<Real>, what: &str) -> Result<Re
 
 fn unit(src: &SceneSource, v: &toml::Spanned<[Real; 3]>, what: &str) -> Result<Vec3, SceneError> {
     let a = Vec3::from_array(*v.get_ref());
-    if a.is_finite() && a.length() > 0.0 {
-        Ok(a.normalize())
-    } else {
-        Err(src.error(v.span(), format!("{what} must be a finite non-zero vector")))
+    // Scaled by its largest component first: the length of [1e300, 0, 0]
+    // overflows and that of [1e-300, 0, 0] underflows, yet both have a
+    // direction (found by the scene fuzz test: the first normalised to 0).
+    let largest = a.abs().max_element();
+    match (a / largest).try_normalize() {
+        Some(n) if a.is_finite() && largest > 0.0 => Ok(n),
+        _ => Err(src.error(v.span(), format!("{what} must be a finite non-zero vector"))),
     }
 }
 
