@@ -116,13 +116,13 @@ enum Command {
         #[arg(long)]
         scene: Option<PathBuf>,
         /// Target number of tetrahedra.
-        #[arg(long, default_value_t = 8000)]
+        #[arg(long, default_value_t = 8000, value_parser = cli::count)]
         tets: usize,
         /// Timed steps (split into 5 batches; the median batch is reported).
-        #[arg(long, default_value_t = 2000)]
+        #[arg(long, default_value_t = 2000, value_parser = cli::count)]
         steps: usize,
         /// Worker threads.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, value_parser = cli::count)]
         threads: usize,
         /// Tensor storage precision.
         #[arg(long, value_enum, default_value = "f32")]

@@ -7,13 +7,15 @@ use three_d::{Camera, InnerSpace, PhysicalPoint, Vec3, Viewport, degrees, vec3};
 /// A named view of the scene.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum View {
-    /// Perspective from above, in front and to the side (z up).
+    /// Perspective from above, in front (+y, the side the tools come
+    /// from) and to the side (z up).
     Iso,
     // Plain text, no rustdoc link: these docs are also `--view`'s help.
     /// Orthographic looking down -z, +y up: the bounding box's centre at the
-    /// image centre and its xy extent filling 90% of the image (`TOP_FILL`).
+    /// image centre and its xy extent filling 90% of the image.
     Top,
-    /// Perspective from -y looking along +y (z up).
+    /// Perspective from +y (in front, where the tools come from) looking
+    /// along -y (z up).
     Front,
 }
 
@@ -61,9 +63,11 @@ pub fn framing(viewport: Viewport, lo: Vec3, hi: Vec3, view: View) -> Camera {
         ),
         View::Iso | View::Front => {
             let dir: Vec3 = if view == View::Iso {
-                vec3(0.55, -1.0, 0.75)
+                // From the anterior side (+y): the embedded scene's trocars
+                // and the tissue its tools cut face this way.
+                vec3(0.55, 1.0, 0.75)
             } else {
-                vec3(0.0, -1.0, 0.0)
+                vec3(0.0, 1.0, 0.0)
             };
             let len = (dir.x * dir.x + dir.y * dir.y + dir.z * dir.z).sqrt();
             let distance = radius / (FOV_DEG.to_radians() * 0.5).sin() * 1.05;

@@ -139,8 +139,11 @@ impl Renderer {
             fibres: None,
             overlay: None,
             overlay_size: (0.0, 0.0),
-            key: DirectionalLight::new(context, 2.2, Srgba::WHITE, vec3(-0.4, -0.5, -1.0)),
-            fill: DirectionalLight::new(context, 0.8, Srgba::WHITE, vec3(0.6, 0.4, 0.3)),
+            // Travelling directions, set for the views from +y (in front):
+            // the key from above and behind the organ, the fill from the
+            // camera's side, so that tissue is never lit to the cut colour.
+            key: DirectionalLight::new(context, 2.2, Srgba::WHITE, vec3(-0.4, 0.5, -1.0)),
+            fill: DirectionalLight::new(context, 0.8, Srgba::WHITE, vec3(0.6, -0.4, 0.3)),
             ambient: AmbientLight::new(context, 0.35, Srgba::WHITE),
         }
     }

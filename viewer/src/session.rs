@@ -55,6 +55,7 @@ pub struct Session {
     topology: Subscriber<Ipc, [[u32; 3]], TopologyHeader>,
     force: Subscriber<Ipc, ForceMsg, ()>,
     telemetry: Subscriber<Ipc, TelemetryBatch, ()>,
+    telemetry_factory: PortFactory<Ipc, TelemetryBatch, ()>,
     pose_factory: PortFactory<Ipc, PoseMsg, ()>,
     /// Latest vertex positions (m).
     pub positions_m: Vec<[f32; 3]>,
@@ -99,7 +100,8 @@ impl Session {
             &services::force_service(&node, session)?,
             services::FORCE_BUFFER_LATEST,
         )?;
-        let telemetry = services::subscriber(&services::telemetry_service(&node, session)?)?;
+        let telemetry_factory = services::telemetry_service(&node, session)?;
+        let telemetry = services::subscriber(&telemetry_factory)?;
         let pose_factory = services::pose_service(&node, session)?;
         Ok(Self {
             node,
@@ -107,6 +109,7 @@ impl Session {
             topology,
             force,
             telemetry,
+            telemetry_factory,
             pose_factory,
             positions_m: Vec::new(),
             triangles: Vec::new(),
@@ -135,6 +138,15 @@ impl Session {
     /// Pose publishers in the session (a daemon, or this viewer driving).
     pub fn pose_publishers(&self) -> usize {
         self.pose_factory.dynamic_config().number_of_publishers()
+    }
+
+    /// Whether a haptic daemon runs in the session (it publishes
+    /// telemetry), whether or not a batch has arrived yet.
+    pub fn daemon_present(&self) -> bool {
+        self.telemetry_factory
+            .dynamic_config()
+            .number_of_publishers()
+            > 0
     }
 
     /// Whether a simulation sent a mesh frame within the last second.

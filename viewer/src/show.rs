@@ -60,6 +60,9 @@ pub fn overlay_lines(
             "tick lateness p50 {:.0} us  p99 {:.0} us",
             s.lateness_p50_us, s.lateness_p99_us
         ));
+    } else if session.daemon_present() {
+        // Telemetry comes in batches of 64 ticks: a rate needs two.
+        lines.push("haptic: daemon running, waiting for telemetry".into());
     } else {
         lines.push("haptic: no daemon".into());
     }

@@ -98,8 +98,12 @@ pub fn snapshot(
         let now = monotonic_ns();
         session.poll(now);
         // Two frames: a topology that arrived with the first may be older
-        // than the state a running simulation is in.
-        if session.drawable() && session.frames >= 2 {
+        // than the state a running simulation is in. With a daemon running,
+        // also its telemetry rate (two batches, ~130 ms) for the overlay,
+        // for at most half a second.
+        let telemetry_pending =
+            session.daemon_present() && session.stats.haptic_hz == 0.0 && now - start < 500_000_000;
+        if session.drawable() && session.frames >= 2 && !telemetry_pending {
             break;
         }
         if (now - start) as f64 * 1e-9 > wait_s {

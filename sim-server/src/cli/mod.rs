@@ -175,6 +175,21 @@ fn progress_line() -> impl FnMut(usize, usize) {
 
 /// The step of backends not bound by the explicit stability limit: the
 /// scene's `dt_s`, else one period of its rate (1 kHz by default).
+/// A count flag (`--tets`, `--steps`, `--threads`): a whole number of at
+/// least 1, with a message that says so (clap's own says "invalid digit"
+/// for a negative number).
+pub fn count(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("expected a whole number of at least 1, got {s:?}")),
+    }
+}
+
+/// [`count`] for a u64 flag (`run --steps`).
+pub fn count_u64(s: &str) -> Result<u64, String> {
+    count(s).map(|n| n as u64)
+}
+
 /// `--dt-s`: the step instead of the scene's, if given (a positive finite
 /// number of seconds, at most 0.1 s).
 fn override_step(scene: &mut BuiltScene, dt_s: Option<f64>) -> Result<()> {

@@ -27,7 +27,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub headless: bool,
     /// Stop after this many steps.
-    #[arg(long)]
+    #[arg(long, value_parser = super::count_u64)]
     pub steps: Option<u64>,
     /// Stop after this many seconds.
     #[arg(long)]

@@ -164,6 +164,14 @@ pub fn run(args: &Args) -> Result<()> {
         args.duration_s.is_finite() && args.duration_s >= 0.5,
         "--duration-s must be at least 0.5"
     );
+    if let Some(dt) = args.dt_s {
+        // Checked here too: sim-server would refuse it, and the run would
+        // end with only "no traffic".
+        anyhow::ensure!(
+            dt.is_finite() && dt > 0.0 && dt <= 0.1,
+            "--dt-s must be a step in seconds, above 0 and at most 0.1, got {dt}"
+        );
+    }
     let d = args.duration_s;
     let pid = std::process::id();
     // The daemon's timer slack (1 ns) for the observer's polling and the
