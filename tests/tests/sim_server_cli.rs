@@ -555,30 +555,55 @@ fn a_negative_number_gets_the_flags_own_message() {
     }
 }
 
+/// Processes whose command line contains `needle` (from /proc).
+fn processes_with(needle: &str) -> Vec<String> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| {
+            let cmd = std::fs::read(e.ok()?.path().join("cmdline")).ok()?;
+            let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+            cmd.contains(needle).then_some(cmd)
+        })
+        .collect()
+}
+
 #[test]
-fn a_demo_cleans_up_what_a_killed_one_left() {
-    // Files of a demo that was killed outright (a pid above any pid_max:
-    // never running) go; the demo leaves none of its own.
+fn a_demo_killed_outright_leaves_no_daemon_and_no_file() {
+    // SIGKILL gives the demo no chance to clean up: the kernel stops its
+    // daemon (PR_SET_PDEATHSIG), and nothing was written to the temp
+    // directory in the first place (pipes, not files).
     let tmp = scratch_dir("demo-tmp");
-    let stale = [
-        tmp.join("hapsim-demo-999999999.csv"),
-        tmp.join("hapsim-demo-999999999-daemon.json"),
-    ];
-    for f in &stale {
-        std::fs::write(f, "left over").unwrap();
-    }
     let keep = tmp.join("hapsim-demo-notes.txt");
     std::fs::write(&keep, "not ours").unwrap();
-    let out = Command::new(binary("sim-server"))
-        .args(["demo", "--headless", "--no-viewer", "--duration-s", "1"])
+    let mut demo = Command::new(binary("sim-server"))
+        .args(["demo", "--headless", "--no-viewer", "--duration-s", "30"])
         .env("TMPDIR", &tmp)
-        .output()
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let session = format!("--session demo{}", demo.id());
+    // Running: its daemon is up.
+    let start = std::time::Instant::now();
+    while processes_with(&session).is_empty() {
+        assert!(
+            start.elapsed().as_secs() < 20,
+            "the demo's daemon never started"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    demo.kill().unwrap();
+    demo.wait().unwrap();
+    let start = std::time::Instant::now();
+    while !processes_with(&session).is_empty() {
+        assert!(
+            start.elapsed().as_secs() < 5,
+            "the daemon outlived its demo: {:?}",
+            processes_with(&session)
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
     let left: Vec<_> = std::fs::read_dir(&tmp)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

@@ -100,27 +100,53 @@ struct DemoJson {
     sim_step_us: sim_server::server::step_time::StepPercentiles,
 }
 
-/// Removes the files a demo killed outright (SIGKILL: no chance to clean
-/// up) left in `dir`: `hapsim-demo-PID.csv` and `hapsim-demo-PID-daemon.json`
-/// of a PID no longer running.
-fn remove_stale_files(dir: &std::path::Path) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix("hapsim-demo-")) else {
-            continue;
-        };
-        let pid = rest
-            .strip_suffix(".csv")
-            .or_else(|| rest.strip_suffix("-daemon.json"))
-            .and_then(|p| p.parse::<u32>().ok());
-        if let Some(pid) = pid
-            && !std::path::Path::new(&format!("/proc/{pid}")).exists()
-        {
-            let _ = std::fs::remove_file(entry.path());
+/// A pipe (both ends close on exec).
+fn pipe() -> std::io::Result<(std::fs::File, std::fs::File)> {
+    use std::os::fd::FromRawFd;
+    let mut fds = [0 as libc::c_int; 2];
+    // SAFETY: pipe2(2) writes two descriptors into `fds`; each is then
+    // owned by exactly one File.
+    unsafe {
+        if libc::pipe2(fds.as_mut_ptr(), libc::O_CLOEXEC) != 0 {
+            return Err(std::io::Error::last_os_error());
         }
+        Ok((
+            std::fs::File::from_raw_fd(fds[0]),
+            std::fs::File::from_raw_fd(fds[1]),
+        ))
+    }
+}
+
+/// The daemon's file descriptors for its trajectory (read) and its JSON
+/// summary (write): no file in /tmp, so a demo killed outright (SIGKILL)
+/// leaves nothing behind. The daemon opens them as `/dev/fd/3` and `/dev/fd/4`.
+const TRAJ_FD: libc::c_int = 3;
+const JSON_FD: libc::c_int = 4;
+
+/// Gives the child `traj` as fd 3 and `json` as fd 4 (without close-on-exec).
+fn pass_fds(cmd: &mut Command, traj: libc::c_int, json: libc::c_int) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: the closure runs in the child between fork and exec and calls
+    // only async-signal-safe functions (fcntl, dup2). Both descriptors are
+    // first copied above 10, so that placing one cannot clobber the other.
+    unsafe {
+        cmd.pre_exec(move || {
+            let high = |fd| {
+                let h = libc::fcntl(fd, libc::F_DUPFD, 10);
+                if h < 0 {
+                    Err(std::io::Error::last_os_error())
+                } else {
+                    Ok(h)
+                }
+            };
+            let (t, j) = (high(traj)?, high(json)?);
+            for (from, to) in [(t, TRAJ_FD), (j, JSON_FD)] {
+                if libc::dup2(from, to) < 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+            }
+            Ok(())
+        });
     }
 }
 
@@ -180,12 +206,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
     }
     let pid = std::process::id();
     let session = format!("demo{pid}");
-    let dir = std::env::temp_dir();
-    remove_stale_files(&dir);
-    let traj = dir.join(format!("hapsim-demo-{pid}.csv"));
-    let daemon_json = dir.join(format!("hapsim-demo-{pid}-daemon.json"));
-    std::fs::write(&traj, GRASPER_CSV)
-        .with_context(|| format!("cannot write {}", traj.display()))?;
+    // The trajectory goes in through a pipe (it fits the pipe's buffer),
+    // the daemon's summary comes back through another.
+    let (traj_read, mut traj_write) = pipe().context("cannot make a pipe for the daemon")?;
+    let (mut json_read, json_write) = pipe().context("cannot make a pipe for the daemon")?;
+    {
+        use std::io::Write;
+        traj_write.write_all(GRASPER_CSV.as_bytes())?;
+    }
+    drop(traj_write);
     let mut daemon_cmd = Command::new(&daemon_bin);
     daemon_cmd
         .args([
@@ -196,19 +225,29 @@ pub fn run(args: DemoArgs) -> Result<()> {
             "local-normal",
         ])
         .arg("--device")
-        .arg(format!("simulated:{}", traj.display()))
+        .arg(format!("simulated:/dev/fd/{TRAJ_FD}"))
         .arg("--duration-s")
         .arg(format!("{}", args.duration_s))
         .arg("--json")
-        .arg(&daemon_json)
+        .arg(format!("/dev/fd/{JSON_FD}"))
         .stdout(Stdio::null());
     if args.headless {
         daemon_cmd.arg("--quiet");
     }
     die_with_parent(&mut daemon_cmd);
+    {
+        use std::os::fd::AsRawFd;
+        pass_fds(
+            &mut daemon_cmd,
+            traj_read.as_raw_fd(),
+            json_write.as_raw_fd(),
+        );
+    }
     let mut daemon = daemon_cmd
         .spawn()
         .with_context(|| format!("cannot start {}", daemon_bin.display()))?;
+    // Only the daemon holds these ends now: its exit closes the summary.
+    drop((traj_read, json_write));
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;
@@ -237,8 +276,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
         Err(e) => {
             let _ = daemon.kill();
             let _ = daemon.wait();
-            let _ = std::fs::remove_file(&traj);
-            let _ = std::fs::remove_file(&daemon_json);
             return Err(e);
         }
     };
@@ -248,13 +285,20 @@ pub fn run(args: DemoArgs) -> Result<()> {
         // SAFETY: kill(2) on our own child's pid.
         unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGTERM) };
     }
+    // The summary (a few hundred bytes) fits the pipe: read after exit.
     let status = daemon.wait()?;
-    let _ = std::fs::remove_file(&traj);
     if !status.success() {
         bail!("haptic-daemon failed ({status})");
     }
-    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&daemon_json)?)?;
-    let _ = std::fs::remove_file(&daemon_json);
+    let mut text = String::new();
+    {
+        use std::io::Read;
+        json_read
+            .read_to_string(&mut text)
+            .context("reading the haptic daemon's summary")?;
+    }
+    let d: serde_json::Value =
+        serde_json::from_str(&text).context("the haptic daemon's summary")?;
     let out = DemoJson {
         sim_steps_per_s: summary.steps_per_s,
         haptic_ticks_per_s: d["rate_hz"].as_f64().unwrap_or(0.0),
