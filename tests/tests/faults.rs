@@ -27,6 +27,17 @@ fn signal(child: &Child, sig: i32) -> u64 {
     monotonic_ns()
 }
 
+/// Sends SIGCONT and returns the time just *before* it: on a loaded machine
+/// this thread may be descheduled right after kill(2), and a window that
+/// must end before the process runs again must not end after it (a CI run
+/// saw the daemon's ramp-in, 4e-5 N, inside "the stall").
+fn resume(child: &Child) -> u64 {
+    let before = monotonic_ns();
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGCONT) };
+    before
+}
+
 /// (t_ns, |F|) per tick of a daemon record, checking every row on the way.
 fn read_record(path: &Path) -> Vec<(u64, f64)> {
     let text = std::fs::read_to_string(path).unwrap();
@@ -102,7 +113,7 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
     std::thread::sleep(Duration::from_millis(2500));
     let stopped = signal(&second, libc::SIGSTOP);
     std::thread::sleep(Duration::from_millis(400));
-    let resumed = signal(&second, libc::SIGCONT);
+    let resumed = resume(&second);
     finish(daemon, Duration::from_secs(30), "haptic-daemon");
     signal(&second, libc::SIGTERM);
     finish(second, Duration::from_secs(10), "restarted sim-server");
