@@ -1,62 +1,25 @@
-//! Standard base64 (RFC 4648, `+/`, `=` padding), the encoding of VTK XML
-//! "binary" data. Twenty lines each way do not justify a dependency.
+//! Base64 (RFC 4648, standard alphabet), the encoding of VTK XML "binary"
+//! data, by the `base64` crate: padded on output, padding optional on input
+//! (VTK writes it, some writers drop it). A decoding error carries no
+//! position the user could use: the readers report the array's line.
 
-const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+use base64::Engine;
+use base64::alphabet::STANDARD;
+use base64::engine::{DecodePaddingMode, GeneralPurpose, GeneralPurposeConfig};
 
-/// Encodes bytes.
+const ENGINE: GeneralPurpose = GeneralPurpose::new(
+    &STANDARD,
+    GeneralPurposeConfig::new().with_decode_padding_mode(DecodePaddingMode::Indifferent),
+);
+
+/// Encodes bytes (padded).
 pub(super) fn encode(bytes: &[u8]) -> String {
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(ALPHABET[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
+    ENGINE.encode(bytes)
 }
 
-fn value(c: u8) -> Option<u32> {
-    Some(match c {
-        b'A'..=b'Z' => c - b'A',
-        b'a'..=b'z' => c - b'a' + 26,
-        b'0'..=b'9' => c - b'0' + 52,
-        b'+' => 62,
-        b'/' => 63,
-        _ => return None,
-    } as u32)
-}
-
-/// Decodes one padded (or unpadded) base64 stream without whitespace. On
-/// failure, returns the index of the offending character.
-pub(super) fn decode(text: &[u8]) -> Result<Vec<u8>, usize> {
-    let data_len = text.iter().rposition(|&c| c != b'=').map_or(0, |k| k + 1);
-    if text.len() - data_len > 2 || (!text.len().is_multiple_of(4) && data_len != text.len()) {
-        return Err(data_len);
-    }
-    let mut out = Vec::with_capacity(data_len / 4 * 3 + 2);
-    for (k, chunk) in text[..data_len].chunks(4).enumerate() {
-        let mut n = 0u32;
-        for (j, &c) in chunk.iter().enumerate() {
-            n |= value(c).ok_or(k * 4 + j)? << (18 - 6 * j);
-        }
-        let bytes = [(n >> 16) as u8, (n >> 8) as u8, n as u8];
-        match chunk.len() {
-            4 => out.extend_from_slice(&bytes),
-            3 => out.extend_from_slice(&bytes[..2]),
-            2 => out.push(bytes[0]),
-            _ => return Err(k * 4),
-        }
-    }
-    Ok(out)
+/// Decodes one padded or unpadded base64 stream without whitespace.
+pub(super) fn decode(text: &[u8]) -> Result<Vec<u8>, base64::DecodeError> {
+    ENGINE.decode(text)
 }
 
 #[cfg(test)]
