@@ -100,6 +100,21 @@ def _verifier() -> "iox2.AttributeVerifier":
     )
 
 
+def open_stream(node, session: str, stream: str, payload, buffer: int):
+    """Opens (or creates) publish-subscribe stream `stream` of `session`
+    with the protocol's settings (docs/protocol.md): the port factory."""
+    return (
+        node.service_builder(iox2.ServiceName.new(f"hapsim/{session}/{stream}"))
+        .publish_subscribe(payload)
+        .max_publishers(2)
+        .max_subscribers(8)
+        .history_size(1)
+        .subscriber_max_buffer_size(buffer)
+        .enable_safe_overflow(True)
+        .open_or_create_with_attributes(_verifier())
+    )
+
+
 class Session:
     """Attach to session `name` (sim-server's `--session`, default
     "default"). Opens the streams a client uses with the protocol's
@@ -146,16 +161,7 @@ class Session:
     # -- services ---------------------------------------------------------
 
     def _service(self, stream: str, payload, buffer: int):
-        return (
-            self._node.service_builder(iox2.ServiceName.new(f"hapsim/{self.name}/{stream}"))
-            .publish_subscribe(payload)
-            .max_publishers(2)
-            .max_subscribers(8)
-            .history_size(1)
-            .subscriber_max_buffer_size(buffer)
-            .enable_safe_overflow(True)
-            .open_or_create_with_attributes(_verifier())
-        )
+        return open_stream(self._node, self.name, stream, payload, buffer)
 
     def _slice_service(self, stream: str, element, header):
         return (

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""An out-of-process hapsim simulation backend in Python, written only from
-docs/protocol.md: it proves the protocol is open.
+"""An out-of-process hapsim simulation backend in Python, written from
+docs/protocol.md (its payload structures are the hapsim package's, in
+python/): it proves the protocol is open.
 
 It reads the daemon's tool poses and publishes one force sample per step at
 RATE_HZ: the tissue is a half-space z < SURFACE_Z_M of stiffness K_N_PER_M
@@ -12,89 +13,17 @@ as the Rust crate (pip install iceoryx2==0.10.0).
 """
 
 import argparse
-import ctypes
+import os
 import sys
 import time
 
 import iceoryx2 as iox2
 
-PROTOCOL_VERSION = 1
-MAX_TOOLS = 4
-CONTACT = 1
-TOOL_PRESENT = 1
-
-
-class ToolPose(ctypes.Structure):
-    _fields_ = [
-        ("tip_m", ctypes.c_double * 3),
-        ("shaft_dir", ctypes.c_double * 3),
-        ("jaw_opening", ctypes.c_double),
-        ("buttons", ctypes.c_uint32),
-        ("flags", ctypes.c_uint32),
-    ]
-
-
-class PoseMsg(ctypes.Structure):
-    _fields_ = [
-        ("version", ctypes.c_uint32),
-        ("tool_count", ctypes.c_uint32),
-        ("seq", ctypes.c_uint64),
-        ("t_ns", ctypes.c_uint64),
-        ("tools", ToolPose * MAX_TOOLS),
-    ]
-
-    @staticmethod
-    def type_name() -> str:
-        return "hapsim.PoseMsg.v1"
-
-
-class ToolForce(ctypes.Structure):
-    _fields_ = [
-        ("position_m", ctypes.c_double * 3),
-        ("force_n", ctypes.c_double * 3),
-        ("stiffness_n_per_m", (ctypes.c_double * 3) * 3),
-        ("pose_seq", ctypes.c_uint64),
-        ("flags", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
-    ]
-
-
-class ForceMsg(ctypes.Structure):
-    _fields_ = [
-        ("version", ctypes.c_uint32),
-        ("tool_count", ctypes.c_uint32),
-        ("seq", ctypes.c_uint64),
-        ("t_ns", ctypes.c_uint64),
-        ("sim_time_ns", ctypes.c_uint64),
-        ("step_period_ns", ctypes.c_uint64),
-        ("tools", ToolForce * MAX_TOOLS),
-    ]
-
-    @staticmethod
-    def type_name() -> str:
-        return "hapsim.ForceMsg.v1"
-
-
-assert ctypes.sizeof(PoseMsg) == 280 and ctypes.sizeof(ForceMsg) == 584
-
-
-def service(node, session, stream, payload, buffer):
-    """Opens (or creates) a stream with the protocol's settings."""
-    name = iox2.ServiceName.new(f"hapsim/{session}/{stream}")
-    verifier = iox2.AttributeVerifier.new().require(
-        iox2.AttributeKey.new("hapsim.protocol"),
-        iox2.AttributeValue.new(str(PROTOCOL_VERSION)),
-    )
-    return (
-        node.service_builder(name)
-        .publish_subscribe(payload)
-        .max_publishers(2)
-        .max_subscribers(8)
-        .history_size(1)
-        .subscriber_max_buffer_size(buffer)
-        .enable_safe_overflow(True)
-        .open_or_create_with_attributes(verifier)
-    )
+# The payloads and stream settings of the hapsim Python package (python/,
+# itself written from docs/protocol.md), from the checkout.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "python"))
+from hapsim.protocol import CONTACT, PROTOCOL_VERSION, TOOL_PRESENT, ForceMsg, PoseMsg  # noqa: E402
+from hapsim.session import open_stream  # noqa: E402
 
 
 def main() -> int:
@@ -113,8 +42,8 @@ def main() -> int:
         .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
         .create(iox2.ServiceType.Ipc)
     )
-    poses = service(node, args.session, "pose", PoseMsg, 1).subscriber_builder().create()
-    forces = service(node, args.session, "force", ForceMsg, 1024).publisher_builder().create()
+    poses = open_stream(node, args.session, "pose", PoseMsg, 1).subscriber_builder().create()
+    forces = open_stream(node, args.session, "force", ForceMsg, 1024).publisher_builder().create()
 
     period_ns = int(1e9 / args.rate_hz)
     # Protocol rules: a pose older than 50 ms drives no tool; after a stall
