@@ -65,6 +65,23 @@ pub fn contact_sample(seq: u64, force_n: [f64; 3]) -> shared::protocol::ForceMsg
     msg
 }
 
+/// Runs `cmd` to completion and returns its output, failing the test with
+/// its stderr if it did not succeed.
+pub fn run_ok(mut cmd: impl std::borrow::BorrowMut<std::process::Command>) -> std::process::Output {
+    let cmd = cmd.borrow_mut();
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {:?}: {e}", cmd.get_program()));
+    assert!(
+        out.status.success(),
+        "{:?} failed ({}): {}",
+        cmd.get_program(),
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// Reads a JSON file a binary wrote (panics naming the file if it cannot).
 pub fn read_json(path: &std::path::Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));

@@ -2,7 +2,7 @@
 //! JSON keys that scripts rely on, with values that make sense.
 
 use std::process::Command;
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{binary, read_json, run_ok, scratch_dir};
 
 /// A 4 x 2 x 2 cm block on 1 cm cells, its material, and a blank line: the
 /// start of the small scenes below (9 lines).
@@ -20,26 +20,21 @@ damping_per_s = 5.0
 fn bench_writes_the_documented_json_keys() {
     let dir = scratch_dir("bench");
     let json = dir.join("bench.json");
-    let out = Command::new(binary("sim-server"))
-        .args([
-            "bench",
-            "--generate",
-            "box",
-            "--tets",
-            "3000",
-            "--steps",
-            "50",
-            "--threads",
-            "2",
-        ])
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .expect("run sim-server");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        Command::new(binary("sim-server"))
+            .args([
+                "bench",
+                "--generate",
+                "box",
+                "--tets",
+                "3000",
+                "--steps",
+                "50",
+                "--threads",
+                "2",
+            ])
+            .arg("--json")
+            .arg(&json),
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("steps/s"), "{stdout}");
@@ -85,15 +80,7 @@ fn bench_refuses_bad_arguments_clearly() {
 
 #[test]
 fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
-    let out = Command::new(binary("sim-server"))
-        .arg("check")
-        .output()
-        .expect("run sim-server");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_ok(Command::new(binary("sim-server")).arg("check"));
     let text = String::from_utf8_lossy(&out.stdout);
     for needle in [
         "tetrahedra",
@@ -145,17 +132,12 @@ fn check_tells_where_a_mesh_is_its_units_and_its_tags() {
         "/../sim-server/tests/data/meshes"
     );
     let check = |file: &std::path::Path, json: &std::path::Path| {
-        let out = Command::new(binary("sim-server"))
-            .arg("check")
-            .arg(file)
-            .arg("--json")
-            .arg(json)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = run_ok(
+            Command::new(binary("sim-server"))
+                .arg("check")
+                .arg(file)
+                .arg("--json")
+                .arg(json),
         );
         String::from_utf8_lossy(&out.stdout).into_owned()
     };
@@ -225,19 +207,14 @@ force_n = [0.0, 0.0, -0.01]
     )
     .unwrap();
     let (vtu, json) = (dir.join("sag.vtu"), dir.join("sag.json"));
-    let out = Command::new(binary("sim-server"))
-        .args(["solve", "--scene"])
-        .arg(&scene)
-        .arg("--out")
-        .arg(&vtu)
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        Command::new(binary("sim-server"))
+            .args(["solve", "--scene"])
+            .arg(&scene)
+            .arg("--out")
+            .arg(&vtu)
+            .arg("--json")
+            .arg(&json),
     );
     let xml = std::fs::read_to_string(&vtu).unwrap();
     assert!(xml.contains("Name=\"displacement\"") && xml.contains("Name=\"force\""));
@@ -331,17 +308,12 @@ fn run_takes_every_backend_and_refuses_unknown_ones() {
     let dir = scratch_dir("run-backend");
     let json = dir.join("implicit.json");
     let session = format!("implicit{}", std::process::id());
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--backend", "implicit", "--headless", "--quiet"])
-        .args(["--steps", "200", "--session", &session])
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .expect("run sim-server");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        Command::new(binary("sim-server"))
+            .args(["run", "--backend", "implicit", "--headless", "--quiet"])
+            .args(["--steps", "200", "--session", &session])
+            .arg("--json")
+            .arg(&json),
     );
     let v = read_json(&json);
     assert_eq!(v["steps"], 200);
@@ -437,17 +409,12 @@ select = {{ box_m = [[0.03, -1, -1], [1, 1, 1]] }}
         );
     }
     // The explicit backend takes it.
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--quiet", "--steps", "1", "--session"])
-        .arg(format!("interior{}", std::process::id()))
-        .arg("--scene")
-        .arg(&scene)
-        .output()
-        .expect("run sim-server");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        Command::new(binary("sim-server"))
+            .args(["run", "--headless", "--quiet", "--steps", "1", "--session"])
+            .arg(format!("interior{}", std::process::id()))
+            .arg("--scene")
+            .arg(&scene),
     );
 }
 
@@ -638,46 +605,36 @@ rotate = { axis = [1.0, 0.0, 0.0], origin_m = [0.0, 0.01, 0.01], angle_deg = 30.
     .unwrap();
     let session = format!("nonlin{}", std::process::id());
     let json = dir.join("run.json");
-    let out = Command::new(binary("sim-server"))
-        .args([
-            "run",
-            "--headless",
-            "--quiet",
-            "--steps",
-            "100",
-            "--session",
-            &session,
-        ])
-        .arg("--scene")
-        .arg(&scene)
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .expect("run sim-server");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        Command::new(binary("sim-server"))
+            .args([
+                "run",
+                "--headless",
+                "--quiet",
+                "--steps",
+                "100",
+                "--session",
+                &session,
+            ])
+            .arg("--scene")
+            .arg(&scene)
+            .arg("--json")
+            .arg(&json),
     );
     let v = read_json(&json);
     assert_eq!(v["nonlinear_tets"], 1152);
     assert!(v["finite"].as_bool().unwrap());
     // Static equilibrium by Newton.
     let solved = dir.join("solve.json");
-    let out = Command::new(binary("sim-server"))
-        .arg("solve")
-        .arg("--scene")
-        .arg(&scene)
-        .arg("--out")
-        .arg(dir.join("twist.vtu"))
-        .arg("--json")
-        .arg(&solved)
-        .output()
-        .expect("run sim-server solve");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        Command::new(binary("sim-server"))
+            .arg("solve")
+            .arg("--scene")
+            .arg(&scene)
+            .arg("--out")
+            .arg(dir.join("twist.vtu"))
+            .arg("--json")
+            .arg(&solved),
     );
     let v = read_json(&solved);
     assert!(v["newton_iterations"].as_u64().unwrap() >= 10, "{v}");
@@ -717,17 +674,12 @@ fn save_frames_writes_a_series_or_says_why_it_cannot() {
     let frames = dir.join("run frames");
     let session = format!("frames{}", std::process::id());
     // Headless: 400 steps, a frame every 1 ms of simulated time at most.
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--quiet", "--steps", "400"])
-        .args(["--viewer-rate", "100", "--session", &session])
-        .arg("--save-frames")
-        .arg(&frames)
-        .output()
-        .expect("run sim-server");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        Command::new(binary("sim-server"))
+            .args(["run", "--headless", "--quiet", "--steps", "400"])
+            .args(["--viewer-rate", "100", "--session", &session])
+            .arg("--save-frames")
+            .arg(&frames),
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     let pvd = std::fs::read_to_string(frames.join("frames.pvd")).unwrap();
