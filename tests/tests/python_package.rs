@@ -60,4 +60,42 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
         .unwrap_or_else(|| panic!("no peak force in {stdout:?}"));
     assert!(peak > 0.2 && peak < 5.0, "{stdout}");
     assert!(stdout.contains("organ [-0.11"), "{stdout}");
+
+    // Read-only beside the whole demo (its daemon drives the tools, its
+    // session is demo<PID>): samples of both tools, frames, and the
+    // cavitron's cuts as new surface versions.
+    let mut demo = Command::new(system_tests::binary("sim-server"))
+        .args(["demo", "--headless", "--no-viewer", "--duration-s", "8"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start the demo");
+    let session = format!("demo{}", demo.id());
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    let out = system_tests::run_ok(
+        Command::new("python3")
+            .arg(root.join("python/examples/watch.py"))
+            .args(["--session", &session, "--seconds", "5"])
+            .env("PYTHONPATH", &site),
+    );
+    system_tests::wait_bounded(&mut demo, std::time::Duration::from_secs(30), "demo");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let number = |after: &str| -> f64 {
+        stdout
+            .split(after)
+            .next()
+            .and_then(|s| s.split_whitespace().last())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("no number before {after:?} in {stdout:?}"))
+    };
+    assert!(number(" force samples") > 2000.0, "{stdout}");
+    assert!(number(" mesh frames") > 60.0, "{stdout}");
+    let versions = stdout.split("(topology v").nth(1).unwrap_or_default();
+    let (from, to) = versions.split_once(" -> v").unwrap_or(("", ""));
+    let to = to.split(')').next().unwrap_or_default();
+    assert!(
+        to.parse::<u64>().unwrap_or(0) > from.parse::<u64>().unwrap_or(u64::MAX),
+        "no cut seen: {stdout}"
+    );
+    assert!(stdout.contains("peak force per tool ["), "{stdout}");
 }
