@@ -82,6 +82,8 @@ pub type PoseSubscriber = Subscriber<Ipc, PoseMsg, ()>;
 pub type PoseReadyListener = Listener<Ipc>;
 /// A force subscriber.
 pub type ForceSubscriber = Subscriber<Ipc, ForceMsg, ()>;
+/// Publisher of a slice stream (`mesh`, `topology`) with its user header.
+pub type SlicePublisher<T, H> = Publisher<Ipc, [T], H>;
 
 /// Creates a node named `name` (shows in iceoryx2's node listings).
 /// Signal handling stays with the program, which must zero forces itself.

@@ -13,23 +13,22 @@
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 
 pub mod frames;
+pub mod outputs;
 pub mod pacing;
 pub mod poses;
 pub mod step_time;
 
 use crate::backend::Backend;
-use crate::contact::{ToolInput, Tools};
+use crate::contact::Tools;
 use crate::math::{Real, Vec3};
 use crate::scene::BuiltScene;
 use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
+use outputs::MeshOut;
 use pacing::Pacing;
 use poses::{PoseIntake, WaitEnd};
 use serde::Serialize;
-use shared::protocol::{
-    CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, TOOL_PRESENT,
-    TopologyHeader,
-};
-use shared::services::{self, ServiceError, UpdateConnections};
+use shared::protocol::{ForceMsg, MAX_TOOLS, PROTOCOL_VERSION};
+use shared::services::{self, ServiceError};
 use shared::{SessionName, monotonic_ns};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -337,12 +336,8 @@ pub fn run<B: Backend>(
     }
     let force_pub = services::publisher(&force_service)?;
     let n = sim.model().vertex_count();
-    let mesh_pub = services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?;
     let max_tris = 4 * sim.model().mesh().tet_count();
-    let topo_pub =
-        services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?;
-    let mut tris: Vec<[u32; 3]> = Vec::with_capacity(max_tris);
-    let mut recorder = match &cfg.save_frames {
+    let recorder = match &cfg.save_frames {
         Some(dir) => Some(frames::FrameRecorder::start(
             dir,
             sim.model(),
@@ -350,15 +345,18 @@ pub fn run<B: Backend>(
         )?),
         None => None,
     };
-    let rest = sim.model().mesh().positions_m().to_vec();
+    let mut mesh_out = MeshOut::new(
+        &sim,
+        services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?,
+        services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?,
+        recorder,
+    );
 
     let mut summary = RunSummary {
         finite: true,
         nonlinear_tets: sim.model().nonlinear_tets(),
         ..RunSummary::default()
     };
-    let mut topology_version = 1u64;
-    let mut published_topology = 0u64;
     if !cfg.headless {
         // Wake-ups at the requested time, not up to 50 us later.
         // SAFETY: prctl(2) on this thread's timer slack; no pointers.
@@ -390,23 +388,8 @@ pub fn run<B: Backend>(
         let contact_t0 = monotonic_ns();
         let latest_pose = poses.active(contact_t0);
         // Contact: detect and impose before the step.
-        let mut flags = [0u32; MAX_TOOLS];
-        let mut any_contact = false;
         let sim_t_s = summary.steps as Real * dt_s;
-        let mut inputs = [None; MAX_TOOLS];
-        for (i, input) in inputs.iter_mut().enumerate().take(contacts.len()) {
-            *input = if let Some(script) = cfg.scripts.iter().find(|s| s.tool == i) {
-                let (tip_m, jaw_opening) = script.at(sim_t_s);
-                Some(ToolInput { tip_m, jaw_opening })
-            } else {
-                latest_pose
-                    .filter(|p| (i as u32) < p.tool_count && p.tools[i].flags & TOOL_PRESENT != 0)
-                    .map(|p| ToolInput {
-                        tip_m: Vec3::from_array(p.tools[i].tip_m),
-                        jaw_opening: p.tools[i].jaw_opening,
-                    })
-            };
-        }
+        let inputs = outputs::tool_inputs(contacts.len(), &cfg.scripts, latest_pose, sim_t_s);
         contacts.update(&mut sim, &inputs);
         let step_t0 = monotonic_ns();
         summary.contact_s += (step_t0 - contact_t0) as Real * 1e-9;
@@ -419,14 +402,9 @@ pub fn run<B: Backend>(
         let step_t1 = monotonic_ns();
         summary.step_s += (step_t1 - step_t0) as Real * 1e-9;
         step_times.record(step_t1 - step_t0);
+        let flags = outputs::tool_flags(reports);
+        let any_contact = reports.iter().any(|r| r.contact);
         for (i, report) in reports.iter().enumerate() {
-            if report.contact {
-                flags[i] |= CONTACT;
-                any_contact = true;
-            }
-            if report.gripping {
-                flags[i] |= GRIPPING;
-            }
             if let Some(why) = report.cut_refused
                 && !cut_refusal_told
             {
@@ -437,9 +415,8 @@ pub fn run<B: Backend>(
                 );
             }
             if report.tets_removed > 0 {
-                flags[i] |= CUTTING;
                 removed_total += report.tets_removed as u64;
-                topology_version += 1;
+                mesh_out.topology_version += 1;
             }
         }
         summary.steps += 1;
@@ -461,9 +438,8 @@ pub fn run<B: Backend>(
         }
         // Force sample: every step.
         let now = monotonic_ns();
-        let mut msg = ForceMsg {
+        let header = ForceMsg {
             version: PROTOCOL_VERSION,
-            tool_count: contacts.len() as u32,
             seq: summary.samples_published,
             t_ns: now,
             sim_time_ns: (summary.steps as Real * dt_s * 1e9) as u64,
@@ -472,17 +448,12 @@ pub fn run<B: Backend>(
         };
         last_step_ns = now;
         let reaction_t0 = monotonic_ns();
-        for (i, c) in contacts.iter().enumerate() {
-            let r = contacts.reaction(i, &sim);
-            let f = r.force_n;
-            let out = &mut msg.tools[i];
-            out.force_n = f.to_array();
-            out.stiffness_n_per_m = r.stiffness_rows();
-            // The position this step used: the tool end after clamping to its length.
-            out.position_m = c.pose().map_or([0.0; 3], |p| p.end_m.to_array());
-            out.pose_seq = latest_pose.map_or(0, |p| p.seq);
-            out.flags = flags[i];
-            summary.max_force_n = summary.max_force_n.max(f.length());
+        let pose_seq = latest_pose.map_or(0, |p| p.seq);
+        let msg = outputs::force_sample(header, &contacts, &sim, pose_seq, &flags);
+        for t in &msg.tools[..contacts.len()] {
+            summary.max_force_n = summary
+                .max_force_n
+                .max(Vec3::from_array(t.force_n).length());
         }
         summary.contact_s += (monotonic_ns() - reaction_t0) as Real * 1e-9;
         force_pub
@@ -493,52 +464,8 @@ pub fn run<B: Backend>(
         poses.check_publishers(&node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if summary.steps.is_multiple_of(frame_every) {
-            if published_topology != topology_version {
-                tris.clear();
-                tris.extend(
-                    sim.model()
-                        .topology()
-                        .surface_triangles(sim.model().mesh())
-                        .map(|t| t.map(|v| v.0)),
-                );
-                let mut s = topo_pub
-                    .loan_slice_uninit(tris.len())
-                    .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
-                *s.user_header_mut() = TopologyHeader {
-                    version: PROTOCOL_VERSION,
-                    triangle_count: tris.len() as u32,
-                    topology_version,
-                };
-                s.write_from_slice(&tris)
-                    .send()
-                    .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
-                published_topology = topology_version;
-            } else {
-                // A viewer that joined since gets the kept topology (history
-                // is delivered when the publisher updates its connections).
-                let _ = topo_pub.update_connections();
-            }
-            let u = sim.displacements();
-            let mut s = mesh_pub
-                .loan_slice_uninit(n)
-                .map_err(|e| publish_err("mesh state")(format!("{e:?}")))?;
-            *s.user_header_mut() = MeshHeader {
-                version: PROTOCOL_VERSION,
-                vertex_count: n as u32,
-                frame_seq: summary.frames_published,
-                topology_version,
-                t_ns: now,
-            };
-            s.write_from_fn(|i| {
-                let p = rest[i] + Vec3::from_array(u[i]);
-                [p.x as f32, p.y as f32, p.z as f32]
-            })
-            .send()
-            .map_err(|e| publish_err("mesh state")(format!("{e:?}")))?;
-            summary.frames_published += 1;
-            if let Some(r) = &mut recorder {
-                r.offer(summary.steps as Real * dt_s, sim.model(), u);
-            }
+            mesh_out.publish(&sim, now, summary.steps as Real * dt_s)?;
+            summary.frames_published = mesh_out.frames;
         }
         if cfg.status && now - last_status >= 1_000_000_000 {
             let secs = (now - start_ns) as Real * 1e-9;
@@ -607,8 +534,7 @@ pub fn run<B: Backend>(
     summary.step_us = step_times.percentiles_us();
     summary.dropped_time_s = pacing.dropped_ns() as Real * 1e-9;
     summary.stalls = pacing.stalls();
-    if let Some(r) = recorder {
-        let (counts, error) = r.finish();
+    if let Some((counts, error)) = mesh_out.finish() {
         summary.frames_saved = counts.saved;
         summary.frames_dropped = counts.dropped;
         if let Some(e) = error {
