@@ -17,6 +17,8 @@ args.add_argument("--seconds", type=float, default=3.0)
 args = args.parse_args()
 
 with Session(args.session) as s:
+    scene = s.wait_scene()  # the tools and the organ, from the simulation
+    print("tools: " + ", ".join(f"{t.name} ({t.kind}, radius {t.radius_m * 1e3:.1f} mm)" for t in scene.tools))
     first = s.wait_mesh()
     samples, peak, cutting, frames = 0, np.zeros(0), 0, set()
     end = time.monotonic() + args.seconds

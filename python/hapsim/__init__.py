@@ -21,7 +21,7 @@ from .protocol import (
     PoseMsg,
     TopologyHeader,
 )
-from .session import POSE_TIMEOUT_S, ForceSample, MeshFrame, ProtocolError, Session
+from .session import POSE_TIMEOUT_S, ForceSample, MeshFrame, ProtocolError, Scene, Session, Tool
 
 __all__ = [
     "CONTACT",
@@ -37,7 +37,9 @@ __all__ = [
     "MeshHeader",
     "PoseMsg",
     "ProtocolError",
+    "Scene",
     "Session",
+    "Tool",
     "TopologyHeader",
 ]
 __version__ = "0.1.0"

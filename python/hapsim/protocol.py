@@ -104,6 +104,43 @@ class TopologyHeader(ctypes.Structure):
         return "hapsim.TopologyHeader.v1"
 
 
+#: `ToolInfo.kind` values.
+TOOL_KINDS = {0: "grasper", 1: "hook", 2: "cavitron"}
+
+
+class ToolInfo(ctypes.Structure):
+    """One declared tool in `SceneInfo` (88 bytes)."""
+
+    _fields_ = [
+        ("name", ctypes.c_uint8 * 32),
+        ("kind", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("fulcrum_m", ctypes.c_double * 3),
+        ("length_m", ctypes.c_double),
+        ("radius_m", ctypes.c_double),
+        ("tip_length_m", ctypes.c_double),
+    ]
+
+
+class SceneInfo(ctypes.Structure):
+    """Simulation -> clients, once at start (history 1): the scene's tools and
+    the organ's rest bounding box (416 bytes)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("tool_count", ctypes.c_uint32),
+        ("vertex_count", ctypes.c_uint32),
+        ("tet_count", ctypes.c_uint32),
+        ("bounds_min_m", ctypes.c_double * 3),
+        ("bounds_max_m", ctypes.c_double * 3),
+        ("tools", ToolInfo * MAX_TOOLS),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "hapsim.SceneInfo.v1"
+
+
 class Position(ctypes.Structure):
     """A `mesh` slice element: a position in metres as Rust's `[f32; 3]`."""
 
@@ -131,6 +168,8 @@ for _t, _size in [
     (ForceMsg, 584),
     (MeshHeader, 32),
     (TopologyHeader, 16),
+    (ToolInfo, 88),
+    (SceneInfo, 64 + 88 * MAX_TOOLS),
     (Position, 12),
     (Triangle, 12),
 ]:

@@ -16,8 +16,10 @@ from .protocol import (
     TOOL_PRESENT,
     ForceMsg,
     MeshHeader,
+    TOOL_KINDS,
     PoseMsg,
     Position,
+    SceneInfo,
     TopologyHeader,
     Triangle,
 )
@@ -68,6 +70,48 @@ class ForceSample:
             pose_seq=np.array([t.pose_seq for t in tools], dtype=np.uint64),
             flags=np.array([t.flags for t in tools], dtype=np.uint32),
         )
+
+
+@dataclasses.dataclass
+class Tool:
+    """A tool the scene declares (`[[tool]]`), index = its place in poses
+    and force samples."""
+
+    name: str
+    kind: str
+    fulcrum_m: np.ndarray
+    length_m: float
+    radius_m: float
+    tip_length_m: float
+
+
+@dataclasses.dataclass
+class Scene:
+    """What the simulation says about its scene (the `scene` stream)."""
+
+    tools: List[Tool]
+    #: The organ's rest bounding box (min, max), m.
+    bounds_m: Tuple[np.ndarray, np.ndarray]
+    vertex_count: int
+    tet_count: int
+
+    @staticmethod
+    def from_msg(m: SceneInfo) -> "Scene":
+        tools = []
+        for t in m.tools[: min(int(m.tool_count), MAX_TOOLS)]:
+            name = bytes(t.name).split(b"\0", 1)[0].decode("utf-8", "replace")
+            tools.append(
+                Tool(
+                    name=name,
+                    kind=TOOL_KINDS.get(int(t.kind), f"kind {t.kind}"),
+                    fulcrum_m=np.array(list(t.fulcrum_m)),
+                    length_m=float(t.length_m),
+                    radius_m=float(t.radius_m),
+                    tip_length_m=float(t.tip_length_m),
+                )
+            )
+        bounds = (np.array(list(m.bounds_min_m)), np.array(list(m.bounds_max_m)))
+        return Scene(tools, bounds, int(m.vertex_count), int(m.tet_count))
 
 
 @dataclasses.dataclass
@@ -144,6 +188,8 @@ class Session:
         self._topology = (
             self._slice_service("topology", Triangle, TopologyHeader).subscriber_builder().create()
         )
+        self._scene_sub = self._service("scene", SceneInfo, 1).subscriber_builder().create()
+        self._scene: Optional[Scene] = None
         self._pose_ready = (
             self._node.service_builder(iox2.ServiceName.new(f"hapsim/{name}/pose-ready"))
             .event()
@@ -250,6 +296,31 @@ class Session:
         """The organ's bounding box (min, max; m) from its surface now."""
         return self.wait_mesh(timeout_s).bounds_m()
 
+    # -- scene ------------------------------------------------------------
+
+    def scene(self) -> Optional[Scene]:
+        """The scene's tools and organ bounds, once the simulation has sent
+        them (None before)."""
+        while True:
+            sample = self._scene_sub.receive()
+            if sample is None:
+                return self._scene
+            m = sample.payload().contents
+            if m.version != PROTOCOL_VERSION:
+                raise ProtocolError(f"scene info of protocol version {m.version}")
+            self._scene = Scene.from_msg(m)
+
+    def wait_scene(self, timeout_s: float = 10.0) -> Scene:
+        """Waits for the scene info (the simulation re-sends it to late
+        joiners with its next mesh frame)."""
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            s = self.scene()
+            if s is not None:
+                return s
+            time.sleep(0.005)
+        raise TimeoutError(f"no scene info on session {self.name!r} within {timeout_s} s: is sim-server running?")
+
     # -- poses ------------------------------------------------------------
 
     def publish_pose(
@@ -286,7 +357,7 @@ class Session:
 
     def close(self) -> None:
         """Releases the ports (also on garbage collection)."""
-        for attr in ("_pose_pub", "_forces", "_mesh", "_topology", "_pose_ready"):
+        for attr in ("_pose_pub", "_forces", "_mesh", "_topology", "_scene_sub", "_pose_ready"):
             port = getattr(self, attr, None)
             if port is not None and hasattr(port, "delete"):
                 port.delete()

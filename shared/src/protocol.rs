@@ -166,6 +166,77 @@ pub struct TopologyHeader {
     pub topology_version: u64,
 }
 
+/// One declared tool as [`SceneInfo`] describes it (88 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.ToolInfo.v1")]
+pub struct ToolInfo {
+    /// The scene's name for the tool, UTF-8, zero-padded (truncated at a
+    /// character boundary to 32 bytes).
+    pub name: [u8; 32],
+    /// [`TOOL_GRASPER`], [`TOOL_HOOK`] or [`TOOL_CAVITRON`].
+    pub kind: u32,
+    /// Padding (keeps the layout explicit).
+    pub reserved: u32,
+    /// The trocar the shaft pivots in (m, scene frame).
+    pub fulcrum_m: [f64; 3],
+    /// Shaft length (m).
+    pub length_m: f64,
+    /// Shaft radius (m).
+    pub radius_m: f64,
+    /// Tip length (m).
+    pub tip_length_m: f64,
+}
+
+/// [`ToolInfo::kind`]: a grasper (grips, cuts with closed jaws).
+pub const TOOL_GRASPER: u32 = 0;
+/// [`ToolInfo::kind`]: a hook (presses and slides).
+pub const TOOL_HOOK: u32 = 1;
+/// [`ToolInfo::kind`]: a cavitron (removes tissue at its tip).
+pub const TOOL_CAVITRON: u32 = 2;
+
+/// Sim -> clients: what the scene holds that a client without the scene
+/// file needs, published once when the simulation starts (history 1: a
+/// client that joins later gets it).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.SceneInfo.v1")]
+pub struct SceneInfo {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Declared tools (<= `MAX_TOOLS`), in `[[tool]]` order: the index of
+    /// `PoseMsg::tools` and `ForceMsg::tools`.
+    pub tool_count: u32,
+    /// Vertices of the mesh (the `mesh` stream's slice length).
+    pub vertex_count: u32,
+    /// Tetrahedra of the mesh at the start.
+    pub tet_count: u32,
+    /// The organ's rest bounding box, low corner (m).
+    pub bounds_min_m: [f64; 3],
+    /// The organ's rest bounding box, high corner (m).
+    pub bounds_max_m: [f64; 3],
+    /// Per tool.
+    pub tools: [ToolInfo; MAX_TOOLS],
+}
+
+impl ToolInfo {
+    /// The name as text (up to the first zero byte).
+    pub fn name(&self) -> &str {
+        let end = self.name.iter().position(|&b| b == 0).unwrap_or(32);
+        std::str::from_utf8(&self.name[..end]).unwrap_or("")
+    }
+
+    /// Stores `name`, cut to 32 bytes at a character boundary.
+    pub fn set_name(&mut self, name: &str) {
+        let mut end = name.len().min(32);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.name = [0; 32];
+        self.name[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
+}
+
 /// One haptic tick as the daemon saw it.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
@@ -229,6 +300,14 @@ mod tests {
         assert_eq!(std::mem::size_of::<ForceMsg>(), 40 + 136 * MAX_TOOLS);
         assert_eq!(std::mem::size_of::<MeshHeader>(), 32);
         assert_eq!(std::mem::size_of::<TopologyHeader>(), 16);
+        assert_eq!(std::mem::size_of::<ToolInfo>(), 88);
+        assert_eq!(std::mem::size_of::<SceneInfo>(), 64 + 88 * MAX_TOOLS);
+        let mut t = ToolInfo::default();
+        t.set_name("grasper");
+        assert_eq!(t.name(), "grasper");
+        // Cut at a character boundary, never inside one.
+        t.set_name(&"é".repeat(20));
+        assert_eq!(t.name(), "é".repeat(16));
         assert_eq!(std::mem::size_of::<TelemetryTick>(), 88);
         assert_eq!(
             std::mem::size_of::<TelemetryBatch>(),

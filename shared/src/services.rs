@@ -4,7 +4,7 @@
 
 use crate::SessionName;
 use crate::protocol::{
-    ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, TelemetryBatch, TopologyHeader,
+    ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, SceneInfo, TelemetryBatch, TopologyHeader,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -37,6 +37,8 @@ pub mod stream {
     /// Daemon -> sim event: a pose was just published (optional; the
     /// simulation steps on it instead of waiting for its next step time).
     pub const POSE_READY: &str = "pose-ready";
+    /// Sim -> clients: the scene's tools and organ, once (history 1).
+    pub const SCENE: &str = "scene";
 }
 
 /// Why a service could not be used.
@@ -82,6 +84,10 @@ pub type PoseSubscriber = Subscriber<Ipc, PoseMsg, ()>;
 pub type PoseReadyListener = Listener<Ipc>;
 /// A force subscriber.
 pub type ForceSubscriber = Subscriber<Ipc, ForceMsg, ()>;
+/// Publisher of the scene-info stream.
+pub type ScenePublisher = Publisher<Ipc, SceneInfo, ()>;
+/// Subscriber of the scene-info stream.
+pub type SceneSubscriber = Subscriber<Ipc, SceneInfo, ()>;
 /// Publisher of a slice stream (`mesh`, `topology`) with its user header.
 pub type SlicePublisher<T, H> = Publisher<Ipc, [T], H>;
 
@@ -165,6 +171,15 @@ pub fn force_service(
     session: &SessionName,
 ) -> Result<PortFactory<Ipc, ForceMsg, ()>, ServiceError> {
     open(node, session, stream::FORCE, FORCE_BUFFER_MAX)
+}
+
+/// The scene-info stream (sim -> clients): published once at start, kept
+/// in history for clients that join later.
+pub fn scene_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, SceneInfo, ()>, ServiceError> {
+    open(node, session, stream::SCENE, 1)
 }
 
 /// The pose stream (daemon -> sim): latest value, so a buffer of one.

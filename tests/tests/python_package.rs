@@ -98,4 +98,11 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
         "no cut seen: {stdout}"
     );
     assert!(stdout.contains("peak force per tool ["), "{stdout}");
+    // The scene's tools, from the simulation's scene stream.
+    assert!(
+        stdout.contains(
+            "tools: grasper (grasper, radius 5.0 mm), cavitron (cavitron, radius 4.0 mm)"
+        ),
+        "{stdout}"
+    );
 }

@@ -349,8 +349,10 @@ pub fn run<B: Backend>(
         &sim,
         services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?,
         services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?,
+        services::publisher(&services::scene_service(&node, &cfg.session)?)?,
+        outputs::scene_info(&contacts, &sim),
         recorder,
-    );
+    )?;
 
     let mut summary = RunSummary {
         finite: true,
