@@ -342,7 +342,12 @@ fn the_cavitron_burns_every_millisecond_of_simulated_time() {
         sim.step();
     }
     assert_eq!(burnt_at, [0, 4, 8]);
-    // Withdrawn and back: it burns at once.
+    // Withdrawn right after a burn and back at the next update: it burns at
+    // once (a tool that comes back starts afresh, not three steps short).
+    let burnt = tool
+        .update(&mut sim, tip(0.002, 0.034, 0.013), 1.0)
+        .tets_removed;
+    assert!(burnt > 0, "update 12 burns");
     tool.0.update(&mut sim, &[None]);
     let at = tip(0.002, 0.03, 0.03);
     assert!(tool.update(&mut sim, at, 1.0).tets_removed > 0);

@@ -582,6 +582,17 @@ fn a_surface_physical_tag_selects_that_surface_s_vertices() {
         "ellipsoid_bin42.vtk",
     ] {
         let b = scene(file, "[[fixed]]\nselect = { surface_physical = 2 }\n").unwrap();
+        // original_id maps each renumbered vertex to its place in the file.
+        let read =
+            sim_server::mesh::io::read_mesh(&std::path::Path::new(meshes).join(file)).unwrap();
+        let ids = b.original_vertex_ids.as_ref().expect("renumbered");
+        let here = b.model.mesh().positions_m();
+        assert!(
+            ids.iter()
+                .zip(here)
+                .all(|(&o, p)| read.mesh.positions_m()[o as usize] == *p),
+            "{file}: original_id does not point back into the file"
+        );
         let m = &b.model;
         let mut boundary: Vec<sim_server::ids::VertexId> =
             m.topology().surface_triangles(m.mesh()).flatten().collect();

@@ -672,22 +672,35 @@ rotate = { axis = [1.0, 0.0, 0.0], origin_m = [0.0, 0.01, 0.01], angle_deg = 30.
 fn save_frames_writes_a_series_or_says_why_it_cannot() {
     let dir = scratch_dir("save-frames");
     let frames = dir.join("run frames");
+    let json = dir.join("run.json");
     let session = format!("frames{}", std::process::id());
-    // Headless: 400 steps, a frame every 1 ms of simulated time at most.
+    // Headless: 400 steps of 1 ms, a frame at 100 Hz: every 10th step, 40.
     let out = run_ok(
         Command::new(binary("sim-server"))
             .args(["run", "--headless", "--quiet", "--steps", "400"])
             .args(["--viewer-rate", "100", "--session", &session])
             .arg("--save-frames")
-            .arg(&frames),
+            .arg(&frames)
+            .arg("--json")
+            .arg(&json),
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     let pvd = std::fs::read_to_string(frames.join("frames.pvd")).unwrap();
-    let listed = pvd.matches("<DataSet").count();
+    let listed = pvd.matches("<DataSet").count() as u64;
+    let v = read_json(&json);
+    let (saved, dropped) = (
+        v["frames_saved"].as_u64().unwrap(),
+        v["frames_dropped"].as_u64().unwrap(),
+    );
+    // Every frame published was saved or counted as dropped; the series
+    // lists exactly the saved ones.
+    assert_eq!(v["frames_published"], 40, "{v}");
+    assert_eq!(saved + dropped, 40, "{v}");
     assert!(
-        listed > 0 && stdout.contains(&format!("{listed} frames saved")),
+        listed == saved && saved > 0 && stdout.contains(&format!("{listed} frames saved")),
         "{stdout}\n{pvd}"
     );
+    assert!(!frames.join("frames.pvd.tmp").exists());
     assert!(frames.join(format!("frame_{:06}.vtu", listed - 1)).exists());
     // A directory that cannot be made: refused at start, naming the flag.
     let out = Command::new(binary("sim-server"))

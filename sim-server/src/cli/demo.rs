@@ -117,6 +117,10 @@ fn pipe() -> std::io::Result<(std::fs::File, std::fs::File)> {
     }
 }
 
+// The trajectory is written into its pipe before the daemon starts: it
+// must fit the pipe's buffer (64 KiB on Linux; POSIX promises 4 KiB).
+const _: () = assert!(GRASPER_CSV.len() < 4096);
+
 /// The daemon's file descriptors for its trajectory (read) and its JSON
 /// summary (write): no file in /tmp, so a demo killed outright (SIGKILL)
 /// leaves nothing behind. The daemon opens them as `/dev/fd/3` and `/dev/fd/4`.
@@ -144,6 +148,9 @@ fn pass_fds(cmd: &mut Command, traj: libc::c_int, json: libc::c_int) {
                 if libc::dup2(from, to) < 0 {
                     return Err(std::io::Error::last_os_error());
                 }
+                // The daemon holds only fds 3 and 4: a second write end of
+                // the summary pipe would keep the demo's read from ending.
+                libc::close(from);
             }
             Ok(())
         });

@@ -173,8 +173,6 @@ fn progress_line() -> impl FnMut(usize, usize) {
     }
 }
 
-/// The step of backends not bound by the explicit stability limit: the
-/// scene's `dt_s`, else one period of its rate (1 kHz by default).
 /// A count flag (`--tets`, `--steps`, `--threads`): a whole number of at
 /// least 1, with a message that says so (clap's own says "invalid digit"
 /// for a negative number).
@@ -202,6 +200,8 @@ fn override_step(scene: &mut BuiltScene, dt_s: Option<f64>) -> Result<()> {
     Ok(())
 }
 
+/// The step of backends not bound by the explicit stability limit: the
+/// scene's `dt_s`, else one period of its rate (1 kHz by default).
 fn real_time_step(scene: &BuiltScene) -> f64 {
     scene
         .settings

@@ -78,8 +78,10 @@ impl SurfaceIndex {
         &self.members
     }
 
-    /// Brings the leaves up to the current positions (call once per step,
-    /// before any query). Follows a cut first, if there was one.
+    /// Brings the leaves up to the current positions (call before a query
+    /// on a state newer than the last refit: the projection law every step,
+    /// the penalty law when it selects points afresh). Follows a cut first,
+    /// if there was one.
     pub fn refit<B: Backend + ?Sized>(&mut self, sim: &B) {
         if self.sync(sim) {
             return;

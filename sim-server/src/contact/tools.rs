@@ -331,7 +331,8 @@ impl Tools {
         self.claims.owner(v)
     }
 
-    /// The surface index the tools query.
+    /// The surface index the tools query (under the penalty law as of the
+    /// last fresh selection of points, not necessarily this step).
     pub fn surface_index(&self) -> &SurfaceIndex {
         &self.index
     }

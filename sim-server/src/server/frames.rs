@@ -2,10 +2,12 @@
 //! a zlib-compressed VTU file per frame and `frames.pvd` listing them with
 //! their simulated times.
 //!
-//! Writing a frame (base64-encoding and writing a few hundred kilobytes
-//! for the liver) takes milliseconds: far too long for the stepping
-//! thread, which must not stall. So the step only copies what a frame
-//! needs into a buffer and hands it to a writer thread over a channel of
+//! Writing a frame (compressing, base64-encoding and writing a few hundred
+//! kilobytes for the liver) takes milliseconds: far too long for the
+//! stepping thread, which must not stall. So the step only copies what a
+//! frame needs into a buffer (and, for a linear scene, computes -K u: one
+//! pass over the tensors, as one explicit sub-step costs) and hands it to
+//! a writer thread over a channel of
 //! [`QUEUE`] frames; buffers come back for reuse, so neither side allocates
 //! per frame once warm. If the disk cannot keep up, frames are dropped
 //! (counted in the run summary), never the step delayed. `frames.pvd` is
@@ -48,8 +50,8 @@ pub enum FramesError {
         /// Why.
         source: std::io::Error,
     },
-    /// The writer thread could not be started.
-    #[error("--save-frames: cannot start the writer thread: {0}")]
+    /// The writer thread could not be started, or it failed.
+    #[error("--save-frames: the frame writer thread: {0}")]
     Thread(std::io::Error),
     /// Writing a frame or the series failed (the run went on; frames
     /// written before are kept).
@@ -73,7 +75,8 @@ struct Frame {
 pub struct FrameCounts {
     /// Frames written.
     pub saved: u64,
-    /// Frames dropped because the writer was behind.
+    /// Frames dropped because the writer was behind (not those after a
+    /// write error, which stops the series).
     pub dropped: u64,
 }
 
@@ -87,8 +90,6 @@ pub struct FrameRecorder {
     dropped: u64,
     /// Whether `elastic_force` is written (linear scenes).
     forces: bool,
-    /// Scratch for -K u on the stepping thread's side.
-    u_scratch: Vec<Vec3>,
 }
 
 impl FrameRecorder {
@@ -124,7 +125,6 @@ impl FrameRecorder {
             writer: Some(writer),
             dropped: 0,
             forces: model.nonlinear_tets() == 0 && !membrane_nonlinear,
-            u_scratch: vec![Vec3::ZERO; model.vertex_count()],
         })
     }
 
@@ -132,6 +132,10 @@ impl FrameRecorder {
     /// dropped (counted) if the writer is behind. Allocates nothing once
     /// the buffers have grown to the mesh's size.
     pub fn offer(&mut self, t_s: Real, model: &ElasticModel, u_m: &[[Real; 3]]) {
+        if self.frames.is_none() {
+            // The writer stopped on an error (`finish` reports it).
+            return;
+        }
         let Some(mut f) = self.unsent.take().or_else(|| self.spare.try_recv().ok()) else {
             self.dropped += 1;
             return;
@@ -141,9 +145,8 @@ impl FrameRecorder {
         f.u_m.extend(u_m.iter().map(|u| Vec3::from_array(*u)));
         f.force_n.clear();
         if self.forces {
-            self.u_scratch.copy_from_slice(&f.u_m);
             f.force_n.resize(u_m.len(), Vec3::ZERO);
-            model.elastic_forces(&self.u_scratch, &mut f.force_n);
+            model.elastic_forces(&f.u_m, &mut f.force_n);
         }
         f.tets.clear();
         f.tet_ids.clear();
@@ -161,8 +164,9 @@ impl FrameRecorder {
                 self.unsent = Some(f);
                 self.dropped += 1;
             }
-            // The writer stopped on an error: `finish` reports it.
-            Err(TrySendError::Disconnected(_)) => self.dropped += 1,
+            // The writer stopped on an error: no more frames are copied
+            // (`finish` reports it).
+            Err(TrySendError::Disconnected(_)) => self.frames = None,
         }
     }
 
@@ -174,13 +178,31 @@ impl FrameRecorder {
         self.frames = None;
         let (saved, error) = match self.writer.take().map(JoinHandle::join) {
             Some(Ok(r)) => r,
-            Some(Err(_)) | None => (0, None),
+            Some(Err(_)) => (
+                0,
+                Some(FramesError::Thread(std::io::Error::other(
+                    "the frame writer panicked",
+                ))),
+            ),
+            None => (0, None),
         };
         let counts = FrameCounts {
             saved,
             dropped: self.dropped,
         };
         (counts, error)
+    }
+}
+
+impl Drop for FrameRecorder {
+    /// A run that ends on an error (not through [`FrameRecorder::finish`])
+    /// still lets the writer write what is queued and the final
+    /// `frames.pvd`.
+    fn drop(&mut self) {
+        self.frames = None;
+        if let Some(w) = self.writer.take() {
+            let _ = w.join();
+        }
     }
 }
 

@@ -62,12 +62,18 @@ pub fn force_sample<B: Backend>(
 ) -> ForceMsg {
     header.tool_count = tools.len() as u32;
     for (i, c) in tools.iter().enumerate() {
-        let r = tools.reaction(i, sim);
         let out = &mut header.tools[i];
+        if c.pose().is_none() {
+            // No pose (withdrawn, let go): nothing in contact, whatever a
+            // stiffness worker last computed for it.
+            out.pose_seq = pose_seq;
+            continue;
+        }
+        let r = tools.reaction(i, sim);
         out.force_n = r.force_n.to_array();
         out.stiffness_n_per_m = r.stiffness_rows();
         // The position this step used: the tool end after clamping to its
-        // length (zeros: no pose).
+        // length.
         out.position_m = c.pose().map_or([0.0; 3], |p| p.end_m.to_array());
         out.pose_seq = pose_seq;
         out.flags = flags[i];

@@ -235,7 +235,9 @@ fn vtu(
 /// Writes a PVD collection: one `DataSet` per step with its time (s). Each
 /// VTU path is written relative to the PVD's directory: a path inside that
 /// directory loses the directory prefix, any other is written as given
-/// (ParaView resolves relative paths from the PVD's directory).
+/// (ParaView resolves relative paths from the PVD's directory). Written
+/// beside it and renamed into place: a run rewriting its series is never
+/// seen (or killed) with half a file.
 pub fn write_pvd(path: &Path, steps: &[(f64, PathBuf)]) -> Result<(), MeshIoError> {
     let file = path.display().to_string();
     if let Some((t, p)) = steps.iter().find(|(t, _)| !t.is_finite()) {
@@ -245,7 +247,10 @@ pub fn write_pvd(path: &Path, steps: &[(f64, PathBuf)]) -> Result<(), MeshIoErro
         });
     }
     let dir = path.parent().unwrap_or(Path::new(""));
-    write_with(&file, path, |w| {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    write_with(&file, &tmp, |w| {
         writeln!(w, "<?xml version=\"1.0\"?>")?;
         writeln!(
             w,
@@ -267,7 +272,8 @@ pub fn write_pvd(path: &Path, steps: &[(f64, PathBuf)]) -> Result<(), MeshIoErro
         }
         writeln!(w, "  </Collection>")?;
         writeln!(w, "</VTKFile>")
-    })
+    })?;
+    std::fs::rename(&tmp, path).map_err(|source| MeshIoError::Io { file, source })
 }
 
 /// Writes a Wavefront OBJ surface (vertices and 1-based triangle faces).

@@ -379,13 +379,18 @@ pub(super) fn element(
     b: &mut Builder,
 ) -> Result<(), MeshIoError> {
     let kind = gmsh_type(t).ok_or_else(|| unsupported(file, at, t))?;
-    let physical = tags.first().map_or(Ok(0), |&p| {
-        i32::try_from(p).map_err(|_| perr(file, at, format!("physical tag {p} is out of range")))
-    })?;
-    if t == TRI3 && physical != 0 {
+    // Read only for the elements kept: a line or point with an odd tag is
+    // skipped as before.
+    let physical = || {
+        tags.first().map_or(Ok(0), |&p| {
+            i32::try_from(p)
+                .map_err(|_| perr(file, at, format!("physical tag {p} is out of range")))
+        })
+    };
+    if t == TRI3 && physical()? != 0 {
         // A triangle of a physical surface: kept for surface selections.
         let v = vertices::<3>(file, at, tag, node_tags, nodes, "a triangle")?;
-        b.triangle(v, physical);
+        b.triangle(v, physical()?);
         return Ok(());
     }
     if kind.dim < 3 {
@@ -396,7 +401,7 @@ pub(super) fn element(
         return Err(unsupported(file, at, t));
     }
     let v = vertices::<4>(file, at, tag, node_tags, nodes, "a tetrahedron")?;
-    b.tet(v, physical, tag as u64, at);
+    b.tet(v, physical()?, tag as u64, at);
     Ok(())
 }
 

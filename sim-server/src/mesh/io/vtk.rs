@@ -28,10 +28,10 @@ pub(super) enum CellKind {
     Unsupported(String),
 }
 
-/// Classifies a VTK cell type.
 /// VTK's linear triangle.
 const VTK_TRIANGLE: i64 = 5;
 
+/// Classifies a VTK cell type.
 pub(super) fn cell_kind(t: i64) -> CellKind {
     let lower = match t {
         VTK_TETRA => return CellKind::Tet,
