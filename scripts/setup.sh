@@ -3,7 +3,7 @@
 # The build needs a Rust toolchain (>= 1.95) and a C compiler; the viewer's
 # snapshots (and the tests that take them) need Mesa's EGL with its software
 # rasterizer (loaded at run time, no display needed); the Python backend
-# example needs iceoryx2's Python package; the writers' tests need meshio.
+# example needs iceoryx2's Python package; the writers' tests need meshio and VTK.
 set -euo pipefail
 need_apt=()
 command -v cc >/dev/null 2>&1 || need_apt+=(gcc)
@@ -22,10 +22,15 @@ if ! python3 -c 'import iceoryx2' >/dev/null 2>&1; then
   python3 -m pip install --quiet --disable-pip-version-check iceoryx2==0.10.0 2>/dev/null \
     || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages iceoryx2==0.10.0
 fi
-# The writers' tests read the files back with meshio, an independent reader.
+# The writers' tests read the files back with independent readers: meshio,
+# and VTK's own (the library ParaView is built on; a 140 MB wheel).
 if ! python3 -c 'import meshio' >/dev/null 2>&1; then
   python3 -m pip install --quiet --disable-pip-version-check meshio==5.3.5 2>/dev/null \
     || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages meshio==5.3.5
+fi
+if ! python3 -c 'import vtkmodules.vtkIOXML' >/dev/null 2>&1; then
+  python3 -m pip install --quiet --disable-pip-version-check vtk==9.7.2 2>/dev/null \
+    || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages vtk==9.7.2
 fi
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: installing the Rust toolchain with rustup" >&2

@@ -94,16 +94,33 @@ pub fn read_json(path: &std::path::Path) -> serde_json::Value {
 /// largest vector lengths, whether integer arrays are permutations).
 /// Panics with meshio's own error if it refuses a file.
 pub fn meshio_describe(files: &[&std::path::Path]) -> Vec<serde_json::Value> {
-    let script =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python/read_with_meshio.py");
+    python_describe("read_with_meshio.py", "meshio", files)
+}
+
+/// What VTK's own readers (the library ParaView is built on;
+/// `scripts/setup.sh` installs its wheel) find in each `.vtu` or `.vtk`
+/// file: `tests/python/read_with_vtk.py`'s JSON (points, tetrahedra,
+/// arrays with components, tuples, largest vector length or range).
+pub fn vtk_describe(files: &[&std::path::Path]) -> Vec<serde_json::Value> {
+    python_describe("read_with_vtk.py", "vtk", files)
+}
+
+fn python_describe(
+    script: &str,
+    package: &str,
+    files: &[&std::path::Path],
+) -> Vec<serde_json::Value> {
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("python")
+        .join(script);
     let out = std::process::Command::new("python3")
         .arg(&script)
         .args(files)
         .output()
-        .expect("python3 (scripts/setup.sh installs it with meshio)");
+        .expect("python3 (scripts/setup.sh installs it)");
     assert!(
         out.status.success(),
-        "meshio could not read {files:?} (is meshio installed? scripts/setup.sh installs it): {}",
+        "{package} could not read {files:?} (is {package} installed? scripts/setup.sh installs it): {}",
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).expect("the script prints JSON")

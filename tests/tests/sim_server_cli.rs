@@ -290,6 +290,22 @@ force_n = [0.0, 0.0, -0.01]
         assert_eq!(s["point_data"]["force"]["shape"][1], 3, "{s}");
         assert_eq!(s["point_data"]["original_id"]["permutation"], true, "{s}");
     }
+    // VTK's own readers (what ParaView uses) read the same from VTU and
+    // legacy VTK, every array included.
+    let n = v["vertices"].as_u64().unwrap() as f64;
+    for s in system_tests::vtk_describe(&[&vtu, &vtk]) {
+        assert_eq!(s["tetrahedra"], tets, "{s}");
+        let u = s["point_data"]["displacement"]["max_norm"]
+            .as_f64()
+            .unwrap();
+        assert!((u - max_u).abs() <= 1e-12 * max_u, "{s}: {u} vs {max_u}");
+        assert_eq!(s["point_data"]["force"]["components"], 3, "{s}");
+        assert_eq!(
+            s["point_data"]["original_id"]["range"],
+            serde_json::json!([0.0, n - 1.0]),
+            "{s}"
+        );
+    }
     assert_eq!(seen[2]["tetrahedra"], tets, "{}", seen[2]);
     assert_eq!(seen[3]["triangles"], count, "{}", seen[3]);
     assert_eq!(seen[4]["triangles"], count, "{}", seen[4]);
