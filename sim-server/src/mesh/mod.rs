@@ -204,19 +204,7 @@ impl TetMesh {
     /// Renumbers the vertices: vertex `order[k]` becomes vertex `k`.
     /// `order` must be a permutation of `0..vertex_count()`.
     pub fn permuted(&self, order: &[VertexId]) -> Self {
-        assert_eq!(
-            order.len(),
-            self.vertex_count(),
-            "order is not a permutation"
-        );
-        let mut new_of_old = vec![u32::MAX; order.len()];
-        for (new, old) in order.iter().enumerate() {
-            new_of_old[old.idx()] = new as u32;
-        }
-        assert!(
-            new_of_old.iter().all(|&v| v != u32::MAX),
-            "order is not a permutation"
-        );
+        let new_of_old = new_of_old(order, self.vertex_count());
         Self {
             positions_m: order.iter().map(|v| self.positions_m[v.idx()]).collect(),
             tets: self
@@ -235,6 +223,22 @@ impl TetMesh {
             |(lo, hi), p| (lo.min(*p), hi.max(*p)),
         )
     }
+}
+
+/// For a renumbering `order` (vertex `order[k]` becomes `k`) of `count`
+/// vertices, each old vertex's new index. Panics unless `order` is a
+/// permutation of `0..count`.
+pub fn new_of_old(order: &[VertexId], count: usize) -> Vec<u32> {
+    assert_eq!(order.len(), count, "order is not a permutation");
+    let mut map = vec![u32::MAX; count];
+    for (new, old) in order.iter().enumerate() {
+        map[old.idx()] = new as u32;
+    }
+    assert!(
+        map.iter().all(|&v| v != u32::MAX),
+        "order is not a permutation"
+    );
+    map
 }
 
 #[cfg(test)]

@@ -313,13 +313,10 @@ fn load_mesh(
         });
     }
     let order = rcm_order(&mesh);
-    let mut new_of_old = vec![VertexId(0); order.len()];
-    for (new, old) in order.iter().enumerate() {
-        new_of_old[old.idx()] = VertexId::from(new);
-    }
+    let new_of_old = crate::mesh::new_of_old(&order, mesh.vertex_count());
     let mut physical = physical;
     for (tri, _) in &mut physical.surface {
-        *tri = tri.map(|v| new_of_old[v.idx()]);
+        *tri = tri.map(|v| VertexId(new_of_old[v.idx()]));
     }
     Ok(LoadedMesh {
         mesh: mesh.permuted(&order),
