@@ -4,7 +4,7 @@ found as one JSON object per file, for the Rust tests to check the writers:
     python3 tests/python/read_with_meshio.py FILE...
 
 Per file: points, tetrahedra, triangles, and per point or cell array its shape, the
-largest vector length (vectors) and whether it is a permutation of
+largest vector length and the first vector (vectors) and whether it is a permutation of
 0..n-1 (integer arrays). A file meshio refuses makes the script fail.
 """
 
@@ -34,6 +34,7 @@ def describe(path):
             entry = {"shape": list(a.shape), "dtype": str(a.dtype)}
             if a.ndim == 2 and a.shape[1] == 3:
                 entry["max_norm"] = float(np.linalg.norm(a, axis=1).max())
+                entry["first"] = [float(x) for x in a[0]]
             if np.issubdtype(a.dtype, np.integer):
                 flat = a.reshape(-1)
                 entry["permutation"] = bool(
