@@ -390,3 +390,26 @@ fn the_help_texts_hold_no_rustdoc_links() {
         );
     }
 }
+
+#[test]
+fn the_viewer_takes_the_tools_from_the_simulation_not_its_default_scene() {
+    // The simulation runs the box scene (one tool, "probe"); the viewer is
+    // given no --scene (its default is the liver, with two tools): what it
+    // draws and reports are the simulation's tools, from the scene stream.
+    let name = format!("viewtools{}", std::process::id());
+    let dir = scratch_dir("viewer-tools");
+    let box_scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/box-probe.toml");
+    let mut sim = Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--duration-s", "20", "--session", &name])
+        .arg("--scene")
+        .arg(&box_scene)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server");
+    let report = snapshot(&name, &dir.join("box.png"), &["--no-overlay"]);
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(sim.id() as libc::pid_t, libc::SIGTERM) };
+    let _ = sim.wait();
+    assert_eq!(report["tools"], serde_json::json!(["probe"]), "{report}");
+}

@@ -56,6 +56,10 @@ pub struct Session {
     force: Subscriber<Ipc, ForceMsg, ()>,
     telemetry: Subscriber<Ipc, TelemetryBatch, ()>,
     telemetry_factory: PortFactory<Ipc, TelemetryBatch, ()>,
+    scene: services::SceneSubscriber,
+    /// The tools the simulation declares (its `scene` stream; empty until
+    /// it arrives): they win over the scene file's.
+    pub scene_tools: Vec<sim_server::scene::ToolDecl>,
     pose_factory: PortFactory<Ipc, PoseMsg, ()>,
     /// Latest vertex positions (m).
     pub positions_m: Vec<[f32; 3]>,
@@ -102,6 +106,7 @@ impl Session {
         )?;
         let telemetry_factory = services::telemetry_service(&node, session)?;
         let telemetry = services::subscriber(&telemetry_factory)?;
+        let scene = services::subscriber(&services::scene_service(&node, session)?)?;
         let pose_factory = services::pose_service(&node, session)?;
         Ok(Self {
             node,
@@ -110,6 +115,8 @@ impl Session {
             force,
             telemetry,
             telemetry_factory,
+            scene,
+            scene_tools: Vec::new(),
             pose_factory,
             positions_m: Vec::new(),
             triangles: Vec::new(),
@@ -204,6 +211,12 @@ impl Session {
                 flags: t.flags,
             }));
         }
+        while let Ok(Some(m)) = self.scene.receive() {
+            if m.version == PROTOCOL_VERSION {
+                self.scene_tools = tools_of(&m);
+                changed = true;
+            }
+        }
         while let Ok(Some(b)) = self.telemetry.receive() {
             if b.version != PROTOCOL_VERSION {
                 continue;
@@ -273,6 +286,27 @@ fn percentiles(x: &mut [f64]) -> (f64, f64) {
     x.sort_unstable_by(f64::total_cmp);
     let at = |q: f64| x[((x.len() - 1) as f64 * q).round() as usize];
     (at(0.5), at(0.99))
+}
+
+/// The tools a scene-info message declares, as the scene file would.
+fn tools_of(m: &shared::protocol::SceneInfo) -> Vec<sim_server::scene::ToolDecl> {
+    use shared::protocol::{TOOL_CAVITRON, TOOL_GRASPER};
+    use sim_server::scene::spec::ToolKind;
+    m.tools[..(m.tool_count as usize).min(MAX_TOOLS)]
+        .iter()
+        .map(|t| sim_server::scene::ToolDecl {
+            name: t.name().to_string(),
+            kind: match t.kind {
+                TOOL_GRASPER => ToolKind::Grasper,
+                TOOL_CAVITRON => ToolKind::Cavitron,
+                _ => ToolKind::Hook,
+            },
+            fulcrum_m: t.fulcrum_m,
+            length_m: t.length_m,
+            radius_m: t.radius_m,
+            tip_length_m: t.tip_length_m,
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -5,6 +5,16 @@ use crate::scene_info::SceneInfo;
 use crate::session::Session;
 use three_d::vec3;
 
+/// The tools to draw: the simulation's own (its `scene` stream), else the
+/// scene file's.
+pub fn tools<'a>(session: &'a Session, info: &'a SceneInfo) -> &'a [sim_server::scene::ToolDecl] {
+    if session.scene_tools.is_empty() {
+        &info.tools
+    } else {
+        &session.scene_tools
+    }
+}
+
 /// One shape per declared tool that the simulation reports, plus the tool
 /// the viewer drives (`driven`: tool index and tip) before the simulation
 /// reports it.
@@ -14,7 +24,7 @@ pub fn tool_shapes(
     driven: Option<(usize, [f64; 3])>,
 ) -> Vec<ToolShape> {
     let mut out = Vec::new();
-    for (i, decl) in info.tools.iter().enumerate() {
+    for (i, decl) in tools(session, info).iter().enumerate() {
         let reported = session.tools.get(i).filter(|t| t.position_m != [0.0; 3]);
         let (end, flags, force) = match (reported, driven) {
             (Some(t), _) => (t.position_m, t.flags, t.force_n),
@@ -68,7 +78,7 @@ pub fn overlay_lines(
     }
     for (i, t) in session.tools.iter().enumerate() {
         let f = (t.force_n[0].powi(2) + t.force_n[1].powi(2) + t.force_n[2].powi(2)).sqrt();
-        let name = info.tools.get(i).map_or("?", |d| d.name.as_str());
+        let name = tools(session, info).get(i).map_or("?", |d| d.name.as_str());
         lines.push(format!("tool {i} {name}: {f:.2} N"));
     }
     if let Some(i) = driving {

@@ -42,7 +42,7 @@ pub enum SnapshotError {
 }
 
 /// What a snapshot showed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct SnapshotReport {
     /// Image width (px).
     pub width: u32,
@@ -58,6 +58,9 @@ pub struct SnapshotReport {
     pub topology_version: u64,
     /// Pixels not of the background colour.
     pub covered_pixels: usize,
+    /// The tools drawn by name: the simulation's (its `scene` stream),
+    /// else the scene file's.
+    pub tools: Vec<String>,
 }
 
 /// How to take a snapshot.
@@ -170,6 +173,10 @@ pub fn snapshot(
         cut_triangles: session.triangles.iter().filter(|t| is_cut(**t)).count(),
         topology_version: session.topology_version,
         covered_pixels: pixels.iter().filter(|p| p[..3] != background).count(),
+        tools: crate::show::tools(session, info)
+            .iter()
+            .map(|t| t.name.clone())
+            .collect(),
     };
     write_png(out, width, height, &pixels)?;
     Ok(report)
