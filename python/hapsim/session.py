@@ -159,6 +159,30 @@ def open_stream(node, session: str, stream: str, payload, buffer: int):
     )
 
 
+def _drain(subscriber, what: str, header: bool = False):
+    """Yields every sample waiting on `subscriber` with its payload (or, for a
+    slice stream, its user header) checked for the protocol version."""
+    while True:
+        sample = subscriber.receive()
+        if sample is None:
+            return
+        m = (sample.user_header() if header else sample.payload()).contents
+        if m.version != PROTOCOL_VERSION:
+            raise ProtocolError(f"{what} of protocol version {m.version}")
+        yield sample, m
+
+
+def _wait(fetch, ready, what: str, session: str, timeout_s: float):
+    """Polls `fetch()` until `ready(value)`, at most `timeout_s`."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        value = fetch()
+        if ready(value):
+            return value
+        time.sleep(0.005)
+    raise TimeoutError(f"no {what} on session {session!r} within {timeout_s} s: is sim-server running?")
+
+
 class Session:
     """Attach to session `name` (sim-server's `--session`, default
     "default"). Opens the streams a client uses with the protocol's
@@ -227,15 +251,7 @@ class Session:
     def forces(self) -> List[ForceSample]:
         """Every force sample received since the last call, oldest first
         (up to 1024 are kept between calls; `seq` gaps show losses)."""
-        out = []
-        while True:
-            sample = self._forces.receive()
-            if sample is None:
-                return out
-            m = sample.payload().contents
-            if m.version != PROTOCOL_VERSION:
-                raise ProtocolError(f"force sample of protocol version {m.version}")
-            out.append(ForceSample.from_msg(m))
+        return [ForceSample.from_msg(m) for _, m in _drain(self._forces, "force sample")]
 
     def latest_force(self) -> Optional[ForceSample]:
         """The newest force sample (older ones are dropped), or None."""
@@ -245,13 +261,7 @@ class Session:
     # -- mesh -------------------------------------------------------------
 
     def _receive_topology(self) -> None:
-        while True:
-            sample = self._topology.receive()
-            if sample is None:
-                return
-            h = sample.user_header().contents
-            if h.version != PROTOCOL_VERSION:
-                raise ProtocolError(f"topology of protocol version {h.version}")
+        for sample, h in _drain(self._topology, "topology", header=True):
             n = int(h.triangle_count)
             view = sample.payload().as_memory_view()
             tris = np.frombuffer(view, dtype=np.uint32, count=3 * n).reshape(n, 3).copy()
@@ -261,13 +271,7 @@ class Session:
         """The newest mesh frame (None before the first): positions copied
         out of shared memory, with the newest surface triangles."""
         self._receive_topology()
-        while True:
-            sample = self._mesh.receive()
-            if sample is None:
-                break
-            h = sample.user_header().contents
-            if h.version != PROTOCOL_VERSION:
-                raise ProtocolError(f"mesh frame of protocol version {h.version}")
+        for sample, h in _drain(self._mesh, "mesh frame", header=True):
             n = int(h.vertex_count)
             view = sample.payload().as_memory_view()
             positions = np.frombuffer(view, dtype=np.float32, count=3 * n).reshape(n, 3)
@@ -284,13 +288,13 @@ class Session:
 
     def wait_mesh(self, timeout_s: float = 10.0, with_surface: bool = True) -> MeshFrame:
         """Waits for a mesh frame (and, by default, its surface triangles)."""
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            frame = self.mesh()
-            if frame is not None and (frame.triangles is not None or not with_surface):
-                return frame
-            time.sleep(0.005)
-        raise TimeoutError(f"no mesh frame on session {self.name!r} within {timeout_s} s: is sim-server running?")
+        return _wait(
+            self.mesh,
+            lambda f: f is not None and (f.triangles is not None or not with_surface),
+            "mesh frame",
+            self.name,
+            timeout_s,
+        )
 
     def organ_bounds_m(self, timeout_s: float = 10.0) -> Tuple[np.ndarray, np.ndarray]:
         """The organ's bounding box (min, max; m) from its surface now."""
@@ -301,25 +305,14 @@ class Session:
     def scene(self) -> Optional[Scene]:
         """The scene's tools and organ bounds, once the simulation has sent
         them (None before)."""
-        while True:
-            sample = self._scene_sub.receive()
-            if sample is None:
-                return self._scene
-            m = sample.payload().contents
-            if m.version != PROTOCOL_VERSION:
-                raise ProtocolError(f"scene info of protocol version {m.version}")
+        for _, m in _drain(self._scene_sub, "scene info"):
             self._scene = Scene.from_msg(m)
+        return self._scene
 
     def wait_scene(self, timeout_s: float = 10.0) -> Scene:
         """Waits for the scene info (the simulation re-sends it to late
         joiners with its next mesh frame)."""
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            s = self.scene()
-            if s is not None:
-                return s
-            time.sleep(0.005)
-        raise TimeoutError(f"no scene info on session {self.name!r} within {timeout_s} s: is sim-server running?")
+        return _wait(self.scene, lambda s: s is not None, "scene info", self.name, timeout_s)
 
     # -- poses ------------------------------------------------------------
 
