@@ -25,14 +25,23 @@ fn hapbench(args: &[&str], json: &Path, plot: Option<&Path>) -> serde_json::Valu
 #[test]
 fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
     let dir = scratch_dir("hapbench-ex");
-    let run = |rate: &str| {
-        hapbench(
-            &["extrapolation", "--sim-rate", rate, "--haptic-rate", "1000"],
-            &dir.join(format!("ex{rate}.json")),
-            Some(&dir),
-        )
+    let (series, samples) = (dir.join("series.csv"), dir.join("samples.csv"));
+    let run = |rate: &str, extra: &[&str]| {
+        let mut args = vec!["extrapolation", "--sim-rate", rate, "--haptic-rate", "1000"];
+        args.extend_from_slice(extra);
+        hapbench(&args, &dir.join(format!("ex{rate}.json")), Some(&dir))
     };
-    let (slow, fast) = (run("50"), run("500"));
+    let slow = run(
+        "50",
+        &[
+            "--series",
+            series.to_str().unwrap(),
+            "--samples",
+            samples.to_str().unwrap(),
+        ],
+    );
+    let fast = run("500", &[]);
+    constant_hold_renders_the_delivered_samples(&series, &samples);
     assert!(
         slow["truth_max_force_n"].as_f64().unwrap() > 0.05,
         "the path touches the liver"
@@ -55,6 +64,66 @@ fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
         assert!(rb < ra, "{m}: rms error {ra} N at 50 Hz, {rb} N at 500 Hz");
     }
     assert!(dir.join("extrapolation.svg").exists());
+}
+
+/// Reads a CSV with a header into rows of numbers.
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).expect("read csv");
+    let mut lines = text.lines();
+    let header = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .map(String::from)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(|x| x.parse().expect("number")).collect())
+        .collect();
+    (header, rows)
+}
+
+/// `--samples` and `--series` describe the same run: at every tick the
+/// constant hold renders exactly the force of the latest sample delivered
+/// by then, and the samples come one simulation period apart.
+fn constant_hold_renders_the_delivered_samples(series: &Path, samples: &Path) {
+    let (sh, srows) = read_csv(samples);
+    assert_eq!(sh.len(), 18, "{sh:?}");
+    assert_eq!(
+        (sh[0].as_str(), sh[8].as_str()),
+        ("delivered_s", "in_contact")
+    );
+    assert!(srows.len() > 100, "{} samples", srows.len());
+    assert!(srows.iter().any(|r| r[8] == 1.0), "no sample in contact");
+    for w in srows.windows(2) {
+        assert!((w[1][0] - w[0][0] - 0.02).abs() < 1e-9, "{w:?}");
+    }
+    let (th, trows) = read_csv(series);
+    let col = th
+        .iter()
+        .position(|c| c == "constant_fx_n")
+        .expect("constant column");
+    let mut next = 0;
+    let mut checked = 0;
+    for r in &trows {
+        while next < srows.len() && srows[next][0] <= r[0] + 1e-9 {
+            next += 1;
+        }
+        let held = if next == 0 {
+            [0.0; 3]
+        } else {
+            [srows[next - 1][5], srows[next - 1][6], srows[next - 1][7]]
+        };
+        for i in 0..3 {
+            assert!(
+                (r[col + i] - held[i]).abs() < 1e-12,
+                "t {}: {:?} vs {held:?}",
+                r[0],
+                &r[col..col + 3]
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked > 1000);
 }
 
 /// Issue 15's acceptance for the contact law, on the truth of a

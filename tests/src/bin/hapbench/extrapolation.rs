@@ -58,6 +58,12 @@ pub struct Args {
     /// truth's force, then each method's force).
     #[arg(long)]
     pub series: Option<PathBuf>,
+    /// Write the simulation's samples here as the haptic loop receives
+    /// them (CSV: delivery time, pose time and position, force, contact
+    /// flag, contact stiffness), to try an extrapolator offline against
+    /// `--series`'s truth.
+    #[arg(long)]
+    pub samples: Option<PathBuf>,
 }
 
 /// One method's figures.
@@ -245,6 +251,41 @@ fn write_series(
     std::fs::write(path, s).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// The samples of `--samples`, as the haptic loop receives them: one line
+/// per simulation step, CSV `delivered_s,pose_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,
+/// in_contact,k00..k22` (the contact stiffness row by row, N/m, dF = -K dP).
+fn write_samples(path: &Path, period_s: f64, traj: &Trajectory, samples: &[Sample]) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut o = String::from("delivered_s,pose_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,in_contact");
+    for i in 0..3 {
+        for j in 0..3 {
+            write!(o, ",k{i}{j}_n_per_m")?;
+        }
+    }
+    o.push('\n');
+    for (j, (f, k, contact)) in samples.iter().enumerate() {
+        let pose_s = j as f64 * period_s;
+        let p = traj.sample(pose_s).0;
+        write!(
+            o,
+            "{},{pose_s},{},{},{},{},{},{},{}",
+            pose_s + period_s,
+            p[0],
+            p[1],
+            p[2],
+            f.x,
+            f.y,
+            f.z,
+            u8::from(*contact)
+        )?;
+        for v in k.iter().flatten() {
+            write!(o, ",{v}")?;
+        }
+        o.push('\n');
+    }
+    std::fs::write(path, o).with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Runs the benchmark.
 pub fn run(args: &Args) -> Result<()> {
     anyhow::ensure!(
@@ -288,6 +329,9 @@ pub fn run(args: &Args) -> Result<()> {
     .context("simulation at the simulation rate")?;
     b.finish();
 
+    if let Some(path) = &args.samples {
+        write_samples(path, s, &traj, &samples)?;
+    }
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.0.to_array()).collect();
     let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.0.to_array()).collect();
