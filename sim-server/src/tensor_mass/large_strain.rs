@@ -11,12 +11,14 @@
 //! ranges and vertex ranges, no atomics, and the result does not depend on
 //! the thread count.
 
+use super::corotational_lanes::corotational_block;
 use super::element::{Geometry, TetElastic};
 use super::kernel::V3;
-use super::large_strain_lanes::{L, StvkBlock, stvk_block};
+use super::lanes::{L, LaneBlock};
 use super::model::ElasticModel;
 use super::nonlinear::{Law, barrier_piola, deformation_gradient, first_piola, in_barrier};
 use super::stability::element_lambda;
+use super::stvk_lanes::stvk_block;
 use crate::ids::TetId;
 use crate::material::MaterialModel;
 use crate::math::{Mat3, Real, Vec3};
@@ -64,8 +66,8 @@ impl PassReport {
 #[derive(Clone, Debug)]
 pub struct LargeStrain {
     elements: Vec<Element>,
-    /// The first StVK elements, four to a block (the rest one at a time).
-    blocks: Vec<StvkBlock>,
+    /// Elements 4k..4k+4 as lanes where they share a model.
+    blocks: Vec<Block>,
     rotations: Vec<DQuat>,
     forces: Vec<[V3; 4]>,
     /// Index of each tetrahedron's element (u32::MAX: linear).
@@ -84,7 +86,8 @@ impl LargeStrain {
         let mesh = model.mesh();
         let mut element_of = vec![u32::MAX; mesh.tet_count()];
         let mut elements = Vec::new();
-        // StVK elements first, so that they fill whole blocks of four lanes.
+        // By model (StVK, then corotational), so that they fill whole blocks of
+        // four lanes.
         let stvk_first =
             (0..mesh.tet_count())
                 .map(TetId::from)
@@ -136,14 +139,7 @@ impl LargeStrain {
                 *at += 1;
             }
         }
-        let stvk = elements
-            .iter()
-            .filter(|e| e.model == MaterialModel::Stvk)
-            .count();
-        let blocks = elements[..stvk - stvk % 4]
-            .chunks_exact(4)
-            .map(block)
-            .collect();
+        let blocks = elements.chunks_exact(4).map(Block::of).collect();
         Some(Self {
             blocks,
             rotations: vec![DQuat::IDENTITY; elements.len()],
@@ -222,6 +218,29 @@ impl LargeStrain {
     }
 }
 
+/// Four consecutive elements as lanes, when they share a model.
+#[derive(Clone, Debug)]
+enum Block {
+    Stvk(LaneBlock),
+    Corotational(LaneBlock),
+    /// Mixed models: one element at a time.
+    Scalar,
+}
+
+impl Block {
+    fn of(four: &[Element]) -> Self {
+        let model = four[0].model;
+        if four.iter().any(|e| e.model != model) {
+            return Block::Scalar;
+        }
+        match model {
+            MaterialModel::Stvk => Block::Stvk(block(four)),
+            MaterialModel::Corotational => Block::Corotational(block(four)),
+            MaterialModel::Linear => Block::Scalar,
+        }
+    }
+}
+
 /// A contiguous range of elements and their buffers; `offset` is the
 /// first one's index (a multiple of four).
 struct Range<'a> {
@@ -233,7 +252,7 @@ struct Range<'a> {
 
 /// The elements of one range, split in halves (at multiples of four, so
 /// blocks stay whole) on the pool down to `min`.
-fn element_range(r: Range<'_>, blocks: &[StvkBlock], u: &[V3], min: usize) -> PassReport {
+fn element_range(r: Range<'_>, blocks: &[Block], u: &[V3], min: usize) -> PassReport {
     let mid = (r.elements.len() / 2) & !3;
     if r.elements.len() > min && mid > 0 {
         let (ea, eb) = r.elements.split_at(mid);
@@ -272,22 +291,34 @@ fn element_range(r: Range<'_>, blocks: &[StvkBlock], u: &[V3], min: usize) -> Pa
 /// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn leaf_avx2(r: Range<'_>, blocks: &[StvkBlock], u: &[V3]) -> PassReport {
+unsafe fn leaf_avx2(r: Range<'_>, blocks: &[Block], u: &[V3]) -> PassReport {
     leaf(r, blocks, u)
 }
 
-/// One task's elements: whole blocks of StVK elements four at a time, the
-/// others one at a time.
+/// One task's elements: blocks of four StVK or four corotational elements
+/// as lanes, the others one at a time.
 #[inline(always)]
-fn leaf(r: Range<'_>, blocks: &[StvkBlock], u: &[V3]) -> PassReport {
+fn leaf(r: Range<'_>, blocks: &[Block], u: &[V3]) -> PassReport {
     let mut report = PassReport::default();
     let mut i = 0;
     while i < r.elements.len() {
         let g = r.offset + i;
-        if g.is_multiple_of(4) && g / 4 < blocks.len() && i + 4 <= r.elements.len() {
-            let alive = std::array::from_fn(|k| r.elements[i + k].alive);
-            let (lambda, collapsed) = stvk_block(&blocks[g / 4], alive, u, &mut r.forces[i..i + 4]);
+        let lanes = match blocks.get(g / 4) {
+            Some(b) if g.is_multiple_of(4) && i + 4 <= r.elements.len() => b,
+            _ => &Block::Scalar,
+        };
+        let alive = || std::array::from_fn(|k| r.elements[i + k].alive);
+        if let Block::Stvk(b) = lanes {
+            let (lambda, collapsed) = stvk_block(b, alive(), u, &mut r.forces[i..i + 4]);
             report = report.join(PassReport { lambda, collapsed });
+            i += 4;
+        } else if let Block::Corotational(b) = lanes {
+            let q = &mut r.rotations[i..i + 4];
+            let lambda = corotational_block(b, alive(), q, u, &mut r.forces[i..i + 4]);
+            report = report.join(PassReport {
+                lambda,
+                collapsed: 0,
+            });
             i += 4;
         } else {
             if r.elements[i].alive {
@@ -300,11 +331,11 @@ fn leaf(r: Range<'_>, blocks: &[StvkBlock], u: &[V3]) -> PassReport {
     report
 }
 
-/// Four StVK elements' rest data as lanes.
-fn block(four: &[Element]) -> StvkBlock {
+/// Four elements' rest data as lanes.
+fn block(four: &[Element]) -> LaneBlock {
     let lanes = |f: &dyn Fn(&Element) -> Real| -> L { std::array::from_fn(|k| f(&four[k])) };
     let fiber = |e: &Element| e.elastic.fiber;
-    StvkBlock {
+    LaneBlock {
         vertices: std::array::from_fn(|k| four[k].vertices),
         m: std::array::from_fn(|k| std::array::from_fn(|c| lanes(&|e| e.geom.shape[k + 1][c]))),
         volume: lanes(&|e| e.geom.volume_m3),
@@ -477,6 +508,89 @@ mod tests {
             assert!((large.last().lambda - lambda).abs() <= 1e-9 * lambda);
             assert_eq!(large.last().collapsed, collapsed);
             assert_eq!(collapsed > 0, squash < 0.5, "squash {squash}");
+        }
+    }
+
+    /// The four-lane corotational blocks give the scalar path's forces,
+    /// rotations and bound, warm-started from the rotations the previous
+    /// pass left: isotropic and anisotropic lanes, a removed element, a
+    /// small deformation, a large rotation (many iterations) and an
+    /// inverted state (Mueller's steps).
+    #[test]
+    fn corotational_lanes_equal_the_scalar_path() {
+        let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
+            .generate()
+            .unwrap();
+        let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
+        let aniso = TransverselyIsotropic::new(iso, 3000.0, 2500.0, Terms::ALL).unwrap();
+        let corot = |e| {
+            Material::new(e, 1000.0, 0.0)
+                .unwrap()
+                .with_model(MaterialModel::Corotational)
+        };
+        let mut mats = TetMaterials::uniform(corot(Elasticity::Isotropic(iso)), mesh.tet_count());
+        let id = mats.add(corot(Elasticity::Transverse(aniso))).unwrap();
+        for t in (0..mesh.tet_count()).filter(|t| t % 3 == 1) {
+            mats.assign(TetId::from(t), id).unwrap();
+            mats.set_fiber(TetId::from(t), Vec3::new(1.0, 0.3, 0.2))
+                .unwrap();
+        }
+        let mut model = ElasticModel::new(mesh, mats).unwrap();
+        model.remove_tet(TetId(6)).unwrap();
+        let mut large = LargeStrain::new(&model).unwrap();
+        let lanes = large
+            .blocks
+            .iter()
+            .filter(|b| matches!(b, Block::Corotational(_)))
+            .count();
+        assert_eq!(lanes, large.elements.len() / 4);
+        let p = model.mesh().positions_m();
+        let turned = |angle: Real, shear: Real, flip: Real| -> Vec<V3> {
+            let r = Mat3::from_rotation_z(angle) * Mat3::from_rotation_x(0.5 * angle);
+            p.iter()
+                .map(|x| {
+                    let y = Vec3::new(x.x + shear * x.y / 0.01 * 0.002, x.y, flip * x.z);
+                    (r * y - *x).to_array()
+                })
+                .collect()
+        };
+        for u in [
+            turned(0.01, 0.1, 1.0),
+            turned(0.02, 0.12, 1.0),
+            turned(1.3, 0.3, 1.0),
+            turned(0.4, 0.2, -0.3),
+        ] {
+            let before = large.rotations.clone();
+            let mut out = vec![[0.0; 3]; u.len()];
+            large.pass(&u, &mut out, 1);
+            let mut lambda: Real = 0.0;
+            let scale = large
+                .forces
+                .iter()
+                .flatten()
+                .flatten()
+                .fold(0.0 as Real, |m, x| m.max(x.abs()));
+            for (i, e) in large.elements.iter().enumerate() {
+                let mut f = [[0.0; 3]; 4];
+                let mut q = before[i];
+                if e.alive {
+                    lambda = lambda.max(element(e, &mut q, &mut f, &u).lambda);
+                }
+                assert!(
+                    (q.dot(large.rotations[i]).abs() - 1.0).abs() < 1e-12,
+                    "element {i}: rotation {q:?} vs {:?}",
+                    large.rotations[i]
+                );
+                for (a, b) in f.iter().zip(&large.forces[i]) {
+                    for d in 0..3 {
+                        assert!(
+                            (a[d] - b[d]).abs() <= 1e-10 * scale,
+                            "element {i}: {a:?} vs {b:?}"
+                        );
+                    }
+                }
+            }
+            assert!((large.last().lambda - lambda).abs() <= 1e-9 * lambda);
         }
     }
 }

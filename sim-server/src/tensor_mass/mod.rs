@@ -5,15 +5,17 @@
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+mod corotational_lanes;
 pub mod element;
 pub mod explicit;
 pub mod huge_pages;
 pub mod kernel;
+mod lanes;
 pub mod large_strain;
-mod large_strain_lanes;
 pub mod model;
 pub mod nonlinear;
 pub mod stability;
+mod stvk_lanes;
 pub mod submodel;
 
 pub use element::{Geometry, TetElastic};

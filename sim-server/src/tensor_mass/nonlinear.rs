@@ -51,9 +51,9 @@ pub const STVK_BARRIER_SCALE: Real = 4.0;
 /// last one; the rotation is then accurate to about its square, 1e-12
 /// (quadratic convergence). Warm-started, an element takes 1.7 iterations
 /// per step on the benchmark box (2.1 with 1e-9, 3 with 1e-13).
-const ROTATION_TOL_RAD: Real = 1e-6;
+pub(super) const ROTATION_TOL_RAD: Real = 1e-6;
 /// Iterations at most per extraction (warm-started: usually 1-3).
-const ROTATION_MAX_ITER: usize = 40;
+pub(super) const ROTATION_MAX_ITER: usize = 40;
 
 /// F = I + sum_k u_k (x) m_k.
 #[inline]

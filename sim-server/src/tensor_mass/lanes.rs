@@ -1,30 +1,27 @@
-//! StVK elements four at a time: the same force correction and tangent
-//! bound as `large_strain::stvk`, written lane by lane over structure-of-
-//! arrays rest data so that the compiler turns each line into one vector
-//! operation (AVX2 and FMA where the CPU has them, checked at run time as
-//! for the linear kernel). The scalar path computed one element at a time
-//! in ~75 ns; the lanes share every instruction between four.
-//!
+//! Four elements at a time: the lane type, lane arithmetic and the pieces
+//! the StVK and corotational lanes share (the displacement gradient, the
+//! paper's stress, the nodal forces), over structure-of-arrays rest data so
+//! that the compiler turns each line into one vector operation (AVX2 and FMA
+//! where the CPU has them, checked at run time as for the linear kernel).
 //! Isotropic and anisotropic elements share the lanes: an isotropic lane
 //! has zero fibre coefficients. Removed elements are masked (zero force, no
-//! bound). Tested against the scalar path to round-off.
+//! bound).
 
 // Tensor indices (r, c, k) written as in the formulas read better than
 // iterator chains over rows of lanes.
 #![allow(clippy::needless_range_loop)]
 
 use super::kernel::V3;
-use super::nonlinear::{STVK_BARRIER_J, STVK_BARRIER_SCALE};
 use crate::math::Real;
 
 /// Four lanes.
 pub type L = [Real; 4];
 /// A 3x3 tensor of lanes, row-major.
-type M = [[L; 3]; 3];
+pub type M = [[L; 3]; 3];
 
-/// The rest data of four StVK elements.
+/// The rest data of four elements of one model.
 #[derive(Clone, Debug, Default)]
-pub struct StvkBlock {
+pub struct LaneBlock {
     /// Vertices, per lane.
     pub vertices: [[u32; 4]; 4],
     /// Shape vectors m_1..m_3 (m_0 = -(m_1 + m_2 + m_3)): `m[k][c]` lane-wise.
@@ -50,48 +47,48 @@ pub struct StvkBlock {
 }
 
 #[inline(always)]
-fn splat(x: Real) -> L {
+pub fn splat(x: Real) -> L {
     [x; 4]
 }
 
 #[inline(always)]
-fn add(a: L, b: L) -> L {
+pub fn add(a: L, b: L) -> L {
     std::array::from_fn(|i| a[i] + b[i])
 }
 
 #[inline(always)]
-fn sub(a: L, b: L) -> L {
+pub fn sub(a: L, b: L) -> L {
     std::array::from_fn(|i| a[i] - b[i])
 }
 
 #[inline(always)]
-fn mul(a: L, b: L) -> L {
+pub fn mul(a: L, b: L) -> L {
     std::array::from_fn(|i| a[i] * b[i])
 }
 
 #[inline(always)]
-fn fma(a: L, b: L, c: L) -> L {
+pub fn fma(a: L, b: L, c: L) -> L {
     std::array::from_fn(|i| a[i] * b[i] + c[i])
 }
 
 #[inline(always)]
-fn max(a: L, b: L) -> L {
+pub fn max(a: L, b: L) -> L {
     std::array::from_fn(|i| a[i].max(b[i]))
 }
 
 #[inline(always)]
-fn abs(a: L) -> L {
+pub fn abs(a: L) -> L {
     std::array::from_fn(|i| a[i].abs())
 }
 
 #[inline(always)]
-fn zero() -> M {
+pub fn zero() -> M {
     [[splat(0.0); 3]; 3]
 }
 
 /// a b for lane matrices.
 #[inline(always)]
-fn matmul(a: &M, b: &M) -> M {
+pub fn matmul(a: &M, b: &M) -> M {
     let mut c = zero();
     for r in 0..3 {
         for col in 0..3 {
@@ -105,7 +102,7 @@ fn matmul(a: &M, b: &M) -> M {
 
 /// The paper's stress of a symmetric strain, lane-wise (see `TetElastic::stress`).
 #[inline(always)]
-fn stress(b: &StvkBlock, e: &M) -> M {
+pub fn stress(b: &LaneBlock, e: &M) -> M {
     let i1 = add(add(e[0][0], e[1][1]), e[2][2]);
     let a = b.dir;
     let ea: [L; 3] =
@@ -141,7 +138,7 @@ fn stress(b: &StvkBlock, e: &M) -> M {
 
 /// Gershgorin's upper bound on the largest eigenvalue (symmetric), lane-wise.
 #[inline(always)]
-fn gershgorin(m: &M) -> L {
+pub fn gershgorin(m: &M) -> L {
     let row = |r: usize| {
         let mut x = m[r][r];
         for c in (0..3).filter(|c| *c != r) {
@@ -154,16 +151,14 @@ fn gershgorin(m: &M) -> L {
 
 /// The largest absolute row sum, lane-wise.
 #[inline(always)]
-fn row_abs(m: &M) -> L {
+pub fn row_abs(m: &M) -> L {
     let row = |r: usize| add(add(abs(m[r][0]), abs(m[r][1])), abs(m[r][2]));
     max(max(row(0), row(1)), row(2))
 }
 
-/// Four elements' force corrections into `out` (`alive` masks removed
-/// ones): returns (largest tangent bound, elements in the barrier).
+/// H = sum_{k=1..3} (u_k - u_0) (x) m_k, the displacement gradient.
 #[inline(always)]
-pub fn stvk_block(b: &StvkBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]) -> (Real, usize) {
-    // H = sum_{k=1..3} (u_k - u_0) (x) m_k.
+pub fn gradient(b: &LaneBlock, u: &[V3]) -> M {
     let du: [[L; 3]; 4] = std::array::from_fn(|k| {
         std::array::from_fn(|c| std::array::from_fn(|lane| u[b.vertices[lane][k] as usize][c]))
     });
@@ -177,94 +172,14 @@ pub fn stvk_block(b: &StvkBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]
             h[r][c] = x;
         }
     }
-    let mut lin = zero();
-    let mut quad = zero();
-    for r in 0..3 {
-        for c in 0..3 {
-            lin[r][c] = mul(splat(0.5), add(h[r][c], h[c][r]));
-            let hh = fma(
-                h[0][r],
-                h[0][c],
-                fma(h[1][r], h[1][c], mul(h[2][r], h[2][c])),
-            );
-            quad[r][c] = mul(splat(0.5), hh);
-        }
-    }
-    let sq = stress(b, &quad);
-    let sl = stress(b, &lin);
-    let mut s = zero();
-    for r in 0..3 {
-        for c in 0..3 {
-            s[r][c] = add(sl[r][c], sq[r][c]);
-        }
-    }
-    let hs = matmul(&h, &s);
-    // F = I + H, its determinant and cofactor (columns f2 x f3, f3 x f1, f1 x f2).
-    let f: M = std::array::from_fn(|r| {
-        std::array::from_fn(|c| {
-            if r == c {
-                add(h[r][c], splat(1.0))
-            } else {
-                h[r][c]
-            }
-        })
-    });
-    let col = |c: usize| [f[0][c], f[1][c], f[2][c]];
-    let cross = |a: [L; 3], b: [L; 3]| -> [L; 3] {
-        [
-            sub(mul(a[1], b[2]), mul(a[2], b[1])),
-            sub(mul(a[2], b[0]), mul(a[0], b[2])),
-            sub(mul(a[0], b[1]), mul(a[1], b[0])),
-        ]
-    };
-    let cof_cols = [
-        cross(col(1), col(2)),
-        cross(col(2), col(0)),
-        cross(col(0), col(1)),
-    ];
-    let det = fma(
-        f[0][0],
-        cof_cols[0][0],
-        fma(f[1][0], cof_cols[0][1], mul(f[2][0], cof_cols[0][2])),
-    );
-    let k = mul(splat(STVK_BARRIER_SCALE), add(b.lambda, add(b.mu, b.mu)));
-    let gap = max(sub(splat(STVK_BARRIER_J), det), splat(0.0));
-    let barrier_coef = mul(mul(splat(-3.0), k), mul(gap, gap));
-    // P = F S + b, d = H S + sigma(quad) + b.
-    let fs = matmul(&f, &s);
-    let mut d = zero();
-    let mut p = zero();
-    for r in 0..3 {
-        for c in 0..3 {
-            let bar = mul(barrier_coef, cof_cols[c][r]);
-            d[r][c] = add(add(hs[r][c], sq[r][c]), bar);
-            p[r][c] = add(fs[r][c], bar);
-        }
-    }
-    // Bound: sigma_max(F)^2 <= gershgorin(I + 2E) times the rest bound,
-    // plus the geometric term (the whole P in the barrier).
-    let mut c2 = zero();
-    for r in 0..3 {
-        for c in 0..3 {
-            let x = mul(splat(2.0), add(lin[r][c], quad[r][c]));
-            c2[r][c] = if r == c { add(x, splat(1.0)) } else { x };
-        }
-    }
-    let stretch = gershgorin(&c2);
-    let outside = fma(
-        stretch,
-        b.rest_lambda,
-        mul(max(gershgorin(&s), splat(0.0)), b.geometric),
-    );
-    let inside = fma(
-        max(stretch, splat(1.0)),
-        b.rest_lambda,
-        mul(mul(splat(4.0), row_abs(&p)), b.geometric),
-    );
-    // Forces f_k = -V d m_k for k = 1..3, f_0 = -(f_1 + f_2 + f_3).
+    h
+}
+
+/// The nodal forces f_k = -V d m_k (k = 1..3), f_0 = -(f_1 + f_2 + f_3) of
+/// each live lane into `out` (zero for a removed one).
+#[inline(always)]
+pub fn scatter(b: &LaneBlock, d: &M, alive: [bool; 4], out: &mut [[V3; 4]]) {
     let minus_v = mul(splat(-1.0), b.volume);
-    let mut lambda: Real = 0.0;
-    let mut in_barrier = 0;
     for lane in 0..4 {
         let slot = &mut out[lane];
         if !alive[lane] {
@@ -283,9 +198,5 @@ pub fn stvk_block(b: &StvkBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]
             }
         }
         slot[0] = f0;
-        let barrier = gap[lane] > 0.0;
-        in_barrier += barrier as usize;
-        lambda = lambda.max(if barrier { inside[lane] } else { outside[lane] });
     }
-    (lambda, in_barrier)
 }
