@@ -73,11 +73,11 @@ struct RunArgs {
     /// Loop rate (Hz), 100 to 10000.
     #[arg(long, default_value_t = 1000.0)]
     rate: f64,
-    /// constant, linear-time, linear-position, linear-position-signed, local-model,
-    /// local-normal (the default: the lowest mean error of the methods that
-    /// stayed passive on every `hapbench extrapolation` run in the README).
-    #[arg(long, default_value = "local-normal")]
-    extrapolation: String,
+    /// The force extrapolator (default local-normal: the lowest mean error
+    /// of the methods that stayed passive on every `hapbench extrapolation`
+    /// run in the README).
+    #[arg(long, value_enum, default_value_t = Method::LocalNormal)]
+    extrapolation: Method,
     /// Force limit (N); at most the device's own.
     #[arg(long)]
     max_force: Option<f64>,
@@ -227,13 +227,7 @@ fn main() -> Result<()> {
     {
         bail!("--duration-s must be a positive number of seconds, got {d}");
     }
-    let method = Method::parse(&args.extrapolation).with_context(|| {
-        format!(
-            "unknown --extrapolation {:?}: use one of {}",
-            args.extrapolation,
-            Method::ALL.map(|m| m.name()).join(", ")
-        )
-    })?;
+    let method = args.extrapolation;
     let session = SessionName::new(&args.session)?;
     let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N)?;
     let device_max = device.specs().max_force_n;

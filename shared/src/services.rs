@@ -15,6 +15,10 @@ use iceoryx2::port::subscriber::Subscriber;
 pub use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue, AttributeVerifier};
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use thiserror::Error;
@@ -145,8 +149,7 @@ fn open<T: std::fmt::Debug + ZeroCopySend>(
     buffer: usize,
 ) -> Result<PortFactory<Ipc, T, ()>, ServiceError> {
     let name = session.service(stream);
-    let service_name =
-        ServiceName::new(&name).map_err(|e| version_or_open(&name, format!("{e:?}")))?;
+    let service_name = ServiceName::new(&name).map_err(|e| name_error(&name, e))?;
     node.service_builder(&service_name)
         .publish_subscribe::<T>()
         .max_publishers(2)
@@ -155,7 +158,7 @@ fn open<T: std::fmt::Debug + ZeroCopySend>(
         .subscriber_max_buffer_size(buffer)
         .enable_safe_overflow(true)
         .open_or_create_with_attributes(&verifier(&name)?)
-        .map_err(|e| version_or_open(&name, format!("{e:?}")))
+        .map_err(|e| pubsub_error(&name, e))
 }
 
 /// Force samples a subscriber may keep: a recorder asks for all of them
@@ -208,14 +211,13 @@ pub fn pose_ready_service(
     session: &SessionName,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Ipc>, ServiceError> {
     let name = session.service(stream::POSE_READY);
-    let service_name =
-        ServiceName::new(&name).map_err(|e| version_or_open(&name, format!("{e:?}")))?;
+    let service_name = ServiceName::new(&name).map_err(|e| name_error(&name, e))?;
     node.service_builder(&service_name)
         .event()
         .max_notifiers(2)
         .max_listeners(8)
         .open_or_create_with_attributes(&verifier(&name)?)
-        .map_err(|e| version_or_open(&name, format!("{e:?}")))
+        .map_err(|e| event_error(&name, e))
 }
 
 /// A notifier on the pose-ready event.
@@ -280,18 +282,42 @@ pub fn wait_notified(listener: &Listener<Ipc>, timeout: std::time::Duration) -> 
     }
 }
 
-fn version_or_open(service: &str, e: String) -> ServiceError {
-    if e.contains("IncompatibleTypes") || e.contains("IncompatibleAttributes") {
-        ServiceError::Version {
-            service: service.to_string(),
-            reason: e,
-        }
+/// An error opening or creating a service; a payload type or protocol
+/// version attribute that differs from an existing service's (made by a
+/// peer of another protocol version) is [`ServiceError::Version`].
+fn service_error(service: &str, version_mismatch: bool, reason: String) -> ServiceError {
+    let service = service.to_string();
+    if version_mismatch {
+        ServiceError::Version { service, reason }
     } else {
-        ServiceError::Open {
-            service: service.to_string(),
-            reason: e,
-        }
+        ServiceError::Open { service, reason }
     }
+}
+
+/// [`service_error`] for a publish-subscribe service.
+fn pubsub_error(service: &str, e: PublishSubscribeOpenOrCreateError) -> ServiceError {
+    use PublishSubscribeOpenError::{IncompatibleAttributes, IncompatibleTypes};
+    let version = matches!(
+        e,
+        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            IncompatibleTypes | IncompatibleAttributes
+        )
+    );
+    service_error(service, version, format!("{e:?}"))
+}
+
+/// [`service_error`] for an event service.
+fn event_error(service: &str, e: EventOpenOrCreateError) -> ServiceError {
+    let version = matches!(
+        e,
+        EventOpenOrCreateError::EventOpenError(EventOpenError::IncompatibleAttributes)
+    );
+    service_error(service, version, format!("{e:?}"))
+}
+
+/// A service name that iceoryx2 refuses (too long, bad characters).
+fn name_error(service: &str, e: impl std::fmt::Debug) -> ServiceError {
+    service_error(service, false, format!("{e:?}"))
 }
 
 /// A slice service of `T` with user header `H` (history 1: a viewer that
@@ -302,8 +328,7 @@ fn open_slice<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySe
     stream: &str,
 ) -> Result<PortFactory<Ipc, [T], H>, ServiceError> {
     let name = session.service(stream);
-    let service_name =
-        ServiceName::new(&name).map_err(|e| version_or_open(&name, format!("{e:?}")))?;
+    let service_name = ServiceName::new(&name).map_err(|e| name_error(&name, e))?;
     node.service_builder(&service_name)
         .publish_subscribe::<[T]>()
         .user_header::<H>()
@@ -313,7 +338,7 @@ fn open_slice<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySe
         .subscriber_max_buffer_size(2)
         .enable_safe_overflow(true)
         .open_or_create_with_attributes(&verifier(&name)?)
-        .map_err(|e| version_or_open(&name, format!("{e:?}")))
+        .map_err(|e| pubsub_error(&name, e))
 }
 
 /// The mesh-state stream (sim -> viewer): positions as `[f32; 3]` (m) with a

@@ -7,6 +7,7 @@ use super::{load_scene, write_json};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use sim_server::math::Vec3;
+use sim_server::scene::spec::BackendName;
 use sim_server::server::{RunConfig, ToolScript};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -34,8 +35,8 @@ pub struct DemoArgs {
     pub no_viewer: bool,
     /// Backend (tensor-mass, implicit, precomputed, hybrid); default the
     /// scene's.
-    #[arg(long)]
-    pub backend: Option<String>,
+    #[arg(long, value_enum)]
+    pub backend: Option<super::BackendArg>,
     /// Save the run as a ParaView series: a VTU per mesh frame (30 Hz) and
     /// `frames.pvd`, in this directory (created).
     #[arg(long, value_name = "DIR")]
@@ -197,7 +198,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     if !(args.duration_s.is_finite() && args.duration_s > 0.0) {
         bail!("--duration-s must be positive");
     }
-    let backend = super::parse_backend(args.backend.as_deref())?;
+    let backend = args.backend.map(BackendName::from);
     let (src, mut scene) = load_scene(None)?;
     super::override_step(&mut scene, args.dt_s)?;
     if scene.tools.len() < 2 {

@@ -2,6 +2,7 @@
 
 use super::{load_scene, write_json};
 use anyhow::{Result, bail};
+use sim_server::scene::spec::BackendName;
 use sim_server::server::{RunConfig, RunError};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -21,8 +22,8 @@ pub struct RunArgs {
     /// (precomputed joined to a cuttable tensor-mass part the scene's
     /// `[hybrid]` selects); default: the scene's `[simulation] backend`,
     /// else tensor-mass.
-    #[arg(long)]
-    pub backend: Option<String>,
+    #[arg(long, value_enum)]
+    pub backend: Option<super::BackendArg>,
     /// Step as fast as possible instead of in real time.
     #[arg(long)]
     pub headless: bool,
@@ -62,7 +63,7 @@ pub struct RunArgs {
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
 pub fn run(args: RunArgs) -> Result<()> {
-    let backend = super::parse_backend(args.backend.as_deref())?;
+    let backend = args.backend.map(BackendName::from);
     if !(args.viewer_rate.is_finite() && args.viewer_rate > 0.0) {
         bail!("--viewer-rate must be a positive number of Hz");
     }
