@@ -219,21 +219,87 @@ pub struct SceneInfo {
     pub tools: [ToolInfo; MAX_TOOLS],
 }
 
+/// The text of a zero-padded UTF-8 field (up to the first zero byte; empty
+/// if it is not UTF-8).
+fn text_of(field: &[u8]) -> &str {
+    let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
+    std::str::from_utf8(&field[..end]).unwrap_or("")
+}
+
+/// Stores `text` in a zero-padded field, cut at a character boundary to
+/// fit.
+fn set_text(field: &mut [u8], text: &str) {
+    let mut end = text.len().min(field.len());
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    field.fill(0);
+    field[..end].copy_from_slice(&text.as_bytes()[..end]);
+}
+
 impl ToolInfo {
     /// The name as text (up to the first zero byte).
     pub fn name(&self) -> &str {
-        let end = self.name.iter().position(|&b| b == 0).unwrap_or(32);
-        std::str::from_utf8(&self.name[..end]).unwrap_or("")
+        text_of(&self.name)
     }
 
     /// Stores `name`, cut to 32 bytes at a character boundary.
     pub fn set_name(&mut self, name: &str) {
-        let mut end = name.len().min(32);
-        while !name.is_char_boundary(end) {
-            end -= 1;
+        set_text(&mut self.name, name);
+    }
+}
+
+/// Sim -> clients: the user header of the `rest` slice stream, published
+/// once at start (history 1). The slice holds `vertex_count` rest
+/// positions (m), then `fibre_count` pairs (the centroid of an anisotropic
+/// tetrahedron, its fibre direction scaled to that tetrahedron's first
+/// edge length), all `[f32; 3]`: what a viewer without the scene file
+/// draws before the first mesh frame and as fibres (80 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.RestHeader.v1")]
+pub struct RestHeader {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Rest positions in the slice (the mesh's vertices, in `mesh` order).
+    pub vertex_count: u32,
+    /// Fibre pairs after them.
+    pub fibre_count: u32,
+    /// Padding (keeps the layout explicit).
+    pub reserved: u32,
+    /// The scene's name (its file, or `<embedded liver>`), UTF-8,
+    /// zero-padded (cut at a character boundary to 64 bytes).
+    pub name: [u8; 64],
+}
+
+impl Default for RestHeader {
+    fn default() -> Self {
+        Self {
+            version: PROTOCOL_VERSION,
+            vertex_count: 0,
+            fibre_count: 0,
+            reserved: 0,
+            name: [0; 64],
         }
-        self.name = [0; 32];
-        self.name[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
+}
+
+impl RestHeader {
+    /// The scene's name as text.
+    pub fn name(&self) -> &str {
+        text_of(&self.name)
+    }
+
+    /// Stores the scene's name, cut to 64 bytes at a character boundary.
+    pub fn set_name(&mut self, name: &str) {
+        set_text(&mut self.name, name);
+    }
+
+    /// The slice length this header describes (`None` if it overflows).
+    pub fn slice_len(&self) -> Option<usize> {
+        (self.fibre_count as usize)
+            .checked_mul(2)?
+            .checked_add(self.vertex_count as usize)
     }
 }
 
@@ -302,6 +368,15 @@ mod tests {
         assert_eq!(std::mem::size_of::<TopologyHeader>(), 16);
         assert_eq!(std::mem::size_of::<ToolInfo>(), 88);
         assert_eq!(std::mem::size_of::<SceneInfo>(), 64 + 88 * MAX_TOOLS);
+        assert_eq!(std::mem::size_of::<RestHeader>(), 80);
+        let mut r = RestHeader::default();
+        r.set_name("liver.toml");
+        assert_eq!(r.name(), "liver.toml");
+        r.set_name(&"x".repeat(100));
+        assert_eq!(r.name().len(), 64);
+        r.vertex_count = 10;
+        r.fibre_count = 3;
+        assert_eq!(r.slice_len(), Some(16));
         let mut t = ToolInfo::default();
         t.set_name("grasper");
         assert_eq!(t.name(), "grasper");

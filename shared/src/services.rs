@@ -4,7 +4,8 @@
 
 use crate::SessionName;
 use crate::protocol::{
-    ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, SceneInfo, TelemetryBatch, TopologyHeader,
+    ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, RestHeader, SceneInfo, TelemetryBatch,
+    TopologyHeader,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -43,6 +44,10 @@ pub mod stream {
     pub const POSE_READY: &str = "pose-ready";
     /// Sim -> clients: the scene's tools and organ, once (history 1).
     pub const SCENE: &str = "scene";
+    /// Sim -> clients: rest positions and fibres, once.
+    pub const REST: &str = "rest";
+    /// Sim -> clients: the surface as built, before any cut, once.
+    pub const SURFACE0: &str = "surface0";
 }
 
 /// Why a service could not be used.
@@ -357,6 +362,26 @@ pub fn topology_service(
     session: &SessionName,
 ) -> Result<PortFactory<Ipc, [[u32; 3]], TopologyHeader>, ServiceError> {
     open_slice(node, session, stream::TOPOLOGY)
+}
+
+/// The rest stream (sim -> clients): rest positions and fibres with a
+/// [`RestHeader`], published once at start (history 1).
+pub fn rest_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, [[f32; 3]], RestHeader>, ServiceError> {
+    open_slice(node, session, stream::REST)
+}
+
+/// The original-surface stream (sim -> clients): the outward surface
+/// triangles as the scene built them, before any cut, with a
+/// [`TopologyHeader`] of `topology_version` 1, published once at start
+/// (history 1): a viewer tells the faces cuts made from it.
+pub fn surface0_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, [[u32; 3]], TopologyHeader>, ServiceError> {
+    open_slice(node, session, stream::SURFACE0)
 }
 
 /// A slice publisher able to loan `max_len` elements without reallocating

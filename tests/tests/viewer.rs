@@ -1,12 +1,12 @@
 //! The viewer end to end. This process plays the simulation (it publishes
-//! the embedded liver's mesh state and surface by the protocol) so the
-//! pictures are predictable: a top-view snapshot covers exactly the organ's
+//! the embedded liver's scene, mesh state and surface by the protocol, the
+//! viewer reading no scene file) so the pictures are predictable: a top-view snapshot covers exactly the organ's
 //! projected silhouette, and after a cut the picture changes and shows cut
 //! faces. With the real sim-server: a viewer started before the simulation
 //! and one started after it both get the mesh, and a viewer that drives a
 //! tool (no daemon) makes the simulation touch the liver.
 
-use shared::protocol::{MeshHeader, PROTOCOL_VERSION, TopologyHeader};
+use shared::protocol::{MeshHeader, PROTOCOL_VERSION, RestHeader, TopologyHeader};
 use shared::{SessionName, monotonic_ns, services};
 use sim_server::ids::TetId;
 use sim_server::scene::{SceneSource, build_scene};
@@ -56,6 +56,32 @@ fn fake_simulation(
             .unwrap();
         let topo_service = services::topology_service(&node, &session).unwrap();
         let topo = services::slice_publisher(&topo_service, 8 * n).unwrap();
+        // The scene streams, once (history 1): the name, the rest shape
+        // and the surface as built (what the viewer tells cut faces from).
+        let rest_pub =
+            services::slice_publisher(&services::rest_service(&node, &session).unwrap(), n)
+                .unwrap();
+        let mut header = RestHeader {
+            vertex_count: n as u32,
+            ..RestHeader::default()
+        };
+        header.set_name("fake liver");
+        let mut s = rest_pub.loan_slice_uninit(n).unwrap();
+        *s.user_header_mut() = header;
+        s.write_from_fn(|i| positions[i]).send().unwrap();
+        let uncut = triangles.lock().unwrap().1.clone();
+        let surface0 = services::slice_publisher(
+            &services::surface0_service(&node, &session).unwrap(),
+            uncut.len(),
+        )
+        .unwrap();
+        let mut s = surface0.loan_slice_uninit(uncut.len()).unwrap();
+        *s.user_header_mut() = TopologyHeader {
+            version: PROTOCOL_VERSION,
+            triangle_count: uncut.len() as u32,
+            topology_version: 1,
+        };
+        s.write_from_slice(&uncut).send().unwrap();
         let mut sent_version = 0;
         let mut seq = 0;
         while !stop.load(Ordering::Relaxed) {
@@ -73,6 +99,8 @@ fn fake_simulation(
             } else {
                 use shared::services::UpdateConnections;
                 topo.update_connections().unwrap();
+                rest_pub.update_connections().unwrap();
+                surface0.update_connections().unwrap();
             }
             let mut s = mesh.loan_slice_uninit(n).unwrap();
             *s.user_header_mut() = MeshHeader {
@@ -193,6 +221,7 @@ fn snapshots_show_the_silhouette_and_change_after_a_cut() {
         &["--view", "top", "--no-overlay", "--no-forces"],
     );
     assert_eq!(report["cut_triangles"], 0, "{report}");
+    assert_eq!(report["scene"], "fake liver", "{report}");
     let (w, h, px) = read_png(&top);
     let background = px[w * h - 1];
     let drawn: Vec<bool> = px.iter().map(|p| *p != background).collect();
@@ -298,6 +327,12 @@ fn a_viewer_started_before_or_after_the_simulation_shows_the_mesh() {
     for r in [&early, &late] {
         assert!(r["triangles"].as_u64().unwrap() > 1000, "{r}");
         assert!(r["covered_pixels"].as_u64().unwrap() > 1000, "{r}");
+        // The scene came with the session, the early viewer's too.
+        assert_eq!(r["scene"], sim_server::scene::DEFAULT_SCENE_NAME, "{r}");
+        assert!(
+            r["fibres"].as_u64().unwrap() > 50,
+            "the liver's vessels: {r}"
+        );
     }
     finish(sim, Duration::from_secs(20), "sim-server");
 }
@@ -392,10 +427,10 @@ fn the_help_texts_hold_no_rustdoc_links() {
 }
 
 #[test]
-fn the_viewer_takes_the_tools_from_the_simulation_not_its_default_scene() {
-    // The simulation runs the box scene (one tool, "probe"); the viewer is
-    // given no --scene (its default is the liver, with two tools): what it
-    // draws and reports are the simulation's tools, from the scene stream.
+fn the_viewer_takes_the_scene_from_the_simulation() {
+    // The simulation runs the box scene (one tool, "probe", isotropic); the
+    // viewer reads no scene file: the tools it draws and reports, the
+    // scene's name and its fibres come from the session's streams.
     let name = format!("viewtools{}", std::process::id());
     let dir = scratch_dir("viewer-tools");
     let box_scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/box-probe.toml");
@@ -412,4 +447,7 @@ fn the_viewer_takes_the_tools_from_the_simulation_not_its_default_scene() {
     unsafe { libc::kill(sim.id() as libc::pid_t, libc::SIGTERM) };
     let _ = sim.wait();
     assert_eq!(report["tools"], serde_json::json!(["probe"]), "{report}");
+    assert_eq!(report["scene"], box_scene.display().to_string(), "{report}");
+    assert_eq!(report["fibres"], 0, "{report}");
+    assert_eq!(report["cut_triangles"], 0, "{report}");
 }

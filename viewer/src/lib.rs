@@ -1,5 +1,7 @@
-//! The viewer of a hapsim session: reads mesh state, surface topology, force
-//! samples and haptic telemetry from shared memory (it only subscribes, so
+//! The viewer of a hapsim session: reads the scene (tools, rest shape,
+//! fibres, uncut surface), mesh state, surface topology, force samples and
+//! haptic telemetry from shared memory (no scene file: everything comes
+//! from the session's streams) (it only subscribes, so
 //! it never slows the simulation or the daemon), and draws them with
 //! three-d, in a native window (cargo feature `window`) or into a PNG on a
 //! surfaceless EGL context (`--snapshot`, no display needed).
@@ -7,12 +9,10 @@
 //! ```no_run
 //! use viewer::camera::View;
 //! use viewer::render::Layers;
-//! use viewer::scene_info::SceneInfo;
 //! use viewer::session::Session;
 //! use viewer::snapshot::{SnapshotConfig, snapshot};
 //! let name = shared::SessionName::new("default").unwrap();
 //! let mut session = Session::join(&name).unwrap();
-//! let info = SceneInfo::load(None).unwrap();
 //! let cfg = SnapshotConfig {
 //!     session: "default".into(),
 //!     out: "liver.png".into(),
@@ -21,7 +21,7 @@
 //!     layers: Layers::default(),
 //!     wait_s: 10.0,
 //! };
-//! let report = snapshot(&mut session, &info, &cfg).unwrap();
+//! let report = snapshot(&mut session, &cfg).unwrap();
 //! println!("{} triangles, {} made by cuts", report.triangles, report.cut_triangles);
 //! ```
 #![warn(missing_docs)]

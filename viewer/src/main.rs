@@ -5,7 +5,6 @@ use clap::Parser;
 use std::path::PathBuf;
 use viewer::camera::View;
 use viewer::render::Layers;
-use viewer::scene_info::SceneInfo;
 use viewer::session::Session;
 
 /// Live 3D view of a hapsim session (organ, tools, forces, rates).
@@ -15,10 +14,6 @@ struct Args {
     /// Session to join (shared with sim-server and haptic-daemon).
     #[arg(long, default_value = "default")]
     session: String,
-    /// The scene the simulation runs (tools' geometry, original surface,
-    /// fibres); default: the embedded liver.
-    #[arg(long)]
-    scene: Option<PathBuf>,
     /// Render one frame into this PNG without any display, then exit.
     #[arg(long)]
     snapshot: Option<PathBuf>,
@@ -65,14 +60,6 @@ fn main() -> Result<()> {
         bail!("--wait-s must be a non-negative number of seconds");
     }
     let name = shared::SessionName::new(&args.session)?;
-    let info = SceneInfo::load(args.scene.as_deref()).with_context(|| {
-        format!(
-            "cannot load the scene {}",
-            args.scene
-                .as_deref()
-                .map_or("<embedded liver>".into(), |p| p.display().to_string())
-        )
-    })?;
     let mut session = Session::join(&name)?;
     let layers = Layers {
         fibres: args.fibres,
@@ -88,7 +75,7 @@ fn main() -> Result<()> {
             layers,
             wait_s: args.wait_s,
         };
-        let report = viewer::snapshot::snapshot(&mut session, &info, &cfg)?;
+        let report = viewer::snapshot::snapshot(&mut session, &cfg)?;
         println!(
             "viewer: wrote {} ({}x{}, {} triangles, {} made by cuts, topology v{})",
             out.display(),
@@ -105,16 +92,16 @@ fn main() -> Result<()> {
         }
         return Ok(());
     }
-    run_window(session, info, layers)
+    run_window(session, layers)
 }
 
 #[cfg(feature = "window")]
-fn run_window(session: Session, info: SceneInfo, layers: Layers) -> Result<()> {
-    viewer::window::run(session, info, layers)
+fn run_window(session: Session, layers: Layers) -> Result<()> {
+    viewer::window::run(session, layers)
 }
 
 #[cfg(not(feature = "window"))]
-fn run_window(_: Session, _: SceneInfo, _: Layers) -> Result<()> {
+fn run_window(_: Session, _: Layers) -> Result<()> {
     bail!(
         "this viewer was built without the window (cargo feature `window`); rebuild with \
          `cargo build --release -p viewer --features window`, or use --snapshot FILE.png"

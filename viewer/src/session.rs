@@ -1,16 +1,19 @@
-//! What the viewer reads from a session: the latest mesh state and surface,
-//! force samples, haptic telemetry and tool poses. Every stream is opened
+//! What the viewer reads from a session: the scene (tools, name, rest
+//! positions, fibres, the uncut surface: [`SceneInfo`]), the latest mesh
+//! state and surface, force samples, haptic telemetry and tool poses. Every stream is opened
 //! (or created) at start, so the viewer may come before or after the
 //! simulation; a simulation that restarts, or cuts, shows up as a new
 //! topology version or vertex count, never as an error.
 
+use crate::scene_info::SceneInfo;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use shared::SessionName;
 use shared::protocol::{
-    ForceMsg, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg, TelemetryBatch, TopologyHeader,
+    ForceMsg, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg, RestHeader, TelemetryBatch,
+    TopologyHeader,
 };
 use shared::services::{self, Ipc, ServiceError};
 use std::collections::VecDeque;
@@ -57,9 +60,11 @@ pub struct Session {
     telemetry: Subscriber<Ipc, TelemetryBatch, ()>,
     telemetry_factory: PortFactory<Ipc, TelemetryBatch, ()>,
     scene: services::SceneSubscriber,
-    /// The tools the simulation declares (its `scene` stream; empty until
-    /// it arrives): they win over the scene file's.
-    pub scene_tools: Vec<sim_server::scene::ToolDecl>,
+    rest: Subscriber<Ipc, [[f32; 3]], RestHeader>,
+    surface0: Subscriber<Ipc, [[u32; 3]], TopologyHeader>,
+    /// The scene as the simulation published it (empty parts until their
+    /// streams arrive).
+    pub info: SceneInfo,
     pose_factory: PortFactory<Ipc, PoseMsg, ()>,
     /// Latest vertex positions (m).
     pub positions_m: Vec<[f32; 3]>,
@@ -107,6 +112,14 @@ impl Session {
         let telemetry_factory = services::telemetry_service(&node, session)?;
         let telemetry = services::subscriber(&telemetry_factory)?;
         let scene = services::subscriber(&services::scene_service(&node, session)?)?;
+        let rest = services::rest_service(&node, session)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| open("rest", format!("{e:?}")))?;
+        let surface0 = services::surface0_service(&node, session)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| open("surface0", format!("{e:?}")))?;
         let pose_factory = services::pose_service(&node, session)?;
         Ok(Self {
             node,
@@ -116,7 +129,9 @@ impl Session {
             telemetry,
             telemetry_factory,
             scene,
-            scene_tools: Vec::new(),
+            rest,
+            surface0,
+            info: SceneInfo::default(),
             pose_factory,
             positions_m: Vec::new(),
             triangles: Vec::new(),
@@ -211,12 +226,7 @@ impl Session {
                 flags: t.flags,
             }));
         }
-        while let Ok(Some(m)) = self.scene.receive() {
-            if m.version == PROTOCOL_VERSION {
-                self.scene_tools = tools_of(&m);
-                changed = true;
-            }
-        }
+        changed |= self.poll_scene();
         while let Ok(Some(b)) = self.telemetry.receive() {
             if b.version != PROTOCOL_VERSION {
                 continue;
@@ -228,6 +238,39 @@ impl Session {
         }
         self.update_stats(now_ns);
         changed
+    }
+
+    /// The once-published scene streams (a simulation that restarts
+    /// publishes them again); whether any arrived.
+    fn poll_scene(&mut self) -> bool {
+        let mut changed = false;
+        while let Ok(Some(m)) = self.scene.receive() {
+            if m.version == PROTOCOL_VERSION {
+                self.info.set_tools(&m);
+                changed = true;
+            }
+        }
+        while let Ok(Some(s)) = self.rest.receive() {
+            let h = *s.user_header();
+            if h.version == PROTOCOL_VERSION {
+                changed |= self.info.set_rest(&h, s.payload());
+            }
+        }
+        while let Ok(Some(s)) = self.surface0.receive() {
+            let h = *s.user_header();
+            if h.version == PROTOCOL_VERSION && h.triangle_count as usize == s.payload().len() {
+                self.info.set_original_surface(s.payload());
+                changed = true;
+            }
+        }
+        changed
+    }
+
+    /// Whether the latest mesh state belongs to the scene the streams
+    /// described (same vertex count), so its faces can be checked against
+    /// the uncut surface.
+    pub fn same_scene(&self) -> bool {
+        self.info.vertex_count == self.positions_m.len()
     }
 
     fn update_stats(&mut self, now_ns: u64) {
@@ -286,27 +329,6 @@ fn percentiles(x: &mut [f64]) -> (f64, f64) {
     x.sort_unstable_by(f64::total_cmp);
     let at = |q: f64| x[((x.len() - 1) as f64 * q).round() as usize];
     (at(0.5), at(0.99))
-}
-
-/// The tools a scene-info message declares, as the scene file would.
-fn tools_of(m: &shared::protocol::SceneInfo) -> Vec<sim_server::scene::ToolDecl> {
-    use shared::protocol::{TOOL_CAVITRON, TOOL_GRASPER};
-    use sim_server::scene::spec::ToolKind;
-    m.tools[..(m.tool_count as usize).min(MAX_TOOLS)]
-        .iter()
-        .map(|t| sim_server::scene::ToolDecl {
-            name: t.name().to_string(),
-            kind: match t.kind {
-                TOOL_GRASPER => ToolKind::Grasper,
-                TOOL_CAVITRON => ToolKind::Cavitron,
-                _ => ToolKind::Hook,
-            },
-            fulcrum_m: t.fulcrum_m,
-            length_m: t.length_m,
-            radius_m: t.radius_m,
-            tip_length_m: t.tip_length_m,
-        })
-        .collect()
 }
 
 #[cfg(test)]

@@ -1,30 +1,15 @@
 //! From what the session says to what is drawn: tool shapes and overlay text.
 
 use crate::render::ToolShape;
-use crate::scene_info::SceneInfo;
 use crate::session::Session;
 use three_d::vec3;
-
-/// The tools to draw: the simulation's own (its `scene` stream), else the
-/// scene file's.
-pub fn tools<'a>(session: &'a Session, info: &'a SceneInfo) -> &'a [sim_server::scene::ToolDecl] {
-    if session.scene_tools.is_empty() {
-        &info.tools
-    } else {
-        &session.scene_tools
-    }
-}
 
 /// One shape per declared tool that the simulation reports, plus the tool
 /// the viewer drives (`driven`: tool index and tip) before the simulation
 /// reports it.
-pub fn tool_shapes(
-    session: &Session,
-    info: &SceneInfo,
-    driven: Option<(usize, [f64; 3])>,
-) -> Vec<ToolShape> {
+pub fn tool_shapes(session: &Session, driven: Option<(usize, [f64; 3])>) -> Vec<ToolShape> {
     let mut out = Vec::new();
-    for (i, decl) in tools(session, info).iter().enumerate() {
+    for (i, decl) in session.info.tools.iter().enumerate() {
         let reported = session.tools.get(i).filter(|t| t.position_m != [0.0; 3]);
         let (end, flags, force) = match (reported, driven) {
             (Some(t), _) => (t.position_m, t.flags, t.force_n),
@@ -44,14 +29,14 @@ pub fn tool_shapes(
 }
 
 /// The overlay's lines.
-pub fn overlay_lines(
-    session: &Session,
-    info: &SceneInfo,
-    now_ns: u64,
-    driving: Option<usize>,
-) -> Vec<String> {
+pub fn overlay_lines(session: &Session, now_ns: u64, driving: Option<usize>) -> Vec<String> {
     let s = &session.stats;
-    let mut lines = vec![format!("scene: {}", info.name)];
+    let name = &session.info.name;
+    let mut lines = vec![if name.is_empty() {
+        "scene: waiting for the simulation's scene".to_string()
+    } else {
+        format!("scene: {name}")
+    }];
     if session.sim_alive(now_ns) {
         lines.push(format!(
             "sim {:6.0} Hz  frames {}  topology v{}",
@@ -78,7 +63,7 @@ pub fn overlay_lines(
     }
     for (i, t) in session.tools.iter().enumerate() {
         let f = (t.force_n[0].powi(2) + t.force_n[1].powi(2) + t.force_n[2].powi(2)).sqrt();
-        let name = tools(session, info).get(i).map_or("?", |d| d.name.as_str());
+        let name = session.info.tools.get(i).map_or("?", |d| d.name.as_str());
         lines.push(format!("tool {i} {name}: {f:.2} N"));
     }
     if let Some(i) = driving {

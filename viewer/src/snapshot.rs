@@ -6,7 +6,6 @@ use crate::camera::{View, bounds, framing};
 use crate::egl::{Headless, HeadlessError};
 use crate::overlay;
 use crate::render::{Layers, Renderer};
-use crate::scene_info::SceneInfo;
 use crate::session::Session;
 use crate::show::{overlay_lines, tool_shapes};
 use shared::monotonic_ns;
@@ -58,9 +57,13 @@ pub struct SnapshotReport {
     pub topology_version: u64,
     /// Pixels not of the background colour.
     pub covered_pixels: usize,
-    /// The tools drawn by name: the simulation's (its `scene` stream),
-    /// else the scene file's.
+    /// The tools drawn by name (the simulation's `scene` stream).
     pub tools: Vec<String>,
+    /// The scene's name (the simulation's `rest` stream; empty if it
+    /// never came).
+    pub scene: String,
+    /// Fibres the scene has (drawn with `--fibres`).
+    pub fibres: usize,
 }
 
 /// How to take a snapshot.
@@ -84,7 +87,6 @@ pub struct SnapshotConfig {
 /// renders it into `cfg.out` (PNG).
 pub fn snapshot(
     session: &mut Session,
-    info: &SceneInfo,
     cfg: &SnapshotConfig,
 ) -> Result<SnapshotReport, SnapshotError> {
     let SnapshotConfig {
@@ -104,9 +106,13 @@ pub fn snapshot(
         // than the state a running simulation is in. With a daemon running,
         // also its telemetry rate (two batches, ~130 ms) for the overlay,
         // for at most half a second.
-        let telemetry_pending =
-            session.daemon_present() && session.stats.haptic_hz == 0.0 && now - start < 500_000_000;
-        if session.drawable() && session.frames >= 2 && !telemetry_pending {
+        // Likewise the uncut surface (cut faces) and the scene's name, which
+        // a simulation publishes once at start.
+        let early = now - start < 500_000_000;
+        let telemetry_pending = session.daemon_present() && session.stats.haptic_hz == 0.0 && early;
+        let scene_pending =
+            (session.info.surface.is_empty() || session.info.name.is_empty()) && early;
+        if session.drawable() && session.frames >= 2 && !telemetry_pending && !scene_pending {
             break;
         }
         if (now - start) as f64 * 1e-9 > wait_s {
@@ -123,9 +129,9 @@ pub fn snapshot(
     let headless = Headless::new()?;
     let ctx = &headless.context;
     let mut renderer = Renderer::new(ctx);
-    let is_cut = |t| info.vertex_count == session.positions_m.len() && info.is_cut_face(t);
+    let is_cut = |t| session.same_scene() && session.info.is_cut_face(t);
     renderer.set_surface(&session.positions_m, &session.triangles, is_cut);
-    renderer.set_tools(&tool_shapes(session, info, None), layers.forces);
+    renderer.set_tools(&tool_shapes(session, None), layers.forces);
     let Some((lo, hi)) = bounds(&session.positions_m) else {
         return Err(SnapshotError::NoMesh {
             session: session_name.to_string(),
@@ -133,11 +139,10 @@ pub fn snapshot(
         });
     };
     if layers.fibres {
-        renderer.set_fibres(&info.fibres, (hi - lo).x.max((hi - lo).y) * 0.0015);
+        renderer.set_fibres(&session.info.fibres, (hi - lo).x.max((hi - lo).y) * 0.0015);
     }
     renderer.set_overlay(&overlay::render(&overlay_lines(
         session,
-        info,
         monotonic_ns(),
         None,
     )));
@@ -173,10 +178,9 @@ pub fn snapshot(
         cut_triangles: session.triangles.iter().filter(|t| is_cut(**t)).count(),
         topology_version: session.topology_version,
         covered_pixels: pixels.iter().filter(|p| p[..3] != background).count(),
-        tools: crate::show::tools(session, info)
-            .iter()
-            .map(|t| t.name.clone())
-            .collect(),
+        tools: session.info.tools.iter().map(|t| t.name.clone()).collect(),
+        scene: session.info.name.clone(),
+        fibres: session.info.fibres.len(),
     };
     write_png(out, width, height, &pixels)?;
     Ok(report)

@@ -13,43 +13,60 @@ use crate::controls::{Controls, Request};
 use crate::drive::Driver;
 use crate::overlay;
 use crate::render::{Layers, Renderer};
-use crate::scene_info::SceneInfo;
 use crate::session::Session;
 use crate::show::{overlay_lines, tool_shapes};
 use shared::monotonic_ns;
 use three_d::*;
 
 /// Opens the window and runs until it is closed.
-pub fn run(mut session: Session, info: SceneInfo, layers: Layers) -> anyhow::Result<()> {
+pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
     let window = Window::new(WindowSettings {
-        title: format!("hapsim viewer - {}", info.name),
+        title: "hapsim viewer".into(),
         max_size: None,
         ..Default::default()
     })?;
     let context = window.gl();
     let mut renderer = Renderer::new(&context);
+    // The organ is where the simulation's streams say (a default box
+    // until they arrive): wait briefly for them, so the first picture is
+    // framed.
+    let start = monotonic_ns();
+    while session.info.rest_m.is_empty() && monotonic_ns() - start < 1_000_000_000 {
+        session.poll(monotonic_ns());
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
     let (mut lo, mut hi) =
-        bounds(&info.rest_m).unwrap_or((vec3(-0.1, -0.1, -0.1), vec3(0.1, 0.1, 0.1)));
+        bounds(&session.info.rest_m).unwrap_or((vec3(-0.1, -0.1, -0.1), vec3(0.1, 0.1, 0.1)));
     let mut camera = framing(window.viewport(), lo, hi, View::Iso);
     let size = (hi - lo).magnitude();
-    renderer.set_fibres(&info.fibres, size * 0.001);
-    // Until the simulation sends a state, show the scene at rest.
-    renderer.set_surface(&info.rest_m, &info.surface, |_| false);
     let centre = (lo + hi) * 0.5;
     let mut driver = Driver::new(
-        info.tools.len(),
+        session.info.tools.len(),
         [centre.x as f64, centre.y as f64, hi.z as f64],
     );
     let mut cursor: Option<PhysicalPoint> = None;
-    let mut controls = Controls::new(size, info.tools.len(), layers);
+    let mut controls = Controls::new(size, session.info.tools.len(), layers);
     let mut shown_frames = u64::MAX;
+    // The scene's name, fibres and rest surface, set when they arrive.
+    let mut shown_scene = String::new();
     window.render_loop(move |mut frame| {
         let now = monotonic_ns();
         camera.set_viewport(frame.viewport);
         let changed = session.poll(now);
+        if session.info.name != shown_scene {
+            shown_scene = session.info.name.clone();
+            renderer.set_fibres(&session.info.fibres, size * 0.001);
+            driver.tool_count = session.info.tools.len().min(shared::protocol::MAX_TOOLS);
+            controls = Controls::new(size, session.info.tools.len(), controls.layers);
+            if session.frames == 0 {
+                // Until the simulation sends a state, the scene at rest.
+                renderer.set_surface(&session.info.rest_m, &session.info.surface, |_| false);
+            }
+        }
         if changed && session.drawable() && session.frames != shown_frames {
             shown_frames = session.frames;
-            let same_scene = info.vertex_count == session.positions_m.len();
+            let same_scene = session.same_scene();
+            let info = &session.info;
             renderer.set_surface(&session.positions_m, &session.triangles, |t| {
                 same_scene && info.is_cut_face(t)
             });
@@ -108,10 +125,8 @@ pub fn run(mut session: Session, info: SceneInfo, layers: Layers) -> anyhow::Res
         let driving = driver.active().then_some(driver.tool);
         let driven = driving.map(|k| (k, driver.tip_m));
         let layers = controls.layers;
-        renderer.set_tools(&tool_shapes(&session, &info, driven), layers.forces);
-        renderer.set_overlay(&overlay::render(&overlay_lines(
-            &session, &info, now, driving,
-        )));
+        renderer.set_tools(&tool_shapes(&session, driven), layers.forces);
+        renderer.set_overlay(&overlay::render(&overlay_lines(&session, now, driving)));
         renderer.draw(&frame.screen(), &camera, &layers);
         FrameOutput::default()
     });

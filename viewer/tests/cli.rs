@@ -44,12 +44,6 @@ fn a_snapshot_without_a_simulation_says_what_to_start() {
     assert!(!std::path::Path::new("x.png").exists());
 }
 
-#[test]
-fn a_bad_scene_is_named() {
-    let (ok, err) = viewer(&["--scene", "/nonexistent/scene.toml", "--snapshot", "x.png"]);
-    assert!(!ok && err.contains("/nonexistent/scene.toml"), "{err}");
-}
-
 #[cfg(not(feature = "window"))]
 #[test]
 fn without_the_window_feature_the_live_view_says_how_to_get_it() {

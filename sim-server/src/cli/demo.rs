@@ -271,6 +271,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         scripts: vec![cavitron_script()],
         pose_timeout_ns: sim_server::server::poses::DEFAULT_POSE_TIMEOUT_NS,
         save_frames: args.save_frames.clone(),
+        scene_name: src.name.clone(),
     };
     let result = super::run_scene(scene, backend, &cfg, stop.clone());
     if let Some(v) = &mut viewer {

@@ -91,6 +91,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         scripts: Vec::new(),
         pose_timeout_ns: (args.pose_timeout_ms * 1e6).round() as u64,
         save_frames: args.save_frames.clone(),
+        scene_name: src.name.clone(),
     };
     let summary = match super::run_scene(scene, backend, &cfg, stop) {
         Ok(summary) => summary,

@@ -16,6 +16,7 @@ pub mod frames;
 pub mod outputs;
 pub mod pacing;
 pub mod poses;
+pub mod scene_out;
 pub mod step_time;
 
 use crate::backend::Backend;
@@ -26,6 +27,7 @@ use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
 use outputs::MeshOut;
 use pacing::Pacing;
 use poses::{PoseIntake, WaitEnd};
+use scene_out::SceneOut;
 use serde::Serialize;
 use shared::protocol::{ForceMsg, MAX_TOOLS, PROTOCOL_VERSION};
 use shared::services::{self, ServiceError};
@@ -58,6 +60,8 @@ pub struct RunConfig {
     /// Save the mesh frames (at the viewer rate) as a VTU series with
     /// `frames.pvd` in this directory ([`frames`]).
     pub save_frames: Option<std::path::PathBuf>,
+    /// The scene's name, for clients ([`scene_out`]).
+    pub scene_name: String,
 }
 
 /// A scripted tool: tip position and jaw opening against simulated time,
@@ -349,10 +353,9 @@ pub fn run<B: Backend>(
         &sim,
         services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?,
         services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?,
-        services::publisher(&services::scene_service(&node, &cfg.session)?)?,
-        outputs::scene_info(&contacts, &sim),
         recorder,
     )?;
+    let scene_out = SceneOut::publish(&node, &cfg.session, &contacts, &sim, &cfg.scene_name)?;
 
     let mut summary = RunSummary {
         finite: true,
@@ -467,6 +470,7 @@ pub fn run<B: Backend>(
         // Viewer: topology when it changed, positions at the viewer rate.
         if summary.steps.is_multiple_of(frame_every) {
             mesh_out.publish(&sim, now, summary.steps as Real * dt_s)?;
+            scene_out.refresh();
             summary.frames_published = mesh_out.frames;
         }
         if cfg.status && now - last_status >= 1_000_000_000 {

@@ -8,12 +8,11 @@ use super::{RunError, ToolScript, publish_err};
 use crate::backend::Backend;
 use crate::contact::{ContactReport, ToolInput, Tools};
 use crate::math::{Real, Vec3};
-use crate::scene::spec::ToolKind;
 use shared::protocol::{
     CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg,
-    SceneInfo, TOOL_CAVITRON, TOOL_GRASPER, TOOL_HOOK, TOOL_PRESENT, TopologyHeader,
+    TOOL_PRESENT, TopologyHeader,
 };
-use shared::services::{ScenePublisher, SlicePublisher, UpdateConnections};
+use shared::services::{SlicePublisher, UpdateConnections};
 
 /// Each tool's input for the step at simulated time `sim_t_s`: its script
 /// if one drives it, else the live pose's entry (none: withdrawn).
@@ -81,43 +80,11 @@ pub fn force_sample<B: Backend>(
     header
 }
 
-/// What a client without the scene file needs: the declared tools and
-/// the organ's rest bounding box (the `scene` stream).
-pub fn scene_info<B: Backend>(tools: &Tools, sim: &B) -> SceneInfo {
-    let mesh = sim.model().mesh();
-    let (lo, hi) = mesh.bounds_m();
-    let mut info = SceneInfo {
-        version: PROTOCOL_VERSION,
-        tool_count: tools.len().min(MAX_TOOLS) as u32,
-        vertex_count: mesh.vertex_count() as u32,
-        tet_count: mesh.tet_count() as u32,
-        bounds_min_m: lo.to_array(),
-        bounds_max_m: hi.to_array(),
-        ..SceneInfo::default()
-    };
-    for (out, t) in info.tools.iter_mut().zip(tools.iter()) {
-        let d = t.decl();
-        out.set_name(&d.name);
-        out.kind = match d.kind {
-            ToolKind::Grasper => TOOL_GRASPER,
-            ToolKind::Hook => TOOL_HOOK,
-            ToolKind::Cavitron => TOOL_CAVITRON,
-        };
-        out.fulcrum_m = d.fulcrum_m;
-        out.length_m = d.length_m;
-        out.radius_m = d.radius_m;
-        out.tip_length_m = d.tip_length_m;
-    }
-    info
-}
-
 /// The viewer's streams (surface topology when cuts change it, positions
-/// at the viewer rate, the scene info once) and the `--save-frames`
-/// recorder.
+/// at the viewer rate) and the `--save-frames` recorder.
 pub struct MeshOut {
     mesh: SlicePublisher<[f32; 3], MeshHeader>,
     topology: SlicePublisher<[u32; 3], TopologyHeader>,
-    scene: ScenePublisher,
     recorder: Option<FrameRecorder>,
     /// Scratch for the surface triangles.
     tris: Vec<[u32; 3]>,
@@ -130,23 +97,16 @@ pub struct MeshOut {
 }
 
 impl MeshOut {
-    /// Over the given publishers, for `sim`'s mesh; publishes `info` on
-    /// `scene` now (it stays in the service's history).
+    /// Over the given publishers, for `sim`'s mesh.
     pub fn new<B: Backend>(
         sim: &B,
         mesh: SlicePublisher<[f32; 3], MeshHeader>,
         topology: SlicePublisher<[u32; 3], TopologyHeader>,
-        scene: ScenePublisher,
-        info: SceneInfo,
         recorder: Option<FrameRecorder>,
     ) -> Result<Self, RunError> {
-        scene
-            .send_copy(info)
-            .map_err(|e| publish_err("scene info")(format!("{e:?}")))?;
         Ok(Self {
             mesh,
             topology,
-            scene,
             recorder,
             tris: Vec::with_capacity(4 * sim.model().mesh().tet_count()),
             rest_m: sim.model().mesh().positions_m().to_vec(),
@@ -192,8 +152,6 @@ impl MeshOut {
             // is delivered when the publisher updates its connections).
             let _ = self.topology.update_connections();
         }
-        // Likewise the scene info for a client that joined since.
-        let _ = self.scene.update_connections();
         let u = sim.displacements();
         let n = self.rest_m.len();
         let mut s = self
