@@ -6,7 +6,7 @@ use super::materials::resolve;
 use super::select::{Region, Tags, distance_to_segment, segment_crosses_tet};
 use super::spec::{
     BackendName, BoundName, DtPolicyName, LatticeKind, MaterialModelName, MembraneModelName,
-    PrecisionName, SceneSpec, ShapeKind, ToolKind,
+    PrecisionName, SceneSpec, ShapeKind,
 };
 use super::{SceneError, SceneSource};
 use crate::ids::{TetId, VertexId};
@@ -18,22 +18,7 @@ use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
 use serde::Serialize;
 use toml::Spanned;
 
-/// A tool as declared (the contact models come with the tool issue).
-#[derive(Clone, Debug, Serialize)]
-pub struct ToolDecl {
-    /// Unique name.
-    pub name: String,
-    /// Kind.
-    pub kind: ToolKind,
-    /// Insertion point (m).
-    pub fulcrum_m: [Real; 3],
-    /// Shaft length (m).
-    pub length_m: Real,
-    /// Shaft radius (m).
-    pub radius_m: Real,
-    /// Tip segment length (m).
-    pub tip_length_m: Real,
-}
+pub use crate::contact::ToolDecl;
 
 /// Simulation settings with defaults applied.
 #[derive(Clone, Debug)]

@@ -349,17 +349,8 @@ pub struct RotateSpec {
     pub angle_deg: Spanned<f64>,
 }
 
-/// Tool kinds.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ToolKind {
-    /// Jaws: grips, and cuts when closed on tissue.
-    Grasper,
-    /// A hook: pushes and pulls.
-    Hook,
-    /// Removes every tetrahedron touching its tip.
-    Cavitron,
-}
+/// Tool kinds (the contact code's own enum, read by name: `grasper`, `hook`, `cavitron`).
+pub use crate::contact::ToolKind;
 
 /// `[[tool]]`.
 #[derive(Debug, Deserialize)]

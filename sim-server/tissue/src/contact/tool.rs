@@ -2,6 +2,8 @@
 //! for all tools in turn each step: cut, hold the gripped vertices, detect
 //! and project the sliding contacts, then commit to the simulation.
 
+use super::ToolDecl;
+use super::ToolKind;
 use super::adjacency::Adjacency;
 use super::claims::Claims;
 use super::config::ContactLaw;
@@ -15,8 +17,6 @@ use crate::backend::Backend;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::mesh::TET_FACES;
-use crate::scene::ToolDecl;
-use crate::scene::spec::ToolKind;
 use crate::tensor_mass::{CutError, ElasticModel};
 
 /// How far (fraction of the radius) below the new plane a persisting

@@ -1,8 +1,8 @@
 //! Tool geometry: the shaft and tip segments of a posed tool, capsule
 //! distances, and the contact planes vertices are projected on.
 
+use super::ToolDecl;
 use crate::math::{Real, Vec3};
-use crate::scene::ToolDecl;
 
 /// Below this fulcrum-to-tip distance (m) the shaft direction is undefined
 /// and the previous one is kept.
@@ -156,8 +156,8 @@ impl Plane {
 
 #[cfg(test)]
 mod tests {
+    use crate::contact::ToolKind;
     use super::*;
-    use crate::scene::spec::ToolKind;
 
     fn decl() -> ToolDecl {
         ToolDecl {

@@ -85,6 +85,7 @@
 mod adjacency;
 mod claims;
 mod config;
+mod decl;
 pub mod field;
 mod geometry;
 mod proxy;
@@ -98,6 +99,7 @@ mod tool;
 mod tools;
 
 pub use config::{ContactConfig, ContactLaw};
+pub use decl::{ToolDecl, ToolKind};
 pub use field::ContactField;
 pub use geometry::{Plane, Segment, ToolPose};
 pub use proxy::Proxy;

@@ -6,7 +6,6 @@
 
 pub mod extent;
 mod generate;
-pub mod io;
 pub mod quality;
 mod reorder;
 pub mod shapes;

@@ -22,8 +22,8 @@
 //! precomputed part uses the membrane's linearisation.
 //!
 //! ```
-//! use sim_server::backend::{Backend, Hybrid, HybridConfig};
-//! use sim_server::prelude::*;
+//! use tissue::backend::{Backend, Hybrid, HybridConfig};
+//! use tissue::prelude::*;
 //! let mesh = BoxSpec::new(Vec3::new(0.04, 0.02, 0.02), CellSize::EdgeM(0.005)).generate().unwrap();
 //! let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 5.0).unwrap();
 //! let model = ElasticModel::new(mesh.clone(), TetMaterials::uniform(tissue, mesh.tet_count())).unwrap();

@@ -1,6 +1,7 @@
 //! The tools of a scene, updated together each step so that they share one
 //! surface index and never fight over a vertex.
 
+use super::ToolDecl;
 use super::adjacency::Adjacency;
 use super::claims::Claims;
 use super::config::{ContactConfig, ContactLaw};
@@ -14,7 +15,6 @@ use super::{ContactReport, Reaction};
 use crate::backend::Backend;
 use crate::ids::VertexId;
 use crate::math::{Mat3, Real, Vec3};
-use crate::scene::ToolDecl;
 use crate::tensor_mass::ElasticModel;
 
 /// omega^2 the springs of `field`'s points may add: by Gershgorin, a
