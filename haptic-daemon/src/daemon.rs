@@ -288,15 +288,16 @@ impl<D: Device> RtLoop<D> {
                         .store(true, Ordering::Relaxed);
                     continue;
                 }
-                let t = &sample.tools[0];
-                let fs = ForceSample {
+                // Tool 0 is the device's; a message without tools is
+                // "nothing": no contact, no force.
+                let fs = ForceSample::from_wire(&sample, 0).unwrap_or(ForceSample {
                     t_ns: sample.t_ns,
                     seq: sample.seq,
-                    position_m: t.position_m,
-                    force_n: t.force_n,
-                    stiffness_n_per_m: t.stiffness_n_per_m,
-                    in_contact: t.flags & shared::protocol::CONTACT != 0,
-                };
+                    position_m: sample.tools[0].position_m,
+                    force_n: [0.0; 3],
+                    stiffness_n_per_m: [[0.0; 3]; 3],
+                    in_contact: false,
+                });
                 // A restarted simulation counts from 0 again: start over
                 // rather than ignore it until its seq passes the old one.
                 if self.extrapolator.latest().is_some_and(|l| fs.seq < l.seq) {

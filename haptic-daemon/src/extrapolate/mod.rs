@@ -72,6 +72,24 @@ pub struct ForceSample {
 }
 
 impl ForceSample {
+    /// Tool `tool`'s sample in a force message (the only conversion from
+    /// the wire to the extrapolators: the daemon and hapbench both use it);
+    /// `None` past the message's tools.
+    pub fn from_wire(msg: &shared::protocol::ForceMsg, tool: usize) -> Option<Self> {
+        let n = (msg.tool_count as usize).min(shared::protocol::MAX_TOOLS);
+        (tool < n).then(|| {
+            let t = &msg.tools[tool];
+            Self {
+                t_ns: msg.t_ns,
+                seq: msg.seq,
+                position_m: t.position_m,
+                force_n: t.force_n,
+                stiffness_n_per_m: t.stiffness_n_per_m,
+                in_contact: t.flags & shared::protocol::CONTACT != 0,
+            }
+        })
+    }
+
     /// Every floating-point field is finite.
     pub fn is_finite(&self) -> bool {
         is_finite(self.position_m)

@@ -6,11 +6,11 @@
 use super::frames::FrameRecorder;
 use super::{RunError, ToolScript, publish_err};
 use crate::backend::Backend;
-use crate::contact::{ContactReport, ToolInput, Tools};
+use crate::contact::{ContactReport, Reaction, ToolInput, Tools};
 use crate::math::{Real, Vec3};
 use shared::protocol::{
     CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg,
-    TOOL_PRESENT, TopologyHeader,
+    TOOL_PRESENT, ToolForce, TopologyHeader,
 };
 use shared::services::{SlicePublisher, UpdateConnections};
 
@@ -68,16 +68,26 @@ pub fn force_sample<B: Backend>(
             out.pose_seq = pose_seq;
             continue;
         }
-        let r = tools.reaction(i, sim);
-        out.force_n = r.force_n.to_array();
-        out.stiffness_n_per_m = r.stiffness_rows();
         // The position this step used: the tool end after clamping to its
         // length.
-        out.position_m = c.pose().map_or([0.0; 3], |p| p.end_m.to_array());
-        out.pose_seq = pose_seq;
-        out.flags = flags[i];
+        let position_m = c.pose().map_or(Vec3::ZERO, |p| p.end_m);
+        *out = tool_force(&tools.reaction(i, sim), position_m, pose_seq, flags[i]);
     }
     header
+}
+
+/// One tool's reaction as the wire carries it (the only conversion from
+/// the simulation's [`Reaction`] to the protocol: the server and hapbench
+/// both use it).
+pub fn tool_force(r: &Reaction, position_m: Vec3, pose_seq: u64, flags: u32) -> ToolForce {
+    ToolForce {
+        position_m: position_m.to_array(),
+        force_n: r.force_n.to_array(),
+        stiffness_n_per_m: r.stiffness_rows(),
+        pose_seq,
+        flags,
+        reserved: 0,
+    }
 }
 
 /// The viewer's streams (surface topology when cuts change it, positions

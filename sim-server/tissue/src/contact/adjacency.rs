@@ -1,11 +1,11 @@
 //! What each vertex touches, in compressed rows, built once per scene and
-//! shared by every tool: its edges (for the elastic force on one vertex)
+//! shared by every tool: its edges (for the elastic force on one vertex,
+//! [`super::reaction::elastic_force_n`])
 //! and its tetrahedra (for cutting and for the surface normals around it).
 //! Neither list changes under cutting: removed tetrahedra are skipped by
 //! their users, orphaned edges keep zero tensors.
 
 use crate::ids::{EdgeId, TetId, VertexId};
-use crate::math::Vec3;
 use crate::tensor_mass::ElasticModel;
 
 /// Per-vertex lists of `T` (compressed rows).
@@ -79,26 +79,8 @@ impl Adjacency {
         self.tets.of(v)
     }
 
-    /// The elastic force -(K U)_v (N) at vertex `v`, given displacements.
-    pub(crate) fn elastic_force_n(
-        &self,
-        model: &ElasticModel,
-        v: VertexId,
-        displacement: impl Fn(VertexId) -> Vec3,
-    ) -> Vec3 {
-        let mut ku = model.vertex_tensors()[v.idx()] * displacement(v);
-        let edges = model.topology().edges();
-        let tensors = model.edge_tensors();
-        for e in self.edges.of(v) {
-            let [a, b] = edges[e.idx()];
-            let k = tensors[e.idx()];
-            // Stored as K_ab with a < b; row b uses K_ba = K_ab^T.
-            ku += if a == v {
-                k * displacement(b)
-            } else {
-                k.transpose() * displacement(a)
-            };
-        }
-        -ku
+    /// The edges that use `v`.
+    pub(crate) fn edges_of(&self, v: VertexId) -> &[EdgeId] {
+        self.edges.of(v)
     }
 }

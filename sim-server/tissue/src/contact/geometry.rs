@@ -156,8 +156,8 @@ impl Plane {
 
 #[cfg(test)]
 mod tests {
-    use crate::contact::ToolKind;
     use super::*;
+    use crate::contact::ToolKind;
 
     fn decl() -> ToolDecl {
         ToolDecl {

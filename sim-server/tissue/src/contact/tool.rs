@@ -10,7 +10,7 @@ use super::config::ContactLaw;
 use super::field::{ContactField, PartSweep};
 use super::geometry::{Plane, Segment, ToolPose};
 use super::proxy::Proxy;
-use super::reaction::{Reaction, along};
+use super::reaction::{self, Reaction};
 use super::surface_index::SurfaceIndex;
 use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
 use crate::backend::Backend;
@@ -256,22 +256,9 @@ impl ToolContact {
         field: &ContactField,
         penalty_stiffness: crate::math::Mat3,
     ) -> Reaction {
-        let model = sim.model();
-        let mut out = Reaction::NONE;
-        if self.law == ContactLaw::Penalty {
-            out.force_n = field.force_n(self.slot);
-            out.stiffness_n_per_m = penalty_stiffness;
-        }
-        for c in &self.constraints {
-            let v = c.vertex;
-            out.force_n += adj.elastic_force_n(model, v, |w| sim.displacement(w));
-            let k = &model.vertex_tensors()[v.idx()];
-            out.stiffness_n_per_m += match c.kind {
-                ConstraintKind::Tip(n) | ConstraintKind::Shaft(n) => along(k, n),
-                ConstraintKind::Grip => *k,
-            };
-        }
-        out
+        let penalty = (self.law == ContactLaw::Penalty)
+            .then(|| (field.force_n(self.slot), penalty_stiffness));
+        reaction::tool_reaction(sim, adj, &self.constraints, penalty)
     }
 
     /// The parts the penalty law samples this step, each swept from the
@@ -399,10 +386,8 @@ impl ToolContact {
         for i in 0..self.kept.len() {
             let v = self.kept[i];
             let x = sim.position(v);
-            let pushing = adj
-                .elastic_force_n(model, v, |w| sim.displacement(w))
-                .dot(n)
-                > 0.0;
+            let pushing =
+                reaction::elastic_force_n(adj, model, v, |w| sim.displacement(w)).dot(n) > 0.0;
             if pushing
                 && plane.footprint_distance_m(x, segment) <= r
                 && plane.height_m(x) >= -KEEP_BELOW * r

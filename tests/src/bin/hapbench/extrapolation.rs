@@ -17,10 +17,12 @@ use haptic_daemon::device::Trajectory;
 use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
 use indicatif::ProgressBar;
 use serde::Serialize;
+use shared::protocol::ForceMsg;
 use shared::protocol::MAX_TOOLS;
 use sim_server::contact::{StiffnessSolves, ToolInput};
 use sim_server::math::Vec3;
 use sim_server::scene::{SceneSource, build_scene};
+use sim_server::server::outputs::{force_sample, tool_flags};
 use sim_server::server::prepare;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -123,8 +125,9 @@ fn scene_source(path: Option<&Path>) -> Result<SceneSource> {
     })
 }
 
-/// Tool 0's force, contact stiffness (rows) and contact flag after a step.
-type Sample = (Vec3, [[f64; 3]; 3], bool);
+/// Tool 0's sample after a step, as the daemon would receive it (its
+/// time and counter are set when it is delivered).
+type Sample = ForceSample;
 
 /// Tool 0's force (and contact state) for each pose the loop gives, the
 /// simulation stepped `dt_s` after each, in `substep_factor` times the
@@ -158,15 +161,18 @@ fn simulate(
             jaw_opening: jaw,
         });
         p.tools.update(&mut p.sim, &inputs);
-        let contact = p.tools.step(&mut p.sim)[0].contact;
+        let flags = tool_flags(p.tools.step(&mut p.sim));
         most_substeps = most_substeps.max(p.sim.substeps());
-        let r = p.tools.reaction(0, &p.sim);
+        // The live server's path: the reactions into a force message, and
+        // the daemon's conversion out of it.
+        let msg = force_sample(ForceMsg::default(), &p.tools, &p.sim, 1, &flags);
+        let sample = ForceSample::from_wire(&msg, 0).context("the scene has no tool 0")?;
         anyhow::ensure!(
-            r.force_n.is_finite(),
+            sample.is_finite(),
             "the simulation diverged at step {}",
             out.len()
         );
-        out.push((r.force_n, r.stiffness_rows(), contact));
+        out.push(sample);
         bar.inc(1);
     }
     Ok((out, most_substeps))
@@ -254,7 +260,7 @@ fn write_series(
 /// The samples of `--samples`, as the haptic loop receives them: one line
 /// per simulation step, CSV `delivered_s,pose_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,
 /// in_contact,k00..k22` (the contact stiffness row by row, N/m, dF = -K dP).
-fn write_samples(path: &Path, period_s: f64, traj: &Trajectory, samples: &[Sample]) -> Result<()> {
+fn write_samples(path: &Path, period_s: f64, samples: &[Sample]) -> Result<()> {
     use std::fmt::Write as _;
     let mut o = String::from("delivered_s,pose_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,in_contact");
     for i in 0..3 {
@@ -263,9 +269,9 @@ fn write_samples(path: &Path, period_s: f64, traj: &Trajectory, samples: &[Sampl
         }
     }
     o.push('\n');
-    for (j, (f, k, contact)) in samples.iter().enumerate() {
+    for (j, x) in samples.iter().enumerate() {
         let pose_s = j as f64 * period_s;
-        let p = traj.sample(pose_s).0;
+        let (p, f) = (x.position_m, x.force_n);
         write!(
             o,
             "{},{pose_s},{},{},{},{},{},{},{}",
@@ -273,12 +279,12 @@ fn write_samples(path: &Path, period_s: f64, traj: &Trajectory, samples: &[Sampl
             p[0],
             p[1],
             p[2],
-            f.x,
-            f.y,
-            f.z,
-            u8::from(*contact)
+            f[0],
+            f[1],
+            f[2],
+            u8::from(x.in_contact)
         )?;
-        for v in k.iter().flatten() {
+        for v in x.stiffness_n_per_m.iter().flatten() {
             write!(o, ",{v}")?;
         }
         o.push('\n');
@@ -330,11 +336,11 @@ pub fn run(args: &Args) -> Result<()> {
     b.finish();
 
     if let Some(path) = &args.samples {
-        write_samples(path, s, &traj, &samples)?;
+        write_samples(path, s, &samples)?;
     }
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
-    let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.0.to_array()).collect();
-    let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.0.to_array()).collect();
+    let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.force_n).collect();
+    let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.force_n).collect();
     let phases = classify(&truth_f, &hand, h);
     let snaps = near_snaps(&truth_f, h);
     let ns = |t: f64| (t * 1e9).round() as u64;
@@ -348,14 +354,10 @@ pub fn run(args: &Args) -> Result<()> {
             let t = k as f64 * h;
             // Sample j (pose at j s) is delivered one simulation period later.
             while next < samples.len() && (next + 1) as f64 * s <= t + 1e-12 {
-                let (f, stiffness, contact) = samples[next];
                 ex.push(&ForceSample {
                     t_ns: ns((next + 1) as f64 * s),
                     seq: next as u64,
-                    position_m: traj.sample(next as f64 * s).0,
-                    force_n: f.to_array(),
-                    stiffness_n_per_m: stiffness,
-                    in_contact: contact,
+                    ..samples[next]
                 });
                 next += 1;
             }
