@@ -93,6 +93,8 @@ pub type PoseSubscriber = Subscriber<Ipc, PoseMsg, ()>;
 pub type PoseReadyListener = Listener<Ipc>;
 /// A force subscriber.
 pub type ForceSubscriber = Subscriber<Ipc, ForceMsg, ()>;
+/// Publisher of force samples (the simulation's, one per session).
+pub type ForcePublisher = Publisher<Ipc, ForceMsg, ()>;
 /// Publisher of the scene-info stream.
 pub type ScenePublisher = Publisher<Ipc, SceneInfo, ()>;
 /// Subscriber of the scene-info stream.

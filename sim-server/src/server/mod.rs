@@ -16,6 +16,7 @@ pub mod frames;
 pub mod outputs;
 pub mod pacing;
 pub mod poses;
+pub mod run_loop;
 pub mod scene_out;
 pub mod step_time;
 
@@ -24,17 +25,13 @@ use crate::contact::Tools;
 use crate::math::{Real, Vec3};
 use crate::scene::BuiltScene;
 use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
-use outputs::MeshOut;
-use pacing::Pacing;
-use poses::{PoseIntake, WaitEnd};
-use scene_out::SceneOut;
 use serde::Serialize;
-use shared::protocol::{ForceMsg, MAX_TOOLS, PROTOCOL_VERSION};
-use shared::services::{self, ServiceError};
-use shared::{SessionName, monotonic_ns};
+use shared::SessionName;
+use shared::protocol::MAX_TOOLS;
+use shared::services::ServiceError;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use step_time::{StepHistogram, StepPercentiles};
+use std::sync::atomic::AtomicBool;
+use step_time::StepPercentiles;
 use thiserror::Error;
 
 /// How to run.
@@ -304,255 +301,16 @@ pub fn run<B: Backend>(
     cfg: &RunConfig,
     stop: Arc<AtomicBool>,
 ) -> Result<RunSummary, RunError> {
-    let Prepared {
-        mut sim,
-        tools: mut contacts,
-        dt_s,
-        original_vertex_ids,
-    } = prepared;
-    if cfg.status {
-        let (cut, live) = crate::backend::cuttable(&sim);
-        eprintln!(
-            "sim-server: {} backend, {}, cuts {}",
-            sim.name(),
-            if sim.dynamic() {
-                "dynamic"
-            } else {
-                "quasi-static"
-            },
-            match cut {
-                0 => "nowhere".to_string(),
-                c if c == live => "anywhere".to_string(),
-                c => format!("in {c} of {live} tetrahedra"),
-            }
-        );
-    }
-    let node = services::node("sim-server")?;
-    let mut poses = PoseIntake::new(&node, &cfg.session, cfg.pose_timeout_ns)?;
-    let force_service = services::force_service(&node, &cfg.session)?;
-    // What a crashed simulation left behind goes first, so that only a live
-    // one makes this session busy.
-    services::reap_dead_nodes(&node);
-    if services::publisher_count(&force_service) > 0 {
-        return Err(RunError::SessionBusy {
-            session: cfg.session.as_str().to_string(),
-        });
-    }
-    let force_pub = services::publisher(&force_service)?;
-    let n = sim.model().vertex_count();
-    let max_tris = 4 * sim.model().mesh().tet_count();
-    let recorder = match &cfg.save_frames {
-        Some(dir) => Some(frames::FrameRecorder::start(
-            dir,
-            sim.model(),
-            original_vertex_ids,
-        )?),
-        None => None,
-    };
-    let mut mesh_out = MeshOut::new(
-        &sim,
-        services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?,
-        services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?,
-        recorder,
-    )?;
-    let scene_out = SceneOut::publish(&node, &cfg.session, &contacts, &sim, &cfg.scene_name)?;
-
-    let mut summary = RunSummary {
-        finite: true,
-        nonlinear_tets: sim.model().nonlinear_tets(),
-        ..RunSummary::default()
-    };
-    if !cfg.headless {
-        // Wake-ups at the requested time, not up to 50 us later.
-        // SAFETY: prctl(2) on this thread's timer slack; no pointers.
-        unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
-    }
-    let mut step_times = StepHistogram::new();
-    let start_ns = monotonic_ns();
-    let step_ns = (dt_s * 1e9) as u64;
-    let mut pacing = Pacing::new(start_ns, step_ns);
-    let mut stalls_told = 0u64;
-    let mut last_stall_told = 0u64;
-    let frame_every = ((1.0 / cfg.viewer_rate_hz.max(1.0)) / dt_s).max(1.0) as u64;
-    let mut last_status = start_ns;
-    let mut last_step_ns = start_ns;
-    let mut removed_total = 0u64;
-    let mut diverged_at = None;
-    let mut cut_refusal_told = false;
-    loop {
-        if stop.load(Ordering::Relaxed)
-            || cfg.max_steps.is_some_and(|m| summary.steps >= m)
-            || cfg
-                .duration_s
-                .is_some_and(|d| (monotonic_ns() - start_ns) as Real * 1e-9 >= d)
-        {
+    let mut l = run_loop::RunLoop::open(prepared, cfg, stop)?;
+    while !l.done() {
+        let pose = l.intake()?;
+        let step = l.step();
+        if !l.check_finite() {
             break;
         }
-        // Poses: newest wins, if fresh and its publisher alive.
-        poses.drain()?;
-        let contact_t0 = monotonic_ns();
-        let latest_pose = poses.active(contact_t0);
-        // Contact: detect and impose before the step.
-        let sim_t_s = summary.steps as Real * dt_s;
-        let inputs = outputs::tool_inputs(contacts.len(), &cfg.scripts, latest_pose, sim_t_s);
-        contacts.update(&mut sim, &inputs);
-        let step_t0 = monotonic_ns();
-        summary.contact_s += (step_t0 - contact_t0) as Real * 1e-9;
-        // The penalty contact is evaluated inside the step: its cost counts
-        // as the step's.
-        let reports = contacts.step(&mut sim);
-        if let Some(r) = sim.large_strain() {
-            summary.max_barrier_elements = summary.max_barrier_elements.max(r.collapsed);
-        }
-        let step_t1 = monotonic_ns();
-        summary.step_s += (step_t1 - step_t0) as Real * 1e-9;
-        step_times.record(step_t1 - step_t0);
-        let flags = outputs::tool_flags(reports);
-        let any_contact = reports.iter().any(|r| r.contact);
-        for (i, report) in reports.iter().enumerate() {
-            if let Some(why) = report.cut_refused
-                && !cut_refusal_told
-            {
-                cut_refusal_told = true;
-                eprintln!(
-                    "sim-server: tool {i} tried to cut, but the {} backend refused: {why}",
-                    sim.name()
-                );
-            }
-            if report.tets_removed > 0 {
-                removed_total += report.tets_removed as u64;
-                mesh_out.topology_version += 1;
-            }
-        }
-        summary.steps += 1;
-        if any_contact {
-            summary.contact_steps += 1;
-        }
-        if summary.steps.is_multiple_of(64)
-            && !sim.displacements().iter().flatten().all(|x| x.is_finite())
-        {
-            summary.finite = false;
-            let _ = force_pub.send_copy(ForceMsg {
-                version: PROTOCOL_VERSION,
-                seq: summary.samples_published,
-                t_ns: monotonic_ns(),
-                ..ForceMsg::default()
-            });
-            diverged_at = Some(summary.steps);
-            break;
-        }
-        // Force sample: every step.
-        let now = monotonic_ns();
-        let header = ForceMsg {
-            version: PROTOCOL_VERSION,
-            seq: summary.samples_published,
-            t_ns: now,
-            sim_time_ns: (summary.steps as Real * dt_s * 1e9) as u64,
-            step_period_ns: now - last_step_ns,
-            ..ForceMsg::default()
-        };
-        last_step_ns = now;
-        let reaction_t0 = monotonic_ns();
-        let pose_seq = latest_pose.map_or(0, |p| p.seq);
-        let msg = outputs::force_sample(header, &contacts, &sim, pose_seq, &flags);
-        for t in &msg.tools[..contacts.len()] {
-            summary.max_force_n = summary
-                .max_force_n
-                .max(Vec3::from_array(t.force_n).length());
-        }
-        summary.contact_s += (monotonic_ns() - reaction_t0) as Real * 1e-9;
-        force_pub
-            .send_copy(msg)
-            .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
-        summary.samples_published += 1;
-        // The sample is out: now there is time to look for dead publishers.
-        poses.check_publishers(&node, monotonic_ns());
-        // Viewer: topology when it changed, positions at the viewer rate.
-        if summary.steps.is_multiple_of(frame_every) {
-            mesh_out.publish(&sim, now, summary.steps as Real * dt_s)?;
-            scene_out.refresh();
-            summary.frames_published = mesh_out.frames;
-        }
-        if cfg.status && now - last_status >= 1_000_000_000 {
-            let secs = (now - start_ns) as Real * 1e-9;
-            let stalls = if pacing.stalls() > 0 {
-                format!(
-                    " | dropped {:.3} s in {} stalls",
-                    pacing.dropped_ns() as Real * 1e-9,
-                    pacing.stalls()
-                )
-            } else {
-                String::new()
-            };
-            eprintln!(
-                "{:8.0} steps/s | sim time {:.2} s | poses {}{} | contact {} | removed {} tets | max force {:.3} N | step p50 {:.0} us p99.9 {:.0} us{stalls}",
-                summary.steps as Real / secs,
-                summary.steps as Real * dt_s,
-                poses.received,
-                if latest_pose.is_some() {
-                    ""
-                } else {
-                    " (none live)"
-                },
-                if any_contact { "yes" } else { "no" },
-                removed_total,
-                summary.max_force_n,
-                step_times.quantile_ns(0.5) * 1e-3,
-                step_times.quantile_ns(0.999) * 1e-3,
-            );
-            last_status = now;
-        }
-        // Real time: the next step starts when it is due, or on a fresh
-        // pose up to one step earlier; after a stall the missed time is
-        // dropped (the grid re-anchored to now), never run fast.
-        if !cfg.headless {
-            let now = monotonic_ns();
-            if let Some(dropped) = pacing.catch_up(summary.steps, now)
-                && cfg.status
-                && now.saturating_sub(last_stall_told) >= 1_000_000_000
-            {
-                eprintln!(
-                    "sim-server: {:.1} ms behind real time (a stall): the missed time is dropped, not run fast ({} stall(s) since the last message, {:.3} s dropped in all: simulated time now runs that far behind wall time)",
-                    dropped as Real * 1e-6,
-                    pacing.stalls() - stalls_told,
-                    pacing.dropped_ns() as Real * 1e-9
-                );
-                stalls_told = pacing.stalls();
-                last_stall_told = now;
-            }
-            match poses.wait(
-                pacing.earliest(summary.steps),
-                pacing.due(summary.steps),
-                &stop,
-            ) {
-                WaitEnd::Pose => summary.steps_on_pose += 1,
-                WaitEnd::Due | WaitEnd::Stop => {}
-            }
-        }
+        l.publish(pose, &step)?;
+        l.status(pose, &step);
+        l.pace();
     }
-    let secs = ((monotonic_ns() - start_ns) as Real * 1e-9).max(1e-9);
-    summary.steps_per_s = summary.steps as Real / secs;
-    summary.sim_time_s = summary.steps as Real * dt_s;
-    summary.tets_removed = removed_total;
-    summary.contact_fraction = summary.contact_s / (summary.contact_s + summary.step_s).max(1e-12);
-    summary.poses_received = poses.received;
-    summary.pose_timeouts = poses.timeouts;
-    summary.step_us = step_times.percentiles_us();
-    summary.dropped_time_s = pacing.dropped_ns() as Real * 1e-9;
-    summary.stalls = pacing.stalls();
-    if let Some((counts, error)) = mesh_out.finish() {
-        summary.frames_saved = counts.saved;
-        summary.frames_dropped = counts.dropped;
-        if let Some(e) = error {
-            // The run's own results stand; the series stops where it failed.
-            eprintln!("sim-server: {e} (the frames before it are kept)");
-        }
-    }
-    match diverged_at {
-        Some(step) => Err(RunError::Diverged {
-            step,
-            summary: Box::new(summary),
-        }),
-        None => Ok(summary),
-    }
+    l.finish()
 }

@@ -1,0 +1,369 @@
+//! The `sim-server run` loop, one method per phase of a step ([`super::run`]
+//! calls them in order): [`RunLoop::intake`] (the live pose and the
+//! scripts into the tools, contact detected and imposed), [`RunLoop::step`]
+//! (the step with the penalty contact inside it, cuts counted),
+//! [`RunLoop::publish`] (the force sample, then the viewer's streams at
+//! their rate), [`RunLoop::status`] (the once-a-second line) and
+//! [`RunLoop::pace`] (real time: wait for the step's time or a fresh pose,
+//! drop the time a stall missed).
+
+use super::frames::FrameRecorder;
+use super::outputs::{self, MeshOut};
+use super::pacing::Pacing;
+use super::poses::{PoseIntake, WaitEnd};
+use super::scene_out::SceneOut;
+use super::step_time::StepHistogram;
+use super::{Prepared, RunConfig, RunError, RunSummary, publish_err};
+use crate::backend::Backend;
+use crate::contact::Tools;
+use crate::math::{Real, Vec3};
+use shared::monotonic_ns;
+use shared::protocol::{ForceMsg, MAX_TOOLS, PROTOCOL_VERSION, PoseMsg};
+use shared::services::{self, ForcePublisher, IpcNode};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// What one step's tools did, for publishing and the status line.
+pub struct StepOutcome {
+    flags: [u32; MAX_TOOLS],
+    any_contact: bool,
+}
+
+/// The loop's state between phases.
+pub struct RunLoop<'a, B: Backend> {
+    cfg: &'a RunConfig,
+    stop: Arc<AtomicBool>,
+    sim: B,
+    contacts: Tools,
+    dt_s: Real,
+    node: IpcNode,
+    poses: PoseIntake,
+    force_pub: ForcePublisher,
+    mesh_out: MeshOut,
+    scene_out: SceneOut,
+    summary: RunSummary,
+    step_times: StepHistogram,
+    start_ns: u64,
+    pacing: Pacing,
+    stalls_told: u64,
+    last_stall_told: u64,
+    frame_every: u64,
+    last_status: u64,
+    last_step_ns: u64,
+    removed_total: u64,
+    diverged_at: Option<u64>,
+    cut_refusal_told: bool,
+}
+
+impl<'a, B: Backend> RunLoop<'a, B> {
+    /// Joins the session (refused if another simulation runs in it),
+    /// opens every stream, publishes the scene and starts the clock.
+    pub fn open(
+        prepared: Prepared<B>,
+        cfg: &'a RunConfig,
+        stop: Arc<AtomicBool>,
+    ) -> Result<Self, RunError> {
+        let Prepared {
+            sim,
+            tools: contacts,
+            dt_s,
+            original_vertex_ids,
+        } = prepared;
+        if cfg.status {
+            announce(&sim);
+        }
+        let node = services::node("sim-server")?;
+        let poses = PoseIntake::new(&node, &cfg.session, cfg.pose_timeout_ns)?;
+        let force_service = services::force_service(&node, &cfg.session)?;
+        // What a crashed simulation left behind goes first, so that only a
+        // live one makes this session busy.
+        services::reap_dead_nodes(&node);
+        if services::publisher_count(&force_service) > 0 {
+            return Err(RunError::SessionBusy {
+                session: cfg.session.as_str().to_string(),
+            });
+        }
+        let force_pub = services::publisher(&force_service)?;
+        let n = sim.model().vertex_count();
+        let max_tris = 4 * sim.model().mesh().tet_count();
+        let recorder = match &cfg.save_frames {
+            Some(dir) => Some(FrameRecorder::start(dir, sim.model(), original_vertex_ids)?),
+            None => None,
+        };
+        let mesh_out = MeshOut::new(
+            &sim,
+            services::slice_publisher(&services::mesh_service(&node, &cfg.session)?, n)?,
+            services::slice_publisher(&services::topology_service(&node, &cfg.session)?, max_tris)?,
+            recorder,
+        )?;
+        let scene_out = SceneOut::publish(&node, &cfg.session, &contacts, &sim, &cfg.scene_name)?;
+        let summary = RunSummary {
+            finite: true,
+            nonlinear_tets: sim.model().nonlinear_tets(),
+            ..RunSummary::default()
+        };
+        if !cfg.headless {
+            // Wake-ups at the requested time, not up to 50 us later.
+            // SAFETY: prctl(2) on this thread's timer slack; no pointers.
+            unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+        }
+        let start_ns = monotonic_ns();
+        Ok(Self {
+            cfg,
+            stop,
+            frame_every: ((1.0 / cfg.viewer_rate_hz.max(1.0)) / dt_s).max(1.0) as u64,
+            pacing: Pacing::new(start_ns, (dt_s * 1e9) as u64),
+            sim,
+            contacts,
+            dt_s,
+            node,
+            poses,
+            force_pub,
+            mesh_out,
+            scene_out,
+            summary,
+            step_times: StepHistogram::new(),
+            start_ns,
+            stalls_told: 0,
+            last_stall_told: 0,
+            last_status: start_ns,
+            last_step_ns: start_ns,
+            removed_total: 0,
+            diverged_at: None,
+            cut_refusal_told: false,
+        })
+    }
+
+    /// Whether a stop condition holds (signal, step count, duration).
+    pub fn done(&self) -> bool {
+        let cfg = self.cfg;
+        self.stop.load(Ordering::Relaxed)
+            || cfg.max_steps.is_some_and(|m| self.summary.steps >= m)
+            || cfg
+                .duration_s
+                .is_some_and(|d| (monotonic_ns() - self.start_ns) as Real * 1e-9 >= d)
+    }
+
+    /// The newest live pose (fresh, its publisher alive) and the scripts
+    /// into the tools: contact detected and imposed before the step.
+    pub fn intake(&mut self) -> Result<Option<PoseMsg>, RunError> {
+        self.poses.drain()?;
+        let t0 = monotonic_ns();
+        let pose = self.poses.active(t0);
+        let sim_t_s = self.summary.steps as Real * self.dt_s;
+        let inputs = outputs::tool_inputs(self.contacts.len(), &self.cfg.scripts, pose, sim_t_s);
+        self.contacts.update(&mut self.sim, &inputs);
+        self.summary.contact_s += (monotonic_ns() - t0) as Real * 1e-9;
+        Ok(pose)
+    }
+
+    /// The step (the penalty contact is evaluated inside it: its cost
+    /// counts as the step's), timed; cuts counted, a refused cut told once.
+    pub fn step(&mut self) -> StepOutcome {
+        let t0 = monotonic_ns();
+        let reports = self.contacts.step(&mut self.sim);
+        if let Some(r) = self.sim.large_strain() {
+            self.summary.max_barrier_elements = self.summary.max_barrier_elements.max(r.collapsed);
+        }
+        let t1 = monotonic_ns();
+        self.summary.step_s += (t1 - t0) as Real * 1e-9;
+        self.step_times.record(t1 - t0);
+        let outcome = StepOutcome {
+            flags: outputs::tool_flags(reports),
+            any_contact: reports.iter().any(|r| r.contact),
+        };
+        for (i, report) in reports.iter().enumerate() {
+            if let Some(why) = report.cut_refused
+                && !self.cut_refusal_told
+            {
+                self.cut_refusal_told = true;
+                eprintln!(
+                    "sim-server: tool {i} tried to cut, but the {} backend refused: {why}",
+                    self.sim.name()
+                );
+            }
+            if report.tets_removed > 0 {
+                self.removed_total += report.tets_removed as u64;
+                self.mesh_out.topology_version += 1;
+            }
+        }
+        self.summary.steps += 1;
+        if outcome.any_contact {
+            self.summary.contact_steps += 1;
+        }
+        outcome
+    }
+
+    /// Every 64 steps: whether the displacements are still finite. When not,
+    /// a zero force sample goes out (the daemon lets go) and the loop ends
+    /// with [`RunError::Diverged`].
+    pub fn check_finite(&mut self) -> bool {
+        let s = &mut self.summary;
+        if !s.steps.is_multiple_of(64)
+            || self
+                .sim
+                .displacements()
+                .iter()
+                .flatten()
+                .all(|x| x.is_finite())
+        {
+            return true;
+        }
+        s.finite = false;
+        let _ = self.force_pub.send_copy(ForceMsg {
+            version: PROTOCOL_VERSION,
+            seq: s.samples_published,
+            t_ns: monotonic_ns(),
+            ..ForceMsg::default()
+        });
+        self.diverged_at = Some(s.steps);
+        false
+    }
+
+    /// The force sample (every step), a look for dead pose publishers once
+    /// it is out, and the viewer's streams at their rate.
+    pub fn publish(&mut self, pose: Option<PoseMsg>, step: &StepOutcome) -> Result<(), RunError> {
+        let now = monotonic_ns();
+        let s = &mut self.summary;
+        let header = ForceMsg {
+            version: PROTOCOL_VERSION,
+            seq: s.samples_published,
+            t_ns: now,
+            sim_time_ns: (s.steps as Real * self.dt_s * 1e9) as u64,
+            step_period_ns: now - self.last_step_ns,
+            ..ForceMsg::default()
+        };
+        self.last_step_ns = now;
+        let t0 = monotonic_ns();
+        let pose_seq = pose.map_or(0, |p| p.seq);
+        let msg = outputs::force_sample(header, &self.contacts, &self.sim, pose_seq, &step.flags);
+        for t in &msg.tools[..self.contacts.len()] {
+            s.max_force_n = s.max_force_n.max(Vec3::from_array(t.force_n).length());
+        }
+        s.contact_s += (monotonic_ns() - t0) as Real * 1e-9;
+        self.force_pub
+            .send_copy(msg)
+            .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
+        s.samples_published += 1;
+        self.poses.check_publishers(&self.node, monotonic_ns());
+        // Viewer: topology when it changed, positions at the viewer rate.
+        if s.steps.is_multiple_of(self.frame_every) {
+            self.mesh_out
+                .publish(&self.sim, now, s.steps as Real * self.dt_s)?;
+            self.scene_out.refresh();
+            s.frames_published = self.mesh_out.frames;
+        }
+        Ok(())
+    }
+
+    /// The once-a-second status line (with `cfg.status`).
+    pub fn status(&mut self, pose: Option<PoseMsg>, step: &StepOutcome) {
+        let now = monotonic_ns();
+        if !self.cfg.status || now - self.last_status < 1_000_000_000 {
+            return;
+        }
+        let s = &self.summary;
+        let secs = (now - self.start_ns) as Real * 1e-9;
+        let stalls = if self.pacing.stalls() > 0 {
+            format!(
+                " | dropped {:.3} s in {} stalls",
+                self.pacing.dropped_ns() as Real * 1e-9,
+                self.pacing.stalls()
+            )
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "{:8.0} steps/s | sim time {:.2} s | poses {}{} | contact {} | removed {} tets | max force {:.3} N | step p50 {:.0} us p99.9 {:.0} us{stalls}",
+            s.steps as Real / secs,
+            s.steps as Real * self.dt_s,
+            self.poses.received,
+            if pose.is_some() { "" } else { " (none live)" },
+            if step.any_contact { "yes" } else { "no" },
+            self.removed_total,
+            s.max_force_n,
+            self.step_times.quantile_ns(0.5) * 1e-3,
+            self.step_times.quantile_ns(0.999) * 1e-3,
+        );
+        self.last_status = now;
+    }
+
+    /// Real time: the next step starts when it is due, or on a fresh pose
+    /// up to one step earlier; after a stall the missed time is dropped
+    /// (the grid re-anchored to now), never run fast. Headless: no wait.
+    pub fn pace(&mut self) {
+        if self.cfg.headless {
+            return;
+        }
+        let steps = self.summary.steps;
+        let now = monotonic_ns();
+        if let Some(dropped) = self.pacing.catch_up(steps, now)
+            && self.cfg.status
+            && now.saturating_sub(self.last_stall_told) >= 1_000_000_000
+        {
+            eprintln!(
+                "sim-server: {:.1} ms behind real time (a stall): the missed time is dropped, not run fast ({} stall(s) since the last message, {:.3} s dropped in all: simulated time now runs that far behind wall time)",
+                dropped as Real * 1e-6,
+                self.pacing.stalls() - self.stalls_told,
+                self.pacing.dropped_ns() as Real * 1e-9
+            );
+            self.stalls_told = self.pacing.stalls();
+            self.last_stall_told = now;
+        }
+        let (earliest, due) = (self.pacing.earliest(steps), self.pacing.due(steps));
+        if let WaitEnd::Pose = self.poses.wait(earliest, due, &self.stop) {
+            self.summary.steps_on_pose += 1;
+        }
+    }
+
+    /// The run's summary (and the frame recorder stopped), or
+    /// [`RunError::Diverged`] with it.
+    pub fn finish(self) -> Result<RunSummary, RunError> {
+        let mut summary = self.summary;
+        let secs = ((monotonic_ns() - self.start_ns) as Real * 1e-9).max(1e-9);
+        summary.steps_per_s = summary.steps as Real / secs;
+        summary.sim_time_s = summary.steps as Real * self.dt_s;
+        summary.tets_removed = self.removed_total;
+        summary.contact_fraction =
+            summary.contact_s / (summary.contact_s + summary.step_s).max(1e-12);
+        summary.poses_received = self.poses.received;
+        summary.pose_timeouts = self.poses.timeouts;
+        summary.step_us = self.step_times.percentiles_us();
+        summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
+        summary.stalls = self.pacing.stalls();
+        if let Some((counts, error)) = self.mesh_out.finish() {
+            summary.frames_saved = counts.saved;
+            summary.frames_dropped = counts.dropped;
+            if let Some(e) = error {
+                // The run's own results stand; the series stops where it failed.
+                eprintln!("sim-server: {e} (the frames before it are kept)");
+            }
+        }
+        match self.diverged_at {
+            Some(step) => Err(RunError::Diverged {
+                step,
+                summary: Box::new(summary),
+            }),
+            None => Ok(summary),
+        }
+    }
+}
+
+/// The start line: backend, dynamics and where it cuts.
+fn announce<B: Backend>(sim: &B) {
+    let (cut, live) = crate::backend::cuttable(sim);
+    eprintln!(
+        "sim-server: {} backend, {}, cuts {}",
+        sim.name(),
+        if sim.dynamic() {
+            "dynamic"
+        } else {
+            "quasi-static"
+        },
+        match cut {
+            0 => "nowhere".to_string(),
+            c if c == live => "anywhere".to_string(),
+            c => format!("in {c} of {live} tetrahedra"),
+        }
+    );
+}
