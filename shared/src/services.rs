@@ -421,6 +421,13 @@ pub fn publisher_count<T: std::fmt::Debug + ZeroCopySend>(
     factory.dynamic_config().number_of_publishers()
 }
 
+/// Subscribers currently connected to `factory`'s service.
+pub fn subscriber_count<T: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, T, ()>,
+) -> usize {
+    factory.dynamic_config().number_of_subscribers()
+}
+
 /// A publisher on `factory`.
 pub fn publisher<T: std::fmt::Debug + ZeroCopySend>(
     factory: &PortFactory<Ipc, T, ()>,

@@ -197,3 +197,49 @@ pub fn write_liver_press(path: &std::path::Path) {
     )
     .unwrap();
 }
+
+/// Waits until `cond` holds, polling every 5 ms, for at most `timeout`;
+/// panics naming `what` if it never does. Cross-process tests wait on a
+/// condition like this rather than sleeping a guessed time.
+pub fn wait_until(what: &str, timeout: std::time::Duration, mut cond: impl FnMut() -> bool) {
+    let start = std::time::Instant::now();
+    while !cond() {
+        assert!(start.elapsed() < timeout, "{what}: not within {timeout:?}");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+/// A peer whose arrival in a session a test waits for ([`wait_for`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Peer {
+    /// A simulation: the session's force publisher exists.
+    Simulation,
+    /// A pose source (a daemon): a pose publisher exists.
+    PoseSource,
+    /// A recorder or daemon reading telemetry: a telemetry subscriber exists.
+    TelemetryReader,
+}
+
+/// Waits (at most 20 s) until `peer` has joined `session`, by looking at
+/// the session's services (opening them, as any participant may).
+pub fn wait_for(session: &str, peer: Peer) {
+    use shared::services;
+    let name = shared::SessionName::new(session).expect("session name");
+    let node = services::node("test-waiter").expect("iceoryx2 node");
+    let timeout = std::time::Duration::from_secs(20);
+    let what = format!("{peer:?} in session {session}");
+    match peer {
+        Peer::Simulation => {
+            let f = services::force_service(&node, &name).expect("force service");
+            wait_until(&what, timeout, || services::publisher_count(&f) > 0);
+        }
+        Peer::PoseSource => {
+            let f = services::pose_service(&node, &name).expect("pose service");
+            wait_until(&what, timeout, || services::publisher_count(&f) > 0);
+        }
+        Peer::TelemetryReader => {
+            let f = services::telemetry_service(&node, &name).expect("telemetry service");
+            wait_until(&what, timeout, || services::subscriber_count(&f) > 0);
+        }
+    }
+}

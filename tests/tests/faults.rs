@@ -83,7 +83,7 @@ fn the_daemon_survives_the_simulation_killed_restarted_and_stalled() {
     // The hand comes down over 1 s to 6 mm into the liver and stays there.
     write_liver_press(&traj);
     let mut first = spawn_sim_server(&session, &["--duration-s", "60"]);
-    std::thread::sleep(Duration::from_millis(500));
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let daemon = daemon_run(&session)
         .args([
             "--duration-s",
@@ -156,7 +156,7 @@ fn a_second_simulation_in_a_busy_session_refuses_clearly() {
         &session,
         &["--duration-s", "3", "--json", json.to_str().unwrap()],
     );
-    std::thread::sleep(Duration::from_millis(800));
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let second = Command::new(binary("sim-server"))
         .args(["run", "--quiet", "--duration-s", "2", "--session", &session])
         .output()

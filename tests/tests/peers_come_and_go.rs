@@ -53,7 +53,7 @@ fn simulation_outlives_its_viewer_and_daemon_leaving_and_coming_back() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start sim-server");
-    std::thread::sleep(Duration::from_millis(500));
+    system_tests::wait_for(&name, system_tests::Peer::Simulation);
 
     let vertices = view_one_frame(&session);
     assert!(vertices > 100);

@@ -7,7 +7,6 @@
 
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::process::{Command, Stdio};
-use std::time::Duration;
 use system_tests::binary;
 
 #[test]
@@ -19,7 +18,7 @@ fn session_memory_is_private_to_its_user() {
         .stderr(Stdio::null())
         .spawn()
         .expect("start sim-server");
-    std::thread::sleep(Duration::from_millis(1000));
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let uid = unsafe { libc::geteuid() };
     // Segments of this user's sessions (the global management file is
     // iceoryx2's own, shared by design, and holds no session data).

@@ -1,10 +1,9 @@
-//! The protocol is open: `tests/python/hapsim_backend.py`, a simulation
+//! The protocol is open: `python/examples/backend.py`, a simulation
 //! backend written in Python from docs/protocol.md with iceoryx2's Python
 //! package, drives the real haptic daemon (scripts/setup.sh installs the
 //! package).
 
 use std::process::{Command, Stdio};
-use std::time::Duration;
 use system_tests::{daemon_run, read_json, scratch_dir};
 
 #[test]
@@ -21,7 +20,8 @@ fn a_python_backend_drives_the_real_daemon() {
     let session = format!("python{}", std::process::id());
     let dir = scratch_dir("python-backend");
     let json = dir.join("daemon.json");
-    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python/hapsim_backend.py");
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../python/examples/backend.py");
     let backend = Command::new("python3")
         .arg(&script)
         .args(["--session", &session, "--duration-s", "5"])
@@ -29,7 +29,7 @@ fn a_python_backend_drives_the_real_daemon() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start the Python backend");
-    std::thread::sleep(Duration::from_millis(800));
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
     // The simulated hand pokes from z = 5 cm down to 2 cm; the Python
     // tissue's surface is at 3 cm.
     let daemon = daemon_run(&session)

@@ -71,7 +71,7 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
         .spawn()
         .expect("start the demo");
     let session = format!("demo{}", demo.id());
-    std::thread::sleep(std::time::Duration::from_millis(800));
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let out = system_tests::run_ok(
         Command::new("python3")
             .arg(root.join("python/examples/watch.py"))

@@ -63,7 +63,7 @@ fn recording_a_running_stack_loses_nothing_and_memory_stays_flat() {
             &path("recorder.json"),
         ],
     );
-    std::thread::sleep(Duration::from_millis(800));
+    system_tests::wait_for(&session, system_tests::Peer::TelemetryReader);
     let daemon = spawn(
         "haptic-daemon",
         &[

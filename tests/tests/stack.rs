@@ -24,7 +24,7 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start sim-server");
-    std::thread::sleep(Duration::from_millis(300));
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let daemon = daemon_run(&session)
         .args(["--duration-s", "3"])
         .args(["--extrapolation", "local-model", "--max-force", "4"])

@@ -9,7 +9,7 @@ RATE_HZ: the tissue is a half-space z < SURFACE_Z_M of stiffness K_N_PER_M
 half-space along z). Needs the iceoryx2 Python package of the same version
 as the Rust crate (pip install iceoryx2==0.10.0).
 
-    python3 hapsim_backend.py --session NAME [--duration-s S]
+    python3 python/examples/backend.py --session NAME [--duration-s S]
 """
 
 import argparse
@@ -21,7 +21,7 @@ import iceoryx2 as iox2
 
 # The payloads and stream settings of the hapsim Python package (python/,
 # itself written from docs/protocol.md), from the checkout.
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "python"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from hapsim.protocol import CONTACT, PROTOCOL_VERSION, TOOL_PRESENT, ForceMsg, PoseMsg  # noqa: E402
 from hapsim.session import open_stream  # noqa: E402
 
