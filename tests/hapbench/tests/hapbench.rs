@@ -4,11 +4,11 @@
 //! sub-stepped or caught; transport costs at least the bare transport).
 
 use std::path::Path;
-use system_tests::{binary, read_json, scratch_dir};
+use system_tests::{read_json, scratch_dir};
 
 /// Runs `hapbench ARGS --json JSON [--plot DIR]` and reads the JSON.
 fn hapbench(args: &[&str], json: &Path, plot: Option<&Path>) -> serde_json::Value {
-    let mut cmd = std::process::Command::new(binary("hapbench"));
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"));
     cmd.args(args).arg("--json").arg(json);
     if let Some(dir) = plot {
         cmd.arg("--plot").arg(dir);
@@ -136,7 +136,7 @@ fn constant_hold_renders_the_delivered_samples(series: &Path, samples: &Path) {
 #[test]
 fn hapbench_extrapolation_truth_on_the_box_is_smooth_passive_and_substep_independent() {
     let dir = scratch_dir("hapbench-box");
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
     let (scene, path) = (data.join("box-probe.toml"), data.join("box-palpate.csv"));
     let v = hapbench(
         &[
