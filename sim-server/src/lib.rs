@@ -1,6 +1,8 @@
-//! The simulation process around the [`tissue`] core: scenes (TOML),
-//! mesh file formats, the `sim-server run` loop that joins a session, and
-//! the benchmarks. The core's modules are re-exported here under their
+//! What the simulation process needs around the [`tissue`] core, as a
+//! library: scenes (TOML), mesh file formats and the recorded frame
+//! series, a scene made ready to step ([`prepare`]), the force sample on
+//! the wire ([`wire`]) and the benchmarks. The process itself (the
+//! `sim-server run` loop that joins a session, the CLI) is the binary's. The core's modules are re-exported here under their
 //! own names, so `sim_server::tensor_mass` is `tissue::tensor_mass`.
 //!
 //! ```
@@ -10,7 +12,7 @@
 //! // The embedded liver scene, built and stepped without a session.
 //! let src = SceneSource::embedded();
 //! let scene = build_scene(&src, &src.parse()?)?;
-//! let mut p = sim_server::server::prepare::<f32>(scene, None)?;
+//! let mut p = sim_server::prepare::prepare::<f32>(scene, None)?;
 //! use sim_server::backend::Backend;
 //! p.sim.step();
 //! assert!(p.sim.displacements().iter().flatten().all(|x| x.is_finite()));
@@ -24,8 +26,11 @@ pub use tissue::{
 };
 
 pub mod bench;
+pub mod frames;
+pub mod prepare;
 pub mod scene;
-pub mod server;
+pub mod step_time;
+pub mod wire;
 
 /// Tetrahedral meshes ([`tissue::mesh`]) and their file formats ([`io`]).
 pub mod mesh {

@@ -1,6 +1,7 @@
 //! The `sim-server` command line.
 
 mod cli;
+mod server;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};

@@ -7,8 +7,8 @@
 
 use sim_server::contact::{ContactLaw, StiffnessSolves, ToolInput};
 use sim_server::prelude::*;
+use sim_server::prepare::{Prepared, prepare};
 use sim_server::scene::{SceneSource, build_scene};
-use sim_server::server::{Prepared, prepare};
 use std::path::PathBuf;
 
 /// Top face of the block (m).

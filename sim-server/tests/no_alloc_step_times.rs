@@ -3,7 +3,7 @@
 //! allocations while 100,000 step times are recorded.
 
 use shared::alloc_count::{Counting, count};
-use sim_server::server::step_time::StepHistogram;
+use sim_server::step_time::StepHistogram;
 
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;

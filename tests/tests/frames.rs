@@ -3,8 +3,8 @@
 //! handed to it and -K u of that state, a cut's tetrahedron is missing from
 //! the frames after it, and the series lists the frames with their times.
 
+use sim_server::frames::FrameRecorder;
 use sim_server::prelude::*;
-use sim_server::server::frames::FrameRecorder;
 use system_tests::{meshio_describe, scratch_dir, vtk_describe};
 
 #[test]

@@ -4,11 +4,11 @@
 //! (scripted in the simulation) removes right-lobe parenchyma.
 
 use super::{load_scene, write_json};
+use crate::server::{RunConfig, ToolScript};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use sim_server::math::Vec3;
 use sim_server::scene::spec::BackendName;
-use sim_server::server::{RunConfig, ToolScript};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -98,7 +98,7 @@ struct DemoJson {
     /// fall short of the rate on a loaded machine.
     sim_dropped_time_s: f64,
     /// The simulation's step time (us).
-    sim_step_us: sim_server::server::step_time::StepPercentiles,
+    sim_step_us: sim_server::step_time::StepPercentiles,
 }
 
 /// A pipe (both ends close on exec).
@@ -269,7 +269,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         viewer_rate_hz: 30.0,
         status: !args.headless,
         scripts: vec![cavitron_script()],
-        pose_timeout_ns: sim_server::server::poses::DEFAULT_POSE_TIMEOUT_NS,
+        pose_timeout_ns: crate::server::poses::DEFAULT_POSE_TIMEOUT_NS,
         save_frames: args.save_frames.clone(),
         scene_name: src.name.clone(),
     };

@@ -6,11 +6,12 @@ pub mod demo;
 pub mod run;
 pub mod solve;
 
+use crate::server::{RunConfig, RunSummary, run};
 use anyhow::{Context, Result};
 use sim_server::backend::{Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
+use sim_server::prepare::{prepare, prepare_with};
 use sim_server::scene::spec::BackendName;
 use sim_server::scene::{BuiltScene, HYBRID_NEEDS_SPLIT, SceneSource, build_scene};
-use sim_server::server::{RunConfig, RunSummary, prepare, prepare_with, run};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;

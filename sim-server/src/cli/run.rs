@@ -1,9 +1,9 @@
 //! `sim-server run`: the simulation process.
 
 use super::{load_scene, write_json};
+use crate::server::{RunConfig, RunError};
 use anyhow::{Result, bail};
 use sim_server::scene::spec::BackendName;
-use sim_server::server::{RunConfig, RunError};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;

@@ -12,26 +12,21 @@
 //! missed time is dropped, not fast-forwarded. A pose older than
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 
-pub mod frames;
 pub mod outputs;
 pub mod pacing;
 pub mod poses;
 pub mod run_loop;
 pub mod scene_out;
-pub mod step_time;
 
-use crate::backend::Backend;
-use crate::contact::Tools;
-use crate::math::{Real, Vec3};
-use crate::scene::BuiltScene;
-use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
 use serde::Serialize;
 use shared::SessionName;
-use shared::protocol::MAX_TOOLS;
 use shared::services::ServiceError;
+use sim_server::backend::Backend;
+use sim_server::math::{Real, Vec3};
+use sim_server::prepare::Prepared;
+use sim_server::step_time::StepPercentiles;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
-use step_time::StepPercentiles;
 use thiserror::Error;
 
 /// How to run.
@@ -152,13 +147,13 @@ pub enum RunError {
     Service(#[from] ServiceError),
     /// The integrator refused the scene's step.
     #[error(transparent)]
-    Explicit(#[from] crate::tensor_mass::ExplicitError),
+    Explicit(#[from] sim_server::tensor_mass::ExplicitError),
     /// The implicit backend refused the scene.
     #[error(transparent)]
-    Implicit(#[from] crate::backend::ImplicitError),
+    Implicit(#[from] sim_server::backend::ImplicitError),
     /// `--save-frames` could not start or write.
     #[error(transparent)]
-    Frames(#[from] frames::FramesError),
+    Frames(#[from] sim_server::frames::FramesError),
     /// A peer sent another protocol version.
     #[error(transparent)]
     Version(#[from] shared::protocol::VersionError),
@@ -193,106 +188,6 @@ pub enum RunError {
 
 fn publish_err(what: &'static str) -> impl Fn(String) -> RunError {
     move |reason| RunError::Publish { what, reason }
-}
-
-/// Why a scene could not be set up on a backend.
-#[derive(Debug, Error)]
-pub enum PrepareError<E: std::error::Error + 'static> {
-    /// The backend refused the model or the step.
-    #[error(transparent)]
-    Backend(E),
-    /// The contact cannot run as the scene asks.
-    #[error(transparent)]
-    Contact(#[from] crate::contact::ContactError),
-}
-
-/// A scene ready to step: the integrator with the scene's fixed vertices,
-/// prescribed displacements and loads applied, and its tools.
-pub struct Prepared<B: Backend> {
-    /// The backend.
-    pub sim: B,
-    /// The scene's tools (at most `MAX_TOOLS`), scene-held vertices reserved.
-    pub tools: Tools,
-    /// The step (s).
-    pub dt_s: Real,
-    /// Each vertex's index before the scene renumbered them, if it did.
-    pub original_vertex_ids: Option<Vec<u32>>,
-}
-
-/// Sets `scene` up for stepping with the explicit tensor-mass integrator at
-/// `dt_s` (default: the scene's, else 90% of the stable step; a larger one
-/// is sub-stepped or refused as the scene says).
-pub fn prepare<S: Storage>(
-    scene: BuiltScene,
-    dt_s: Option<Real>,
-) -> Result<Prepared<Explicit<S>>, PrepareError<crate::tensor_mass::ExplicitError>> {
-    prepare_with(scene, dt_s, |model, settings, dt_s| {
-        Explicit::<S>::new(
-            model,
-            ExplicitConfig {
-                dt_s,
-                policy: settings.policy,
-                bound: settings.bound,
-                threads: settings.threads,
-            },
-        )
-    })
-}
-
-/// Sets `scene` up on the backend `make` builds from the model, the
-/// scene's settings and the step (`dt_s`, else the scene's, else 90% of the
-/// explicit stable step).
-pub fn prepare_with<B: Backend, E: std::error::Error + 'static>(
-    scene: BuiltScene,
-    dt_s: Option<Real>,
-    make: impl FnOnce(
-        crate::tensor_mass::ElasticModel,
-        &crate::scene::SimSettings,
-        Real,
-    ) -> Result<B, E>,
-) -> Result<Prepared<B>, PrepareError<E>> {
-    let BuiltScene {
-        model,
-        fixed,
-        prescribed,
-        loads_n,
-        tools,
-        settings,
-        contact,
-        original_vertex_ids,
-        ..
-    } = scene;
-    // The bound only when no step is given: backends that need it compute
-    // their own, and it costs an eigenproblem per tetrahedron.
-    let dt_s = dt_s
-        .or(settings.dt_s)
-        .unwrap_or_else(|| 0.9 * crate::tensor_mass::element_bound(&model).dt_max_s);
-    let mut sim = make(model, &settings, dt_s).map_err(PrepareError::Backend)?;
-    for v in &fixed {
-        sim.fix(*v);
-    }
-    for (v, d) in &prescribed {
-        sim.prescribe(*v, *d);
-    }
-    for (v, f) in loads_n.iter().enumerate() {
-        if *f != Vec3::ZERO {
-            sim.set_external_force(crate::ids::VertexId::from(v), *f);
-        }
-    }
-    let decls = &tools[..tools.len().min(MAX_TOOLS)];
-    // A tool never takes over (or releases) a vertex the scene holds.
-    let held: Vec<_> = fixed
-        .iter()
-        .copied()
-        .chain(prescribed.iter().map(|(v, _)| *v))
-        .collect();
-    let contacts = Tools::with_config(decls, &mut sim, &contact, &held)?;
-    Ok(Prepared {
-        sim,
-        tools: contacts,
-        dt_s,
-        original_vertex_ids,
-    })
 }
 
 /// Runs a prepared scene until a stop condition or `stop` is set.

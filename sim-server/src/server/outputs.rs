@@ -1,18 +1,17 @@
-//! What a step sends out, one function per hop: the tools' inputs from the
-//! pose and the scripts ([`tool_inputs`]), the force sample from the
-//! tools' reactions ([`force_sample`]), and the viewer's streams with the
-//! optional frame recording ([`MeshOut`]).
+//! The process's hops in and out of a step: the tools' inputs from the
+//! pose and the scripts ([`tool_inputs`]), and the viewer's streams with
+//! the optional frame recording ([`MeshOut`]); the force sample itself is
+//! the library's ([`sim_server::wire`]).
 
-use super::frames::FrameRecorder;
 use super::{RunError, ToolScript, publish_err};
-use crate::backend::Backend;
-use crate::contact::{ContactReport, Reaction, ToolInput, Tools};
-use crate::math::{Real, Vec3};
 use shared::protocol::{
-    CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg,
-    TOOL_PRESENT, ToolForce, TopologyHeader,
+    MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg, TOOL_PRESENT, TopologyHeader,
 };
 use shared::services::{SlicePublisher, UpdateConnections};
+use sim_server::backend::Backend;
+use sim_server::contact::ToolInput;
+use sim_server::frames::FrameRecorder;
+use sim_server::math::{Real, Vec3};
 
 /// Each tool's input for the step at simulated time `sim_t_s`: its script
 /// if one drives it, else the live pose's entry (none: withdrawn).
@@ -36,58 +35,6 @@ pub fn tool_inputs(
         };
     }
     inputs
-}
-
-/// Each tool's protocol flags from its report of the step.
-pub fn tool_flags(reports: &[ContactReport]) -> [u32; MAX_TOOLS] {
-    let mut flags = [0u32; MAX_TOOLS];
-    for (f, r) in flags.iter_mut().zip(reports) {
-        *f = (u32::from(r.contact) * CONTACT)
-            | (u32::from(r.gripping) * GRIPPING)
-            | (u32::from(r.tets_removed > 0) * CUTTING);
-    }
-    flags
-}
-
-/// The force sample of a step: each tool's reaction, contact stiffness, the
-/// position the step used and the pose it came from. `header` holds the
-/// message's counters and times; the tools are filled in.
-pub fn force_sample<B: Backend>(
-    mut header: ForceMsg,
-    tools: &Tools,
-    sim: &B,
-    pose_seq: u64,
-    flags: &[u32; MAX_TOOLS],
-) -> ForceMsg {
-    header.tool_count = tools.len() as u32;
-    for (i, c) in tools.iter().enumerate() {
-        let out = &mut header.tools[i];
-        if c.pose().is_none() {
-            // No pose (withdrawn, let go): nothing in contact, whatever a
-            // stiffness worker last computed for it.
-            out.pose_seq = pose_seq;
-            continue;
-        }
-        // The position this step used: the tool end after clamping to its
-        // length.
-        let position_m = c.pose().map_or(Vec3::ZERO, |p| p.end_m);
-        *out = tool_force(&tools.reaction(i, sim), position_m, pose_seq, flags[i]);
-    }
-    header
-}
-
-/// One tool's reaction as the wire carries it (the only conversion from
-/// the simulation's [`Reaction`] to the protocol: the server and hapbench
-/// both use it).
-pub fn tool_force(r: &Reaction, position_m: Vec3, pose_seq: u64, flags: u32) -> ToolForce {
-    ToolForce {
-        position_m: position_m.to_array(),
-        force_n: r.force_n.to_array(),
-        stiffness_n_per_m: r.stiffness_rows(),
-        pose_seq,
-        flags,
-        reserved: 0,
-    }
 }
 
 /// The viewer's streams (surface topology when cuts change it, positions
@@ -193,8 +140,8 @@ impl MeshOut {
     pub fn finish(
         self,
     ) -> Option<(
-        super::frames::FrameCounts,
-        Option<super::frames::FramesError>,
+        sim_server::frames::FrameCounts,
+        Option<sim_server::frames::FramesError>,
     )> {
         self.recorder.map(FrameRecorder::finish)
     }
@@ -228,22 +175,5 @@ mod tests {
         pose.tools[0].flags = 0;
         assert!(tool_inputs(3, &[], Some(pose), 0.0)[0].is_none());
         assert!(tool_inputs(3, &[], None, 0.0)[0].is_none());
-    }
-
-    #[test]
-    fn reports_become_the_protocol_flags() {
-        let reports = [
-            ContactReport {
-                contact: true,
-                tets_removed: 3,
-                ..ContactReport::default()
-            },
-            ContactReport {
-                gripping: true,
-                ..ContactReport::default()
-            },
-            ContactReport::default(),
-        ];
-        assert_eq!(tool_flags(&reports), [CONTACT | CUTTING, GRIPPING, 0, 0]);
     }
 }

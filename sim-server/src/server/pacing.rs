@@ -7,7 +7,7 @@
 //!
 //! - Step `k` (counting from the last anchor) is due at
 //!   `anchor_ns + (k - anchor_step) * step_ns`; the loop waits for it.
-//! - A step may start up to [`Pacing::early_ns`] (one step, at most
+//! - A step may start up to `early_ns` (one step, at most
 //!   [`MAX_EARLY_NS`]) before it is due when a fresh pose has arrived, so that
 //!   a pose gets its force one step later instead of waiting for the grid.
 //!   The grid does not move, so simulated time never runs ahead of wall time
@@ -15,7 +15,7 @@
 //!   than real time.
 //! - After a stall (the process stopped, a long step) the loop does not
 //!   fast-forward through the missed steps: when the next step is more than
-//!   [`Pacing::bound_ns`] (two steps or 5 ms, whichever is larger) overdue,
+//!   `bound_ns` (two steps or 5 ms, whichever is larger) overdue,
 //!   the grid is re-anchored to now and the overdue time is counted as
 //!   dropped. Simulated time (`ForceMsg::sim_time_ns`, steps x step) then runs
 //!   behind wall time by everything dropped so far, at the real-time rate.
@@ -60,16 +60,6 @@ impl Pacing {
     /// The earliest that step may start on a fresh pose (ns).
     pub fn earliest(&self, steps: u64) -> u64 {
         self.due(steps).saturating_sub(self.early_ns)
-    }
-
-    /// How far behind the grid the loop may fall before it drops time (ns).
-    pub fn bound_ns(&self) -> u64 {
-        self.bound_ns
-    }
-
-    /// How early a step may start on a fresh pose (ns).
-    pub fn early_ns(&self) -> u64 {
-        self.early_ns
     }
 
     /// Called after `steps` steps at `now_ns`: when the next step is overdue
@@ -183,11 +173,11 @@ mod tests {
     #[test]
     fn the_bound_is_two_steps_or_5_ms_and_the_early_window_a_step_or_2_ms() {
         let fast = Pacing::new(0, MS);
-        assert_eq!(fast.bound_ns(), 5 * MS);
-        assert_eq!(fast.early_ns(), MS);
+        assert_eq!(fast.bound_ns, 5 * MS);
+        assert_eq!(fast.early_ns, MS);
         let slow = Pacing::new(0, 33 * MS);
-        assert_eq!(slow.bound_ns(), 66 * MS);
-        assert_eq!(slow.early_ns(), 2 * MS);
+        assert_eq!(slow.bound_ns, 66 * MS);
+        assert_eq!(slow.early_ns, 2 * MS);
         assert_eq!(slow.earliest(1), 31 * MS);
     }
 }

@@ -7,19 +7,19 @@
 //! [`RunLoop::pace`] (real time: wait for the step's time or a fresh pose,
 //! drop the time a stall missed).
 
-use super::frames::FrameRecorder;
 use super::outputs::{self, MeshOut};
 use super::pacing::Pacing;
 use super::poses::{PoseIntake, WaitEnd};
 use super::scene_out::SceneOut;
-use super::step_time::StepHistogram;
 use super::{Prepared, RunConfig, RunError, RunSummary, publish_err};
-use crate::backend::Backend;
-use crate::contact::Tools;
-use crate::math::{Real, Vec3};
 use shared::monotonic_ns;
 use shared::protocol::{ForceMsg, MAX_TOOLS, PROTOCOL_VERSION, PoseMsg};
 use shared::services::{self, ForcePublisher, IpcNode};
+use sim_server::backend::Backend;
+use sim_server::contact::Tools;
+use sim_server::frames::FrameRecorder;
+use sim_server::math::{Real, Vec3};
+use sim_server::step_time::StepHistogram;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -169,7 +169,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         self.summary.step_s += (t1 - t0) as Real * 1e-9;
         self.step_times.record(t1 - t0);
         let outcome = StepOutcome {
-            flags: outputs::tool_flags(reports),
+            flags: sim_server::wire::tool_flags(reports),
             any_contact: reports.iter().any(|r| r.contact),
         };
         for (i, report) in reports.iter().enumerate() {
@@ -236,7 +236,13 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         self.last_step_ns = now;
         let t0 = monotonic_ns();
         let pose_seq = pose.map_or(0, |p| p.seq);
-        let msg = outputs::force_sample(header, &self.contacts, &self.sim, pose_seq, &step.flags);
+        let msg = sim_server::wire::force_sample(
+            header,
+            &self.contacts,
+            &self.sim,
+            pose_seq,
+            &step.flags,
+        );
         for t in &msg.tools[..self.contacts.len()] {
             s.max_force_n = s.max_force_n.max(Vec3::from_array(t.force_n).length());
         }
@@ -351,7 +357,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
 
 /// The start line: backend, dynamics and where it cuts.
 fn announce<B: Backend>(sim: &B) {
-    let (cut, live) = crate::backend::cuttable(sim);
+    let (cut, live) = sim_server::backend::cuttable(sim);
     eprintln!(
         "sim-server: {} backend, {}, cuts {}",
         sim.name(),

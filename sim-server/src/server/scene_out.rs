@@ -7,18 +7,18 @@
 //! no files.
 
 use super::{RunError, publish_err};
-use crate::backend::Backend;
-use crate::contact::Tools;
-use crate::ids::TetId;
-use crate::math::Vec3;
-use crate::scene::spec::ToolKind;
-use crate::tensor_mass::ElasticModel;
 use shared::SessionName;
 use shared::protocol::{
     MAX_TOOLS, PROTOCOL_VERSION, RestHeader, SceneInfo, TOOL_CAVITRON, TOOL_GRASPER, TOOL_HOOK,
     TopologyHeader,
 };
 use shared::services::{self, IpcNode, ScenePublisher, SlicePublisher, UpdateConnections};
+use sim_server::backend::Backend;
+use sim_server::contact::Tools;
+use sim_server::ids::TetId;
+use sim_server::math::Vec3;
+use sim_server::scene::spec::ToolKind;
+use sim_server::tensor_mass::ElasticModel;
 
 /// The declared tools and the organ's rest bounding box (the `scene`
 /// stream).
@@ -148,7 +148,7 @@ impl SceneOut {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{SceneSource, build_scene};
+    use sim_server::scene::{SceneSource, build_scene};
 
     /// The liver's rest slice: every vertex where the mesh has it, then one
     /// unit-direction fibre per anisotropic tetrahedron scaled to its edge,

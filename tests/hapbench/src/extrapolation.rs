@@ -21,9 +21,9 @@ use shared::protocol::ForceMsg;
 use shared::protocol::MAX_TOOLS;
 use sim_server::contact::{StiffnessSolves, ToolInput};
 use sim_server::math::Vec3;
+use sim_server::prepare::prepare;
 use sim_server::scene::{SceneSource, build_scene};
-use sim_server::server::outputs::{force_sample, tool_flags};
-use sim_server::server::prepare;
+use sim_server::wire::{force_sample, tool_flags};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

@@ -9,8 +9,8 @@ use serde::Serialize;
 use shared::protocol::MAX_TOOLS;
 use sim_server::contact::ToolInput;
 use sim_server::math::Vec3;
+use sim_server::prepare::prepare;
 use sim_server::scene::{SceneSource, build_scene};
-use sim_server::server::prepare;
 use sim_server::tensor_mass::element_bound;
 use std::path::PathBuf;
 
