@@ -386,6 +386,19 @@ pub fn surface0_service(
     open_slice(node, session, stream::SURFACE0)
 }
 
+/// A subscriber on a slice stream (`mesh`, `topology`, `rest`, `surface0`).
+pub fn slice_subscriber<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(
+    factory: &PortFactory<Ipc, [T], H>,
+) -> Result<Subscriber<Ipc, [T], H>, ServiceError> {
+    factory
+        .subscriber_builder()
+        .create()
+        .map_err(|e| ServiceError::Open {
+            service: factory.name().to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
 /// A slice publisher able to loan `max_len` elements without reallocating
 /// (larger loans grow the pool by powers of two).
 pub fn slice_publisher<T: std::fmt::Debug + ZeroCopySend, H: std::fmt::Debug + ZeroCopySend>(

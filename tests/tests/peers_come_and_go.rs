@@ -14,11 +14,9 @@ use system_tests::{binary, finish, read_json, scratch_dir};
 /// returns its vertex count; the node leaves when this returns.
 fn view_one_frame(session: &SessionName) -> u32 {
     let node = services::node("test-viewer").expect("viewer node");
-    let sub = services::mesh_service(&node, session)
-        .expect("mesh service")
-        .subscriber_builder()
-        .create()
-        .expect("mesh subscriber");
+    let sub =
+        services::slice_subscriber(&services::mesh_service(&node, session).expect("mesh service"))
+            .expect("mesh subscriber");
     let start = Instant::now();
     while start.elapsed() < Duration::from_secs(5) {
         if let Some(frame) = sub.receive().expect("receive mesh") {

@@ -93,18 +93,8 @@ impl Session {
     /// Joins `session` (creating its streams if nobody has yet).
     pub fn join(session: &SessionName) -> Result<Self, ServiceError> {
         let node = services::node("viewer")?;
-        let open = |what: &str, e: String| ServiceError::Open {
-            service: session.service(what),
-            reason: e,
-        };
-        let mesh = services::mesh_service(&node, session)?
-            .subscriber_builder()
-            .create()
-            .map_err(|e| open("mesh", format!("{e:?}")))?;
-        let topology = services::topology_service(&node, session)?
-            .subscriber_builder()
-            .create()
-            .map_err(|e| open("topology", format!("{e:?}")))?;
+        let mesh = services::slice_subscriber(&services::mesh_service(&node, session)?)?;
+        let topology = services::slice_subscriber(&services::topology_service(&node, session)?)?;
         let force = services::subscriber_with_buffer(
             &services::force_service(&node, session)?,
             services::FORCE_BUFFER_LATEST,
@@ -112,14 +102,8 @@ impl Session {
         let telemetry_factory = services::telemetry_service(&node, session)?;
         let telemetry = services::subscriber(&telemetry_factory)?;
         let scene = services::subscriber(&services::scene_service(&node, session)?)?;
-        let rest = services::rest_service(&node, session)?
-            .subscriber_builder()
-            .create()
-            .map_err(|e| open("rest", format!("{e:?}")))?;
-        let surface0 = services::surface0_service(&node, session)?
-            .subscriber_builder()
-            .create()
-            .map_err(|e| open("surface0", format!("{e:?}")))?;
+        let rest = services::slice_subscriber(&services::rest_service(&node, session)?)?;
+        let surface0 = services::slice_subscriber(&services::surface0_service(&node, session)?)?;
         let pose_factory = services::pose_service(&node, session)?;
         Ok(Self {
             node,

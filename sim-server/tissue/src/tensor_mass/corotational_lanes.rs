@@ -17,8 +17,8 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, abs, add, fma, gradient, matmul, mul, row_abs, scatter, splat, stress, sub,
-    zero,
+    L, LaneBlock, M, abs, add, fma, gradient, identity_plus, matmul, mul, row_abs, scatter, splat,
+    stress, sub, zero,
 };
 use super::nonlinear::{ROTATION_MAX_ITER, ROTATION_TOL_RAD};
 use crate::math::Real;
@@ -157,15 +157,7 @@ pub fn corotational_block(
     out: &mut [[V3; 4]],
 ) -> Real {
     let h = gradient(b, u);
-    let f: M = std::array::from_fn(|r| {
-        std::array::from_fn(|c| {
-            if r == c {
-                add(h[r][c], splat(1.0))
-            } else {
-                h[r][c]
-            }
-        })
-    });
+    let f = identity_plus(&h);
     let mut q: Q =
         std::array::from_fn(|k| std::array::from_fn(|lane| rotations[lane].to_array()[k]));
     let mut active = alive;

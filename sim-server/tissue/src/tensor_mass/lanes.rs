@@ -156,6 +156,20 @@ pub fn row_abs(m: &M) -> L {
     max(max(row(0), row(1)), row(2))
 }
 
+/// I + h: the deformation gradient F of a displacement gradient.
+#[inline(always)]
+pub fn identity_plus(h: &M) -> M {
+    std::array::from_fn(|r| {
+        std::array::from_fn(|c| {
+            if r == c {
+                add(h[r][c], splat(1.0))
+            } else {
+                h[r][c]
+            }
+        })
+    })
+}
+
 /// H = sum_{k=1..3} (u_k - u_0) (x) m_k, the displacement gradient.
 #[inline(always)]
 pub fn gradient(b: &LaneBlock, u: &[V3]) -> M {

@@ -447,23 +447,18 @@ mod tests {
     use crate::material_map::TetMaterials;
     use crate::mesh::{BoxSpec, CellSize};
 
-    /// The four-lane StVK blocks give the scalar path's forces and bound:
-    /// isotropic and anisotropic lanes, a removed element, stretched and
-    /// squeezed (barrier) states.
-    #[test]
-    fn lanes_equal_the_scalar_path() {
+    /// A 2 x 1 x 1 cm block of `model` elements, a third of them
+    /// anisotropic (fibres along (1, 0.3, 0.2)), tetrahedron 6 removed.
+    fn mixed_block(model: MaterialModel) -> ElasticModel {
         let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
             .generate()
             .unwrap();
         let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
         let aniso = TransverselyIsotropic::new(iso, 3000.0, 2500.0, Terms::ALL).unwrap();
-        let stvk = |e| {
-            Material::new(e, 1000.0, 0.0)
-                .unwrap()
-                .with_model(MaterialModel::Stvk)
-        };
-        let mut mats = TetMaterials::uniform(stvk(Elasticity::Isotropic(iso)), mesh.tet_count());
-        let id = mats.add(stvk(Elasticity::Transverse(aniso))).unwrap();
+        let material = |e| Material::new(e, 1000.0, 0.0).unwrap().with_model(model);
+        let mut mats =
+            TetMaterials::uniform(material(Elasticity::Isotropic(iso)), mesh.tet_count());
+        let id = mats.add(material(Elasticity::Transverse(aniso))).unwrap();
         for t in (0..mesh.tet_count()).filter(|t| t % 3 == 1) {
             mats.assign(TetId::from(t), id).unwrap();
             mats.set_fiber(TetId::from(t), Vec3::new(1.0, 0.3, 0.2))
@@ -471,6 +466,15 @@ mod tests {
         }
         let mut model = ElasticModel::new(mesh, mats).unwrap();
         model.remove_tet(TetId(6)).unwrap();
+        model
+    }
+
+    /// The four-lane StVK blocks give the scalar path's forces and bound:
+    /// isotropic and anisotropic lanes, a removed element, stretched and
+    /// squeezed (barrier) states.
+    #[test]
+    fn lanes_equal_the_scalar_path() {
+        let model = mixed_block(MaterialModel::Stvk);
         let mut large = LargeStrain::new(&model).unwrap();
         assert!(!large.blocks.is_empty());
         let p = model.mesh().positions_m();
@@ -518,25 +522,7 @@ mod tests {
     /// inverted state (Mueller's steps).
     #[test]
     fn corotational_lanes_equal_the_scalar_path() {
-        let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
-            .generate()
-            .unwrap();
-        let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
-        let aniso = TransverselyIsotropic::new(iso, 3000.0, 2500.0, Terms::ALL).unwrap();
-        let corot = |e| {
-            Material::new(e, 1000.0, 0.0)
-                .unwrap()
-                .with_model(MaterialModel::Corotational)
-        };
-        let mut mats = TetMaterials::uniform(corot(Elasticity::Isotropic(iso)), mesh.tet_count());
-        let id = mats.add(corot(Elasticity::Transverse(aniso))).unwrap();
-        for t in (0..mesh.tet_count()).filter(|t| t % 3 == 1) {
-            mats.assign(TetId::from(t), id).unwrap();
-            mats.set_fiber(TetId::from(t), Vec3::new(1.0, 0.3, 0.2))
-                .unwrap();
-        }
-        let mut model = ElasticModel::new(mesh, mats).unwrap();
-        model.remove_tet(TetId(6)).unwrap();
+        let model = mixed_block(MaterialModel::Corotational);
         let mut large = LargeStrain::new(&model).unwrap();
         let lanes = large
             .blocks

@@ -10,8 +10,8 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, add, fma, gershgorin, gradient, matmul, max, mul, row_abs, scatter, splat,
-    stress, sub, zero,
+    L, LaneBlock, add, fma, gershgorin, gradient, identity_plus, matmul, max, mul, row_abs,
+    scatter, splat, stress, sub, zero,
 };
 use super::nonlinear::{STVK_BARRIER_J, STVK_BARRIER_SCALE};
 use crate::math::Real;
@@ -44,15 +44,7 @@ pub fn stvk_block(b: &LaneBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]
     }
     let hs = matmul(&h, &s);
     // F = I + H, its determinant and cofactor (columns f2 x f3, f3 x f1, f1 x f2).
-    let f: M = std::array::from_fn(|r| {
-        std::array::from_fn(|c| {
-            if r == c {
-                add(h[r][c], splat(1.0))
-            } else {
-                h[r][c]
-            }
-        })
-    });
+    let f = identity_plus(&h);
     let col = |c: usize| [f[0][c], f[1][c], f[2][c]];
     let cross = |a: [L; 3], b: [L; 3]| -> [L; 3] {
         [
