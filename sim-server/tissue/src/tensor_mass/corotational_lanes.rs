@@ -17,8 +17,8 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, abs, add, fma, gradient, identity_plus, matmul, mul, row_abs, scatter, splat,
-    stress, sub, zero,
+    L, LaneBlock, M, abs, add, fma, gradient, identity_plus, lanes, mask, mat, matmul, mul,
+    row_abs, scatter, splat, stress, sub, vec3, zero,
 };
 use super::nonlinear::{ROTATION_MAX_ITER, ROTATION_TOL_RAD};
 use crate::math::Real;
@@ -61,7 +61,7 @@ fn transpose_mul(a: &M, b: &M) -> M {
 /// Per lane: `if mask { a } else { b }`.
 #[inline(always)]
 fn select(mask: [bool; 4], a: L, b: L) -> L {
-    std::array::from_fn(|i| if mask[i] { a[i] } else { b[i] })
+    lanes(|i| if mask[i] { a[i] } else { b[i] })
 }
 
 /// One rotation step of every active lane (`nonlinear::extract_rotation`'s
@@ -75,14 +75,12 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
         sub(a[1][0], a[0][1]),
     ];
     let half = splat(0.5);
-    let s: M = std::array::from_fn(|r| std::array::from_fn(|c| mul(half, add(a[r][c], a[c][r]))));
+    let s: M = mat(|r, c| mul(half, add(a[r][c], a[c][r])));
     let tr = add(add(s[0][0], s[1][1]), s[2][2]);
     // m = tr S I - S, symmetric.
-    let m: M = std::array::from_fn(|r| {
-        std::array::from_fn(|c| {
-            let neg = mul(splat(-1.0), s[r][c]);
-            if r == c { add(tr, neg) } else { neg }
-        })
+    let m: M = mat(|r, c| {
+        let neg = mul(splat(-1.0), s[r][c]);
+        if r == c { add(tr, neg) } else { neg }
     });
     // Adjugate (cofactors of a symmetric matrix) and determinant.
     let cof = |r0: usize, r1: usize, c0: usize, c1: usize| {
@@ -102,13 +100,13 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
     let tr_m = add(add(m[0][0], m[1][1]), m[2][2]);
     let scale = add(abs(tr_m), splat(1e-300));
     let minor = sub(mul(m[0][0], m[1][1]), mul(m[0][1], m[1][0]));
-    let pd: [bool; 4] = std::array::from_fn(|i| {
+    let pd = mask(|i| {
         let sc = scale[i];
         m[0][0][i] > 1e-3 * sc && minor[i] > 1e-6 * sc * sc && det[i] > 1e-9 * sc * sc * sc
     });
-    let inv_det: L = std::array::from_fn(|i| if pd[i] { 1.0 / det[i] } else { 0.0 });
-    let mueller: L = std::array::from_fn(|i| 1.0 / (tr[i].abs() + 1e-12));
-    let omega: [L; 3] = std::array::from_fn(|r| {
+    let inv_det = lanes(|i| if pd[i] { 1.0 / det[i] } else { 0.0 });
+    let mueller = lanes(|i| 1.0 / (tr[i].abs() + 1e-12));
+    let omega = vec3(|r| {
         let newton = mul(
             inv_det,
             fma(
@@ -124,7 +122,7 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
         omega[0],
         fma(omega[1], omega[1], mul(omega[2], omega[2])),
     );
-    let w: L = std::array::from_fn(|i| w2[i].sqrt());
+    let w = lanes(|i| w2[i].sqrt());
     // q * (omega / 2, 1), normalised.
     let [hx, hy, hz] = omega.map(|o| mul(half, o));
     let [x, y, z, qw] = *q;
@@ -133,16 +131,16 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
     let ny = add(fma(qw, hy, y), sub(mul(z, hx), mul(x, hz)));
     let nz = add(fma(qw, hz, z), sub(mul(x, hy), mul(y, hx)));
     let n2 = fma(nx, nx, fma(ny, ny, fma(nz, nz, mul(nw, nw))));
-    let inv: L = std::array::from_fn(|i| 1.0 / n2[i].sqrt());
+    let inv = lanes(|i| 1.0 / n2[i].sqrt());
     // A NaN stops a lane before its update, as in the scalar loop.
-    let update: [bool; 4] = std::array::from_fn(|i| active[i] && !w[i].is_nan());
+    let update = mask(|i| active[i] && !w[i].is_nan());
     *q = [
         select(update, mul(nx, inv), q[0]),
         select(update, mul(ny, inv), q[1]),
         select(update, mul(nz, inv), q[2]),
         select(update, mul(nw, inv), q[3]),
     ];
-    std::array::from_fn(|i| update[i] && w[i] > ROTATION_TOL_RAD)
+    mask(|i| update[i] && w[i] > ROTATION_TOL_RAD)
 }
 
 /// Four corotational elements' force corrections into `out` (`alive`
@@ -158,8 +156,8 @@ pub fn corotational_block(
 ) -> Real {
     let h = gradient(b, u);
     let f = identity_plus(&h);
-    let mut q: Q =
-        std::array::from_fn(|k| std::array::from_fn(|lane| rotations[lane].to_array()[k]));
+    let quat = |k: usize| lanes(|lane| rotations[lane].to_array()[k]);
+    let mut q: Q = [quat(0), quat(1), quat(2), quat(3)];
     let mut active = alive;
     for _ in 0..ROTATION_MAX_ITER {
         if !active.contains(&true) {
@@ -175,13 +173,11 @@ pub fn corotational_block(
     let r = rotation(&q);
     let a = transpose_mul(&r, &f);
     let half = splat(0.5);
-    let rotated: M = std::array::from_fn(|i| {
-        std::array::from_fn(|j| {
-            let s = mul(half, add(a[i][j], a[j][i]));
-            if i == j { sub(s, splat(1.0)) } else { s }
-        })
+    let rotated: M = mat(|i, j| {
+        let s = mul(half, add(a[i][j], a[j][i]));
+        if i == j { sub(s, splat(1.0)) } else { s }
     });
-    let lin: M = std::array::from_fn(|i| std::array::from_fn(|j| mul(half, add(h[i][j], h[j][i]))));
+    let lin: M = mat(|i, j| mul(half, add(h[i][j], h[j][i])));
     let p = matmul(&r, &stress(b, &rotated));
     let sl = stress(b, &lin);
     let mut d = zero();
