@@ -17,7 +17,6 @@ use super::kernel::V3;
 use super::lanes::{L, LaneBlock};
 use super::model::ElasticModel;
 use super::nonlinear::{Law, barrier_piola, deformation_gradient, first_piola, in_barrier};
-use super::stability::element_lambda;
 use super::stvk_lanes::stvk_block;
 use crate::ids::TetId;
 use crate::material::MaterialModel;
@@ -106,7 +105,7 @@ impl LargeStrain {
                 geom,
                 elastic,
                 model: material.model(),
-                rest_lambda: element_lambda(model, t),
+                rest_lambda: model.element_lambdas()[t.idx()],
                 geometric_per_pa: geom.volume_m3 * shape2 / quarter_mass,
                 alive: model.topology().is_alive(t),
             });

@@ -16,7 +16,6 @@
 use super::model::ElasticModel;
 use crate::ids::TetId;
 use crate::math::{Real, Vec3};
-use rayon::prelude::*;
 
 /// Which estimate the integrator enforces.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -102,14 +101,16 @@ pub fn element_lambda(model: &ElasticModel, t: TetId) -> Real {
     k.symmetric_eigenvalues().max() / quarter_mass
 }
 
-/// Irons' proven bound over the live tetrahedra (parallel over elements).
+/// Irons' proven bound over the live tetrahedra (the element values are
+/// the model's, [`ElasticModel::element_lambdas`]).
 pub fn element_bound(model: &ElasticModel) -> StableStep {
-    let lambda = (0..model.mesh().tet_count())
-        .into_par_iter()
-        .map(TetId::from)
-        .filter(|t| model.topology().is_alive(*t))
-        .map(|t| element_lambda(model, t))
-        .reduce(|| 0.0, Real::max);
+    let lambda = model
+        .element_lambdas()
+        .iter()
+        .enumerate()
+        .filter(|(t, _)| model.topology().is_alive(TetId::from(*t)))
+        .map(|(_, l)| *l)
+        .fold(0.0, Real::max);
     StableStep::from_lambda(lambda, BoundMethod::Element)
 }
 
