@@ -21,7 +21,16 @@ from .protocol import (
     PoseMsg,
     TopologyHeader,
 )
-from .session import POSE_TIMEOUT_S, ForceSample, MeshFrame, ProtocolError, Scene, Session, Tool
+from .session import (
+    POSE_TIMEOUT_S,
+    ForceSample,
+    MeshFrame,
+    ProtocolError,
+    Rest,
+    Scene,
+    Session,
+    Tool,
+)
 
 __all__ = [
     "CONTACT",
@@ -37,6 +46,7 @@ __all__ = [
     "MeshHeader",
     "PoseMsg",
     "ProtocolError",
+    "Rest",
     "Scene",
     "Session",
     "Tool",

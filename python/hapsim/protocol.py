@@ -141,6 +141,24 @@ class SceneInfo(ctypes.Structure):
         return "hapsim.SceneInfo.v1"
 
 
+class RestHeader(ctypes.Structure):
+    """User header of the `rest` slice stream (80 bytes): the slice holds
+    `vertex_count` rest positions, then `fibre_count` pairs (centroid of an
+    anisotropic tetrahedron, its fibre direction times its first edge)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("vertex_count", ctypes.c_uint32),
+        ("fibre_count", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("name", ctypes.c_uint8 * 64),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "hapsim.RestHeader.v1"
+
+
 class Position(ctypes.Structure):
     """A `mesh` slice element: a position in metres as Rust's `[f32; 3]`."""
 
@@ -170,6 +188,7 @@ for _t, _size in [
     (TopologyHeader, 16),
     (ToolInfo, 88),
     (SceneInfo, 64 + 88 * MAX_TOOLS),
+    (RestHeader, 80),
     (Position, 12),
     (Triangle, 12),
 ]:

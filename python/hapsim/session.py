@@ -19,6 +19,7 @@ from .protocol import (
     TOOL_KINDS,
     PoseMsg,
     Position,
+    RestHeader,
     SceneInfo,
     TopologyHeader,
     Triangle,
@@ -112,6 +113,23 @@ class Scene:
             )
         bounds = (np.array(list(m.bounds_min_m)), np.array(list(m.bounds_max_m)))
         return Scene(tools, bounds, int(m.vertex_count), int(m.tet_count))
+
+
+@dataclasses.dataclass
+class Rest:
+    """The scene at rest (the `rest` and `surface0` streams): what a client
+    needs instead of the scene file."""
+
+    #: The scene's name (its file, or the embedded liver's).
+    name: str
+    #: (vertices, 3) float64, metres: rest positions, in mesh-frame order.
+    positions_m: np.ndarray
+    #: (fibres, 2, 3) float64: per anisotropic tetrahedron its centroid and
+    #: its fibre direction times its first edge length (m).
+    fibres: np.ndarray
+    #: (triangles, 3) uint32: the surface as built, before any cut (None
+    #: until `surface0` has arrived); a later surface's other faces are cuts.
+    original_triangles: Optional[np.ndarray]
 
 
 @dataclasses.dataclass
@@ -214,6 +232,12 @@ class Session:
         )
         self._scene_sub = self._service("scene", SceneInfo, 1).subscriber_builder().create()
         self._scene: Optional[Scene] = None
+        self._rest_sub = self._slice_service("rest", Position, RestHeader).subscriber_builder().create()
+        self._surface0 = (
+            self._slice_service("surface0", Triangle, TopologyHeader).subscriber_builder().create()
+        )
+        self._rest: Optional[Rest] = None
+        self._original: Optional[np.ndarray] = None
         self._pose_ready = (
             self._node.service_builder(iox2.ServiceName.new(f"hapsim/{name}/pose-ready"))
             .event()
@@ -313,6 +337,37 @@ class Session:
         """Waits for the scene info (the simulation re-sends it to late
         joiners with its next mesh frame)."""
         return _wait(self.scene, lambda s: s is not None, "scene info", self.name, timeout_s)
+
+    def rest(self) -> Optional[Rest]:
+        """The scene at rest: name, rest positions, fibres and the uncut
+        surface, once the simulation has sent them (None before)."""
+        for sample, h in _drain(self._surface0, "surface0", header=True):
+            k = int(h.triangle_count)
+            view = sample.payload().as_memory_view()
+            self._original = np.frombuffer(view, dtype=np.uint32, count=3 * k).reshape(k, 3).copy()
+        for sample, h in _drain(self._rest_sub, "rest", header=True):
+            n, f = int(h.vertex_count), int(h.fibre_count)
+            view = sample.payload().as_memory_view()
+            data = np.frombuffer(view, dtype=np.float32, count=3 * (n + 2 * f)).reshape(-1, 3)
+            self._rest = Rest(
+                name=bytes(h.name).split(b"\0", 1)[0].decode("utf-8", "replace"),
+                positions_m=data[:n].astype(np.float64),
+                fibres=data[n:].astype(np.float64).reshape(f, 2, 3),
+                original_triangles=None,
+            )
+        if self._rest is not None:
+            self._rest.original_triangles = self._original
+        return self._rest
+
+    def wait_rest(self, timeout_s: float = 10.0) -> Rest:
+        """Waits for the scene at rest with its uncut surface."""
+        return _wait(
+            self.rest,
+            lambda r: r is not None and r.original_triangles is not None,
+            "rest shape",
+            self.name,
+            timeout_s,
+        )
 
     # -- poses ------------------------------------------------------------
 

@@ -35,6 +35,36 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
     );
     let session = format!("pypkg{}", std::process::id());
     let sim = spawn_sim_server(&session, &["--duration-s", "20"]);
+    // The scene at rest, without the scene file: name, rest positions,
+    // fibres and the uncut surface, as numpy arrays.
+    let rest = Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import sys; from hapsim import Session\n\
+             with Session(sys.argv[1]) as s:\n\
+             \x20   r = s.wait_rest(); sc = s.wait_scene()\n\
+             \x20   t = r.original_triangles\n\
+             \x20   print(r.name, r.positions_m.shape[0] == sc.vertex_count, r.fibres.shape[1:],\n\
+             \x20         len(r.fibres) > 50, t.shape[1], int(t.max()) < r.positions_m.shape[0])",
+        )
+        .arg(&session)
+        .env("PYTHONPATH", &site)
+        .output()
+        .expect("run python3");
+    let rest_out = String::from_utf8_lossy(&rest.stdout);
+    assert!(
+        rest.status.success(),
+        "{rest_out}{}",
+        String::from_utf8_lossy(&rest.stderr)
+    );
+    assert_eq!(
+        rest_out.trim(),
+        format!(
+            "{} True (2, 3) True 3 True",
+            sim_server::scene::DEFAULT_SCENE_NAME
+        ),
+        "{rest_out}"
+    );
     let out = Command::new("python3")
         .arg(root.join("python/examples/press.py"))
         .args(["--session", &session])
