@@ -14,6 +14,7 @@ use iceoryx2::port::subscriber::Subscriber;
 /// Brings `update_connections` into scope: a publisher that sends rarely
 /// (the topology stream) delivers its history to late subscribers with it.
 pub use iceoryx2::port::update_connections::UpdateConnections;
+pub use iceoryx2::prelude::ZeroCopySend;
 use iceoryx2::prelude::*;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue, AttributeVerifier};
 use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};

@@ -7,11 +7,12 @@ use super::{RunError, ToolScript, publish_err};
 use shared::protocol::{
     MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg, TOOL_PRESENT, TopologyHeader,
 };
-use shared::services::{SlicePublisher, UpdateConnections};
+use shared::services::{SlicePublisher, UpdateConnections, ZeroCopySend};
 use sim_server::backend::Backend;
 use sim_server::contact::ToolInput;
 use sim_server::frames::FrameRecorder;
 use sim_server::math::{Real, Vec3};
+use sim_server::tensor_mass::ElasticModel;
 
 /// Each tool's input for the step at simulated time `sim_t_s`: its script
 /// if one drives it, else the live pose's entry (none: withdrawn).
@@ -84,25 +85,13 @@ impl MeshOut {
         sim_t_s: Real,
     ) -> Result<(), RunError> {
         if self.published_topology != self.topology_version {
-            self.tris.clear();
-            self.tris.extend(
-                sim.model()
-                    .topology()
-                    .surface_triangles(sim.model().mesh())
-                    .map(|t| t.map(|v| v.0)),
-            );
-            let mut s = self
-                .topology
-                .loan_slice_uninit(self.tris.len())
-                .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
-            *s.user_header_mut() = TopologyHeader {
+            surface_into(sim.model(), &mut self.tris);
+            let header = TopologyHeader {
                 version: PROTOCOL_VERSION,
                 triangle_count: self.tris.len() as u32,
                 topology_version: self.topology_version,
             };
-            s.write_from_slice(&self.tris)
-                .send()
-                .map_err(|e| publish_err("topology")(format!("{e:?}")))?;
+            send_slice(&self.topology, header, &self.tris, "topology")?;
             self.published_topology = self.topology_version;
         } else {
             // A viewer that joined since gets the kept topology (history
@@ -145,6 +134,39 @@ impl MeshOut {
     )> {
         self.recorder.map(FrameRecorder::finish)
     }
+}
+
+/// The model's outward surface triangles as the wire carries them, into
+/// `out` (cleared first; its capacity reused).
+pub fn surface_into(model: &ElasticModel, out: &mut Vec<[u32; 3]>) {
+    out.clear();
+    out.extend(
+        model
+            .topology()
+            .surface_triangles(model.mesh())
+            .map(|t| t.map(|v| v.0)),
+    );
+}
+
+/// Sends `data` with `header` on a slice stream (`what` names it in errors).
+pub fn send_slice<T, H>(
+    publisher: &SlicePublisher<T, H>,
+    header: H,
+    data: &[T],
+    what: &'static str,
+) -> Result<(), RunError>
+where
+    T: std::fmt::Debug + ZeroCopySend + Copy,
+    H: std::fmt::Debug + ZeroCopySend + Default,
+{
+    let mut s = publisher
+        .loan_slice_uninit(data.len())
+        .map_err(|e| publish_err(what)(format!("{e:?}")))?;
+    *s.user_header_mut() = header;
+    s.write_from_slice(data)
+        .send()
+        .map_err(|e| publish_err(what)(format!("{e:?}")))?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@
 //! recorder or a client on another machine (through a bridge) then needs
 //! no files.
 
+use super::outputs::{send_slice, surface_into};
 use super::{RunError, publish_err};
 use shared::SessionName;
 use shared::protocol::{
@@ -104,31 +105,17 @@ impl SceneOut {
             ..RestHeader::default()
         };
         header.set_name(scene_name);
-        let mut s = rest
-            .loan_slice_uninit(slice.len())
-            .map_err(|e| publish_err("rest positions")(format!("{e:?}")))?;
-        *s.user_header_mut() = header;
-        s.write_from_slice(&slice)
-            .send()
-            .map_err(|e| publish_err("rest positions")(format!("{e:?}")))?;
-        let tris: Vec<[u32; 3]> = model
-            .topology()
-            .surface_triangles(model.mesh())
-            .map(|t| t.map(|v| v.0))
-            .collect();
+        send_slice(&rest, header, &slice, "rest positions")?;
+        let mut tris = Vec::new();
+        surface_into(model, &mut tris);
         let surface0 =
             services::slice_publisher(&services::surface0_service(node, session)?, tris.len())?;
-        let mut s = surface0
-            .loan_slice_uninit(tris.len())
-            .map_err(|e| publish_err("original surface")(format!("{e:?}")))?;
-        *s.user_header_mut() = TopologyHeader {
+        let header = TopologyHeader {
             version: PROTOCOL_VERSION,
             triangle_count: tris.len() as u32,
             topology_version: 1,
         };
-        s.write_from_slice(&tris)
-            .send()
-            .map_err(|e| publish_err("original surface")(format!("{e:?}")))?;
+        send_slice(&surface0, header, &tris, "original surface")?;
         Ok(Self {
             scene,
             rest,
