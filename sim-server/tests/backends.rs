@@ -203,6 +203,7 @@ fn pressed_reaction(kind: Kind) -> (String, Vec3) {
         length_m: 0.3,
         radius_m: 0.004,
         tip_length_m: 0.01,
+        friction: Default::default(),
     };
     let mut sim = backend(kind);
     let mut tools = Tools::new(std::slice::from_ref(&decl), sim.model());

@@ -73,6 +73,7 @@ fn setup_at(kind: ToolKind, dt_s: f64) -> (Explicit<f64>, Single) {
         length_m: 0.3,
         radius_m: RADIUS_M,
         tip_length_m: 0.01,
+        friction: Default::default(),
     };
     for v in bottom(&sim) {
         sim.fix(v);
@@ -394,6 +395,7 @@ fn shaft_pressing_across_the_top_pushes_it_down_along_the_shaft_plane() {
         length_m: 0.3,
         radius_m: RADIUS_M,
         tip_length_m: 0.01,
+        friction: Default::default(),
     };
     let mut tool = Single::new(&decl, &sim);
     let a = Vec3::new(0.1, 0.02, z + 0.003);
@@ -476,6 +478,7 @@ fn two_tools(sim: &Explicit<f64>, kinds: [ToolKind; 2], x: [f64; 2]) -> Tools {
             length_m: 0.3,
             radius_m: RADIUS_M,
             tip_length_m: 0.01,
+            friction: Default::default(),
         })
         .collect();
     let mut tools = Tools::new(&decls, sim.model());

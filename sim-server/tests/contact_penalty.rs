@@ -5,79 +5,15 @@
 //! finite differences of the settled reaction), survives a pose glitch
 //! through the speed-limited proxy, and keeps gripping and cutting.
 
-use sim_server::contact::{ContactLaw, StiffnessSolves, ToolInput};
+mod common;
+
+use sim_server::contact::{ContactLaw, StiffnessSolves};
 use sim_server::prelude::*;
-use sim_server::prepare::{Prepared, prepare};
+
 use sim_server::scene::{SceneSource, build_scene};
 use std::path::PathBuf;
 
-/// Top face of the block (m).
-const TOP_M: f64 = 0.02;
-
-/// A 4 x 2 x 2 cm block on 5 mm cells, bottom fixed, one tool of `kind`
-/// (radius 2.5 mm) entering from above; `extra` appended to the scene.
-fn scene(kind: &str, extra: &str) -> Prepared<Explicit<f64>> {
-    scene_stepped(kind, extra, 1e-3)
-}
-
-/// [`scene`] stepped `dt_s` at a time.
-fn scene_stepped(kind: &str, extra: &str, dt_s: f64) -> Prepared<Explicit<f64>> {
-    let text = format!(
-        r#"
-[mesh]
-generate = {{ shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }}
-
-[material]
-young_pa = 5000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 40.0
-
-[[fixed]]
-name = "bottom"
-select = {{ box_m = [[-0.001, -0.001, -0.001], [0.041, 0.021, 0.0001]] }}
-
-[[tool]]
-name = "tool"
-kind = "{kind}"
-fulcrum_m = [0.02, 0.01, 0.15]
-length_m = 0.3
-radius_m = 0.0025
-tip_length_m = 0.01
-{extra}
-"#
-    );
-    let src = SceneSource {
-        name: "<block>".into(),
-        dir: PathBuf::from("."),
-        text,
-    };
-    let built = build_scene(&src, &src.parse().unwrap()).unwrap();
-    let mut p = prepare::<f64>(built, Some(dt_s)).unwrap();
-    // The stiffness exact at every step, whatever the threads' timing.
-    p.tools.set_stiffness_solves(StiffnessSolves::Inline);
-    p
-}
-
-/// One step with the tool tip at `tip` (jaws `jaw`); the force on it.
-fn step(p: &mut Prepared<Explicit<f64>>, tip: Vec3, jaw: f64) -> Vec3 {
-    let input = [Some(ToolInput {
-        tip_m: tip,
-        jaw_opening: jaw,
-    })];
-    p.tools.update(&mut p.sim, &input);
-    p.tools.step(&mut p.sim);
-    p.tools.reaction(0, &p.sim).force_n
-}
-
-/// Holds the tool at `tip` for `steps` steps; the last force.
-fn settle(p: &mut Prepared<Explicit<f64>>, tip: Vec3, steps: usize) -> Vec3 {
-    let mut f = Vec3::ZERO;
-    for _ in 0..steps {
-        f = step(p, tip, 1.0);
-    }
-    f
-}
+use common::{TOP_M, scene, scene_stepped, settle, step};
 
 /// Between vertices (a cell is 5 mm): no vertex under the tool.
 fn between(z: f64) -> Vec3 {

@@ -9,6 +9,7 @@ use super::spec::{
     PrecisionName, SceneSpec, ShapeKind,
 };
 use super::{SceneError, SceneSource};
+use crate::contact::Friction;
 use crate::ids::{TetId, VertexId};
 use crate::material_map::TetMaterials;
 use crate::math::{Real, Vec3};
@@ -125,6 +126,36 @@ fn positive(src: &SceneSource, v: &toml::Spanned<Real>, what: &str) -> Result<Re
             v.span(),
             format!("{what} must be a positive finite number, got {x}"),
         ))
+    }
+}
+
+/// `friction_static` / `friction_dynamic` of a `[[tool]]`: either alone
+/// sets both; each is checked at its own line.
+fn tool_friction(
+    src: &SceneSource,
+    t: &super::spec::ToolSpec,
+    what: &str,
+) -> Result<Friction, SceneError> {
+    let coefficient = |v: Option<&Spanned<Real>>, key: &str| match v {
+        None => Ok(None),
+        Some(v) if v.get_ref().is_finite() && *v.get_ref() >= 0.0 => Ok(Some(*v.get_ref())),
+        Some(v) => Err(src.error(
+            v.span(),
+            format!(
+                "{what} {key} must be a finite number >= 0, got {}",
+                v.get_ref()
+            ),
+        )),
+    };
+    let s = coefficient(t.friction_static.as_ref(), "friction_static")?;
+    let d = coefficient(t.friction_dynamic.as_ref(), "friction_dynamic")?;
+    let friction = Friction {
+        static_coefficient: s.or(d).unwrap_or(0.0),
+        dynamic_coefficient: d.or(s).unwrap_or(0.0),
+    };
+    match (friction.check(), &t.friction_dynamic) {
+        (Err(why), Some(d)) => Err(src.error(d.span(), format!("{what} {why}"))),
+        _ => Ok(friction),
     }
 }
 
@@ -610,6 +641,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
                 format!("{what}: tip_length_m ({tip}) exceeds length_m ({length})"),
             ));
         }
+        let friction = tool_friction(src, t, &what)?;
         tools.push(ToolDecl {
             name,
             kind: t.kind,
@@ -617,6 +649,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
             length_m: length,
             radius_m: radius,
             tip_length_m: tip,
+            friction,
         });
     }
     let settings = settings(src, spec)?;

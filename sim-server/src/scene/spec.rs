@@ -368,6 +368,11 @@ pub struct ToolSpec {
     pub radius_m: Spanned<f64>,
     /// Tip segment length (m).
     pub tip_length_m: Spanned<f64>,
+    /// Static Coulomb coefficient of its sliding contact (default: the
+    /// dynamic one, else 0: frictionless).
+    pub friction_static: Option<Spanned<f64>>,
+    /// Dynamic Coulomb coefficient (default: the static one).
+    pub friction_dynamic: Option<Spanned<f64>>,
 }
 
 /// Contact laws by name.

@@ -1,8 +1,12 @@
 //! Shared fixtures for the physics-law tests.
 #![allow(dead_code)]
 
+use sim_server::contact::{StiffnessSolves, ToolInput};
 use sim_server::material::MaterialError;
 use sim_server::prelude::*;
+use sim_server::prepare::{Prepared, prepare};
+use sim_server::scene::{SceneSource, build_scene};
+use std::path::PathBuf;
 
 /// A deterministic xorshift generator in [-0.5, 0.5).
 pub struct Rng(u64);
@@ -116,4 +120,72 @@ pub fn block(cell_m: f64) -> ElasticModel {
     let tissue = Material::isotropic(5000.0, 0.45, 1000.0, 30.0).unwrap();
     let materials = TetMaterials::uniform(tissue, mesh.tet_count());
     ElasticModel::new(mesh, materials).unwrap()
+}
+
+/// Top face of the penalty-contact block of [`scene`] (m).
+pub const TOP_M: f64 = 0.02;
+
+/// A 4 x 2 x 2 cm block on 5 mm cells, bottom fixed, one tool of `kind`
+/// (radius 2.5 mm) entering from above; `extra` appended to the scene.
+pub fn scene(kind: &str, extra: &str) -> Prepared<Explicit<f64>> {
+    scene_stepped(kind, extra, 1e-3)
+}
+
+/// [`scene`] stepped `dt_s` at a time.
+pub fn scene_stepped(kind: &str, extra: &str, dt_s: f64) -> Prepared<Explicit<f64>> {
+    let text = format!(
+        r#"
+[mesh]
+generate = {{ shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }}
+
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 40.0
+
+[[fixed]]
+name = "bottom"
+select = {{ box_m = [[-0.001, -0.001, -0.001], [0.041, 0.021, 0.0001]] }}
+
+[[tool]]
+name = "tool"
+kind = "{kind}"
+fulcrum_m = [0.02, 0.01, 0.15]
+length_m = 0.3
+radius_m = 0.0025
+tip_length_m = 0.01
+{extra}
+"#
+    );
+    let src = SceneSource {
+        name: "<block>".into(),
+        dir: PathBuf::from("."),
+        text,
+    };
+    let built = build_scene(&src, &src.parse().unwrap()).unwrap();
+    let mut p = prepare::<f64>(built, Some(dt_s)).unwrap();
+    // The stiffness exact at every step, whatever the threads' timing.
+    p.tools.set_stiffness_solves(StiffnessSolves::Inline);
+    p
+}
+
+/// One step with the tool tip at `tip` (jaws `jaw`); the force on it.
+pub fn step(p: &mut Prepared<Explicit<f64>>, tip: Vec3, jaw: f64) -> Vec3 {
+    let input = [Some(ToolInput {
+        tip_m: tip,
+        jaw_opening: jaw,
+    })];
+    p.tools.update(&mut p.sim, &input);
+    p.tools.step(&mut p.sim);
+    p.tools.reaction(0, &p.sim).force_n
+}
+
+/// Holds the tool at `tip` for `steps` steps; the last force.
+pub fn settle(p: &mut Prepared<Explicit<f64>>, tip: Vec3, steps: usize) -> Vec3 {
+    let mut f = Vec3::ZERO;
+    for _ in 0..steps {
+        f = step(p, tip, 1.0);
+    }
+    f
 }

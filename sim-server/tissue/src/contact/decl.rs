@@ -2,6 +2,7 @@
 //! that the core does not depend on the scene format (which builds these
 //! from its `[[tool]]` tables).
 
+use super::friction::Friction;
 use crate::math::Real;
 use serde::{Deserialize, Serialize};
 
@@ -32,4 +33,7 @@ pub struct ToolDecl {
     pub radius_m: Real,
     /// Tip segment length (m).
     pub tip_length_m: Real,
+    /// Coulomb friction of its sliding contact (penalty law only; the
+    /// projection law's prescribed vertices already stick).
+    pub friction: Friction,
 }

@@ -18,7 +18,10 @@
 //! spread to the triangle's vertices by w, and the tool feels -f n. It is
 //! continuous in the tool pose (zero at zero gap), never sticky (the factor
 //! is clamped to [0, 2]: the damping never pulls and never more than
-//! doubles the spring), and frictionless (along n only). The point
+//! doubles the spring), and frictionless (along n only) unless the tool
+//! has Coulomb friction: then each point also carries a tangential
+//! stick-slip spring of stiffness k_p, |f_t| <= mu f ([`super::friction`]).
+//! The point
 //! stiffness is k_p = kappa a_p, a foundation modulus times the point's
 //! share of the rest area, so the total over a surface does not depend on
 //! how finely it is sampled.
@@ -35,6 +38,7 @@
 //! earlier three times better than at its own pose). The window still
 //! averages the stiff springs' sub-step ripple, as a 1 kHz step does.
 
+use super::friction::{Carried, Friction, Stick, point_key};
 use super::geometry::Segment;
 use crate::math::{Mat3, Real, Vec3, outer};
 
@@ -124,6 +128,19 @@ pub struct SubStep<'a> {
     pub masses_kg: &'a [Real],
 }
 
+/// A point in contact at this evaluation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Acting {
+    /// Normal (from the tool to the point).
+    n: Vec3,
+    /// Spring force (N).
+    spring: Real,
+    /// Penetration rate (m/s).
+    rate: Real,
+    /// The point's motion relative to the tool over the sub-step (m).
+    slip_m: Vec3,
+}
+
 /// The contact points of one step and what they did.
 #[derive(Clone, Debug, Default)]
 pub struct ContactField {
@@ -146,9 +163,16 @@ pub struct ContactField {
     hessians: Vec<Mat3>,
     /// Per point: the spring part of its Hessian alone (slope n n^T).
     spring_hessians: Vec<Mat3>,
-    /// Per point, this evaluation: normal, spring force and penetration
-    /// rate where it acts.
-    acting: Vec<Option<(Vec3, Real, Real)>>,
+    /// Per point, this evaluation: where it acts.
+    acting: Vec<Option<Acting>>,
+    /// Per tool: its Coulomb friction.
+    friction: Vec<Friction>,
+    /// Per point: its identity across selections ([`point_key`]) and its
+    /// friction state.
+    keys: Vec<u64>,
+    sticks: Vec<Stick>,
+    /// The friction states of the points dropped last.
+    carried: Carried,
     /// Per vertex: the contact damping coefficients summed (scratch, zero
     /// between evaluations).
     damping_sum: Vec<Real>,
@@ -160,19 +184,25 @@ impl ContactField {
         Self {
             damping_s_per_m,
             force_sum_n: vec![Vec3::ZERO; tools],
+            friction: vec![Friction::NONE; tools],
             ..Self::default()
         }
+    }
+
+    /// The same with each tool's Coulomb friction (`per_tool[i]` for tool
+    /// `i`; missing tools are frictionless).
+    pub fn with_friction(mut self, per_tool: &[Friction]) -> Self {
+        for (f, mu) in self.friction.iter_mut().zip(per_tool) {
+            *f = *mu;
+        }
+        self
     }
 
     /// Starts a new step: no points, no parts, reactions cleared (the
     /// vertices written last are remembered, to be zeroed).
     pub fn clear(&mut self) {
-        self.points.clear();
+        self.clear_points();
         self.parts.clear();
-        self.penetration_m.clear();
-        self.hessians.clear();
-        self.spring_hessians.clear();
-        self.acting.clear();
         self.evaluations = 0;
         self.force_sum_n.fill(Vec3::ZERO);
     }
@@ -180,6 +210,9 @@ impl ContactField {
     /// Drops the points (within a step, before they are selected again);
     /// the parts and the step's reactions stay.
     pub fn clear_points(&mut self) {
+        self.carried.save(&self.keys, &self.sticks);
+        self.keys.clear();
+        self.sticks.clear();
         self.points.clear();
         self.penetration_m.clear();
         self.hessians.clear();
@@ -193,8 +226,22 @@ impl ContactField {
         (self.parts.len() - 1) as u16
     }
 
-    /// Adds a contact point.
+    /// Adds a contact point: a point that was in contact before the last
+    /// [`ContactField::clear`] keeps its friction state (if its part was
+    /// added first).
     pub fn push(&mut self, p: ContactPoint) {
+        // Its part may come later (a selection being recorded): then it
+        // starts unstuck.
+        let part = self.parts.get(p.part as usize);
+        let key = part.map_or(0, |part| point_key(&p, part));
+        let rough = part.is_some_and(|part| self.friction[part.tool].is_active());
+        let stick = if rough {
+            self.carried.get(key)
+        } else {
+            Stick::default()
+        };
+        self.keys.push(key);
+        self.sticks.push(stick);
         self.points.push(p);
         self.penetration_m.push(0.0);
         self.hessians.push(Mat3::ZERO);
@@ -249,12 +296,25 @@ impl ContactField {
     /// Adds to `out` the contact forces at fraction `s` of the step, for
     /// displacements `u` and the previous sub-step's `u_prev` (`h_s` apart)
     /// over rest positions `rest_m`. Call [`ContactField::zero`] first.
+    /// Friction states advance by the sub-step's motion.
     pub fn add_forces(
         &mut self,
         rest_m: &[Vec3],
         u: &[[Real; 3]],
         u_prev: &[[Real; 3]],
         at: SubStep,
+        out: &mut [[Real; 3]],
+    ) {
+        self.evaluate(rest_m, u, u_prev, at, true, out);
+    }
+
+    fn evaluate(
+        &mut self,
+        rest_m: &[Vec3],
+        u: &[[Real; 3]],
+        u_prev: &[[Real; 3]],
+        at: SubStep,
+        advance: bool,
         out: &mut [[Real; 3]],
     ) {
         let SubStep {
@@ -294,6 +354,10 @@ impl ContactField {
             let depth = sweep.radius_m - dist;
             if depth <= 0.0 || dist <= 1e-12 * sweep.radius_m {
                 self.penetration_m[i] = 0.0;
+                if advance {
+                    // Out of contact: it sticks afresh when it comes back.
+                    self.sticks[i] = Stick::default();
+                }
                 continue;
             }
             self.penetration_m[i] = depth;
@@ -312,7 +376,12 @@ impl ContactField {
                 + ((sweep.to.b_m - sweep.from.b_m) - (sweep.to.a_m - sweep.from.a_m)) * t)
                 / step_s;
             let rate = (tool_vel - vel).dot(n);
-            self.acting[i] = Some((n, spring, rate));
+            self.acting[i] = Some(Acting {
+                n,
+                spring,
+                rate,
+                slip_m: (vel - tool_vel) * h_s,
+            });
             if damped {
                 // Gershgorin row of the damping matrix (sum_p c_p w_vp w^T)
                 // over the mass, with c_p = alpha k_p d the point's linear
@@ -337,26 +406,52 @@ impl ContactField {
         } else {
             1.0
         };
-        for (p, acting) in self.points.iter().zip(&self.acting) {
-            let Some((n, spring, rate)) = *acting else {
+        for (i, p) in self.points.iter().enumerate() {
+            let Some(Acting {
+                n,
+                spring,
+                rate,
+                slip_m,
+            }) = self.acting[i]
+            else {
                 continue;
             };
             let factor = (1.0 + gamma * alpha * rate).clamp(0.0, 2.0);
             let f = spring * factor;
+            let tool = self.parts[p.part as usize].tool;
+            let mu = &self.friction[tool];
+            // With friction, the tangential spring's force on the point.
+            let mut tangential = Vec3::ZERO;
+            if mu.is_active() {
+                let k_t = p.stiffness_n_per_m;
+                let stick = &mut self.sticks[i];
+                tangential = if advance {
+                    stick.advance(n, slip_m, f, k_t, mu)
+                } else {
+                    stick.force_n(n, k_t)
+                };
+                if !stick.sliding {
+                    // A sticking point resists tangential motion too.
+                    let t = (Mat3::IDENTITY - outer(n, n)) * k_t;
+                    self.spring_hessians[i] += t;
+                    self.hessians[i] += t;
+                }
+            }
             for k in 0..3 {
                 let j = p.vertices[k] as usize;
                 if damped {
                     self.damping_sum[j] = 0.0;
                 }
                 let w = p.weights[k] * f;
+                let wt = tangential * p.weights[k];
                 let o = &mut out[j];
-                o[0] += w * n.x;
-                o[1] += w * n.y;
-                o[2] += w * n.z;
+                o[0] += w * n.x + wt.x;
+                o[1] += w * n.y + wt.y;
+                o[2] += w * n.z + wt.z;
                 self.dirty.push(p.vertices[k]);
             }
             if reported {
-                self.force_sum_n[self.parts[p.part as usize].tool] -= n * f;
+                self.force_sum_n[tool] -= n * f + tangential;
             }
         }
         // A vertex of several points is listed several times: harmless
@@ -383,7 +478,7 @@ impl ContactField {
             s: 1.0,
             masses_kg: &[],
         };
-        self.add_forces(rest_m, u, u, at, out);
+        self.evaluate(rest_m, u, u, at, false, out);
         self.damping_s_per_m = alpha;
     }
 }
@@ -477,5 +572,88 @@ mod tests {
         f.add_forces(&rest, &u, &up, at, &mut out);
         assert!(f.force_n(0).z >= 0.0);
         assert_eq!(f.force_n(0).z, 0.0);
+    }
+
+    #[test]
+    fn friction_holds_to_the_static_limit_then_drags_at_the_dynamic_one() {
+        // A shaft lying along x, 0.5 mm into a point below it, sliding
+        // along its own axis: the normal and depth stay as they are, only
+        // the friction changes.
+        let rest = vec![
+            Vec3::new(-0.01, -0.01, 0.0),
+            Vec3::new(0.01, -0.01, 0.0),
+            Vec3::new(0.0, 0.01, 0.0),
+        ];
+        let mu = Friction {
+            static_coefficient: 0.5,
+            dynamic_coefficient: 0.3,
+        };
+        let mut f = ContactField::new(1, 0.0).with_friction(&[mu]);
+        let seg = |x: Real| Segment {
+            a_m: Vec3::new(x - 0.02, 0.0, 0.0015),
+            b_m: Vec3::new(x + 0.02, 0.0, 0.0015),
+        };
+        let u = vec![[0.0; 3]; 3];
+        let mut out = vec![[0.0; 3]; 3];
+        let normal = spring(100.0, 0.0005, 0.002).0;
+        let mut x = 0.0;
+        let mut forces = Vec::new();
+        let step_m = 0.00005;
+        for k in 0..16 {
+            // Ten steps forward, then back.
+            let dx = if k < 10 { step_m } else { -step_m };
+            f.clear();
+            let part = f.add_part(PartSweep {
+                tool: 0,
+                tip: false,
+                from: seg(x),
+                to: seg(x + dx),
+                radius_m: 0.002,
+            });
+            f.push(ContactPoint {
+                vertices: [0, 1, 2],
+                weights: [0.25, 0.25, 0.5],
+                part,
+                stiffness_n_per_m: 100.0,
+            });
+            x += dx;
+            f.zero(&mut out);
+            let at = SubStep {
+                h_s: 1e-3,
+                step_s: 1e-3,
+                s: 1.0,
+                masses_kg: &[],
+            };
+            f.add_forces(&rest, &u, &u, at, &mut out);
+            let tool = f.force_n(0);
+            assert!((tool.z - normal).abs() < 1e-12, "{tool}");
+            // The tissue gets the opposite.
+            let sum = out.iter().fold(Vec3::ZERO, |s, o| s + Vec3::from_array(*o));
+            assert!((sum + tool).length() < 1e-12);
+            forces.push(tool.x);
+        }
+        // Sticking: 100 N/m x 0.05 mm more each step against the motion,
+        // up to mu_s f (0.5 x 0.0479 N: 4 steps hold, the 5th slips).
+        for (k, fx) in forces[..4].iter().enumerate() {
+            assert!(
+                (fx + 100.0 * step_m * (k + 1) as Real).abs() < 1e-12,
+                "{k}: {fx}"
+            );
+        }
+        for fx in &forces[4..10] {
+            assert!((fx + 0.3 * normal).abs() < 1e-12, "sliding: {fx}");
+        }
+        // Back: it sticks at once and unloads elastically.
+        assert!((forces[10] - (-0.3 * normal + 100.0 * step_m)).abs() < 1e-12);
+        // The stiffness seen by the local model: tangential k_p while it
+        // sticks.
+        let h = f.spring_hessians()[0];
+        assert!((h.x_axis.x - 100.0).abs() < 1e-9 && (h.z_axis.z - 100.0).abs() < 1e-9);
+        // A static evaluation reads the state without moving it.
+        let before = f.force_n(0);
+        for _ in 0..2 {
+            f.static_forces(&rest, &u, &mut out);
+            assert!((f.force_n(0).x - before.x).abs() < 1e-15);
+        }
     }
 }

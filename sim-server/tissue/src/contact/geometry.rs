@@ -167,6 +167,7 @@ mod tests {
             length_m: 0.2,
             radius_m: 0.002,
             tip_length_m: 0.01,
+            friction: Default::default(),
         }
     }
 

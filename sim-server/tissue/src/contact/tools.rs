@@ -112,6 +112,24 @@ pub enum ContactError {
         /// What it must be: "positive", or "zero or positive".
         range: &'static str,
     },
+    /// A tool asks for friction under the projection law.
+    #[error(
+        "tool {tool:?} has friction, which the penalty contact law models; the contact here is the projection law (on the {backend} backend), whose prescribed vertices cannot slide: remove friction_static/friction_dynamic or use law = \"penalty\" on a tensor-mass backend"
+    )]
+    FrictionUnsupported {
+        /// The tool's name.
+        tool: String,
+        /// The backend's name.
+        backend: &'static str,
+    },
+    /// A tool's friction coefficients are out of range.
+    #[error("tool {tool:?}: {why}")]
+    BadFriction {
+        /// The tool's name.
+        tool: String,
+        /// What is wrong.
+        why: String,
+    },
 }
 
 impl Tools {
@@ -159,6 +177,14 @@ impl Tools {
                 range: "zero or positive",
             });
         }
+        for d in decls {
+            d.friction
+                .check()
+                .map_err(|why| ContactError::BadFriction {
+                    tool: d.name.clone(),
+                    why,
+                })?;
+        }
         let law = match config.law {
             Some(ContactLaw::Penalty) if !sim.integrates_contact() => {
                 return Err(ContactError::PenaltyUnsupported {
@@ -169,6 +195,14 @@ impl Tools {
             None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
             None => ContactLaw::Projection,
         };
+        if law == ContactLaw::Projection
+            && let Some(d) = decls.iter().find(|d| d.friction.is_active())
+        {
+            return Err(ContactError::FrictionUnsupported {
+                tool: d.name.clone(),
+                backend: sim.name(),
+            });
+        }
         let mut tools = Self::build(decls, sim.model(), law, config);
         if law == ContactLaw::Penalty {
             let sampler = Sampler::new(sim.model(), config.stiffness_factor, config.point_spacing);
@@ -211,7 +245,8 @@ impl Tools {
             adjacency: Adjacency::new(model),
             claims: Claims::new(model.vertex_count()),
             law,
-            field: ContactField::new(decls.len(), config.damping_s_per_m),
+            field: ContactField::new(decls.len(), config.damping_s_per_m)
+                .with_friction(&decls.iter().map(|d| d.friction).collect::<Vec<_>>()),
             sampler: None,
             stiffness: None,
             last_inputs: vec![None; decls.len()],
