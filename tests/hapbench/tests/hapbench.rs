@@ -132,12 +132,19 @@ fn constant_hold_renders_the_delivered_samples(series: &Path, samples: &Path) {
 /// (p99 per-tick change <= 0.05 N), no dropouts while the tool is in the
 /// tissue, passive (net work on the hand <= 0), independent of the
 /// integrator's sub-steps (<= 0.03 N RMS at twice the sub-steps); and every
-/// extrapolator's figures finite, per phase.
+/// extrapolator's figures finite, per phase. The same with Coulomb friction
+/// on the probe (tests/data/box-probe-friction.toml).
 #[test]
 fn hapbench_extrapolation_truth_on_the_box_is_smooth_passive_and_substep_independent() {
+    for scene in ["box-probe.toml", "box-probe-friction.toml"] {
+        box_truth_holds(scene);
+    }
+}
+
+fn box_truth_holds(scene: &str) {
     let dir = scratch_dir("hapbench-box");
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
-    let (scene, path) = (data.join("box-probe.toml"), data.join("box-palpate.csv"));
+    let (scene, path) = (data.join(scene), data.join("box-palpate.csv"));
     let v = hapbench(
         &[
             "extrapolation",
@@ -169,8 +176,9 @@ fn hapbench_extrapolation_truth_on_the_box_is_smooth_passive_and_substep_indepen
         ),
     );
     eprintln!(
-        "box-palpate truth: p99 jump {jump:.4} N, net energy {:.3} mJ, max {max:.3} N, \
+        "{} on box-palpate, truth: p99 jump {jump:.4} N, net energy {:.3} mJ, max {max:.3} N, \
          {dropouts} dropout ticks, sub-steps {} vs {} differ by {substeps:.4} N RMS",
+        scene.display(),
         energy * 1e3,
         v["truth_check"]["substeps"][0],
         v["truth_check"]["substeps"][1],

@@ -38,7 +38,7 @@
 //! earlier three times better than at its own pose). The window still
 //! averages the stiff springs' sub-step ripple, as a 1 kHz step does.
 
-use super::friction::{Carried, Friction, Stick, point_key};
+use super::friction::{Carried, Friction, Stick, along_surface, point_key};
 use super::geometry::Segment;
 use crate::math::{Mat3, Real, Vec3, outer};
 
@@ -426,10 +426,20 @@ impl ContactField {
                 let k_t = p.stiffness_n_per_m;
                 let stick = &mut self.sticks[i];
                 tangential = if advance {
-                    stick.advance(n, slip_m, f, k_t, mu)
+                    stick.advance(n, slip_m, spring, k_t, mu)
                 } else {
                     stick.force_n(n, k_t)
                 };
+                if advance && damped && !stick.sliding {
+                    // A sticking point's tangential spring is damped like
+                    // the normal one (the same coefficient, so the bound
+                    // above holds: the damping block is c I), within the
+                    // static limit; undamped, it rang at the sub-step
+                    // rate and the force depended on the sub-step count.
+                    let c = gamma * alpha * spring;
+                    tangential -= along_surface(slip_m, n) * (c / h_s);
+                    tangential = tangential.clamp_length_max(mu.static_coefficient * spring);
+                }
                 if !stick.sliding {
                     // A sticking point resists tangential motion too.
                     let t = (Mat3::IDENTITY - outer(n, n)) * k_t;

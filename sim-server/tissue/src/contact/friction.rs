@@ -105,7 +105,7 @@ impl Stick {
     ) -> Vec3 {
         // The old displacement on the new tangent plane, plus the new
         // tangential motion.
-        let trial = tangential(self.delta_m, n) + tangential(slip_m, n);
+        let trial = along_surface(self.delta_m, n) + along_surface(slip_m, n);
         let limit = if self.sliding {
             mu.dynamic_coefficient
         } else {
@@ -132,11 +132,12 @@ impl Stick {
     /// The tangential force on the tissue point now, without advancing
     /// (N).
     pub fn force_n(&self, n: Vec3, k_t_n_per_m: Real) -> Vec3 {
-        -tangential(self.delta_m, n) * k_t_n_per_m
+        -along_surface(self.delta_m, n) * k_t_n_per_m
     }
 }
 
-fn tangential(v: Vec3, n: Vec3) -> Vec3 {
+/// The part of `v` across the normal `n` (along the surface).
+pub fn along_surface(v: Vec3, n: Vec3) -> Vec3 {
     v - n * v.dot(n)
 }
 
