@@ -33,7 +33,7 @@ pub struct Args {
 }
 
 /// Cases in a run (for the progress bar).
-const CASES: usize = 31;
+const CASES: usize = 33;
 
 /// One chart per family of cases: the stable step bound and the largest
 /// displacement against the pushed value (log10 of it for the wide ranges).
@@ -44,6 +44,7 @@ fn plot(dir: &std::path::Path, cases: &[Case]) -> Result<()> {
         ("anisotropy_mu_ratio", true),
         ("membrane_alpha_over_young", true),
         ("sliver_thickness_m", true),
+        ("sliver_damping_per_s", true),
     ] {
         let x = |v: f64| if log { v.log10() } else { v };
         let of: Vec<&Case> = cases.iter().filter(|c| c.case == family).collect();
@@ -333,20 +334,43 @@ pub fn run(args: &Args) -> Result<()> {
             ));
         }
     }
-    // Slivers: a cell edge so short in z that the elements are flat.
-    for h in [0.004, 0.001, 0.0002] {
-        let scene = format!("{BLOCK}{}", material(0.4, "")).replace(
-            "size_m = [0.04, 0.02, 0.02], cell_m = 0.004",
-            &format!("size_m = [0.04, 0.02, {h}], cell_m = 0.004"),
-        );
+    // Slivers: a cell edge so short in z that the elements are flat; then
+    // the thinnest under more mass damping (the scene's 5 /s, 20 /s, 80 /s),
+    // to tell the plate's own dynamics from the contact's.
+    let sliver = |h: f64, damping: f64| {
+        let scene = format!("{BLOCK}{}", material(0.4, ""))
+            .replace(
+                "size_m = [0.04, 0.02, 0.02], cell_m = 0.004",
+                &format!("size_m = [0.04, 0.02, {h}], cell_m = 0.004"),
+            )
+            .replace(
+                "damping_per_s = 5.0",
+                &format!("damping_per_s = {damping:?}"),
+            );
         let on_top = move |t: f64| {
             let [x, y, z] = press(t);
             [x, y, z - 0.02 + h]
         };
+        (scene, on_top)
+    };
+    for h in [0.004, 0.001, 0.0002] {
+        let (scene, on_top) = sliver(h, 5.0);
         cases.push(run_case(
             &progress,
             "sliver_thickness_m",
             h,
+            &scene,
+            None,
+            Box::new(on_top),
+            d,
+        ));
+    }
+    for damping in [20.0, 80.0] {
+        let (scene, on_top) = sliver(0.0002, damping);
+        cases.push(run_case(
+            &progress,
+            "sliver_damping_per_s",
+            damping,
             &scene,
             None,
             Box::new(on_top),
