@@ -419,3 +419,36 @@ fn the_worker_thread_publishes_the_stiffness_the_step_computes() {
         "the stiffness must have come from the worker thread"
     );
 }
+
+#[test]
+fn implicit_springs_add_no_sub_steps_and_settle_to_the_explicit_springs_force() {
+    // The default integrates the springs implicitly: in contact the step
+    // keeps the tissue's own sub-steps; explicit springs need more. Both
+    // settle to the same equilibrium (the same law).
+    let run = |extra: &str| {
+        let mut p = scene("hook", extra);
+        let free = p.sim.substeps();
+        settle(&mut p, between(TOP_M + 0.0045), 100);
+        for k in 0..=300 {
+            step(
+                &mut p,
+                between(TOP_M + 0.0045 - 0.006 * k as f64 / 300.0),
+                1.0,
+            );
+        }
+        let pressed = p.sim.substeps();
+        (free, pressed, settle(&mut p, between(TOP_M - 0.0015), 1500))
+    };
+    let (free, implicit_substeps, implicit) = run("");
+    let (_, explicit_substeps, explicit) = run("[contact]\nsprings = \"explicit\"\n");
+    assert_eq!(implicit_substeps, free, "implicit springs set no sub-steps");
+    assert!(
+        explicit_substeps > free,
+        "explicit: {explicit_substeps} vs {free}"
+    );
+    assert!(implicit.z > 0.1, "{implicit}");
+    assert!(
+        (implicit - explicit).length() < 0.01 * explicit.length(),
+        "settled: implicit {implicit}, explicit {explicit}"
+    );
+}

@@ -727,6 +727,9 @@ fn contact_config(
         "max_tool_accel_m_s2",
         c.max_tool_accel_m_s2,
     )?;
+    if let Some(springs) = &s.springs {
+        c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
+    }
     if let Some(d) = &s.damping_s_per_m {
         let x = *d.get_ref();
         if !(x.is_finite() && x >= 0.0) {

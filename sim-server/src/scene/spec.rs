@@ -402,6 +402,18 @@ pub struct ContactSpec {
     pub max_tool_speed_m_s: Option<Spanned<f64>>,
     /// Acceleration limit of the simulated tool (m/s^2, default 100).
     pub max_tool_accel_m_s2: Option<Spanned<f64>>,
+    /// How the penalty springs are integrated (default: implicit).
+    pub springs: Option<Spanned<SpringsName>>,
+}
+
+/// How the penalty springs are integrated, by name.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum SpringsName {
+    /// At every sub-step with the tissue's forces (they size the sub-steps).
+    Explicit,
+    /// Linearly implicit at the end of each sub-step (they do not limit it).
+    Implicit,
 }
 
 /// Backends by name.

@@ -45,6 +45,10 @@ pub struct ContactConfig {
     pub max_tool_speed_m_s: Real,
     /// ... and changes its velocity at most this fast (m/s^2).
     pub max_tool_accel_m_s2: Real,
+    /// The penalty springs are integrated linearly implicitly at the end
+    /// of each sub-step ([`super::implicit`]) instead of explicitly with
+    /// the tissue's forces (which makes them size the sub-steps).
+    pub implicit_springs: bool,
 }
 
 impl Default for ContactConfig {
@@ -56,6 +60,7 @@ impl Default for ContactConfig {
             point_spacing: 0.5,
             max_tool_speed_m_s: 1.0,
             max_tool_accel_m_s2: 100.0,
+            implicit_springs: true,
         }
     }
 }

@@ -40,6 +40,7 @@
 
 use super::friction::{Carried, Friction, Stick, along_surface, point_key};
 use super::geometry::Segment;
+use super::implicit::ImplicitSprings;
 use crate::math::{Mat3, Real, Vec3, outer};
 
 /// One contact point: a triangle's vertices, its barycentric weights, the
@@ -173,6 +174,12 @@ pub struct ContactField {
     sticks: Vec<Stick>,
     /// The friction states of the points dropped last.
     carried: Carried,
+    /// Springs integrated implicitly ([`super::implicit`]), if so.
+    implicit: Option<Box<ImplicitSprings>>,
+    /// Whether the last evaluation was in the report window.
+    last_reported: bool,
+    /// Per tool: scratch for the implicit correction's force change.
+    tool_change_n: Vec<Vec3>,
     /// Per vertex: the contact damping coefficients summed (scratch, zero
     /// between evaluations).
     damping_sum: Vec<Real>,
@@ -187,6 +194,47 @@ impl ContactField {
             friction: vec![Friction::NONE; tools],
             ..Self::default()
         }
+    }
+
+    /// The same with the springs integrated implicitly (`true`) or
+    /// explicitly (see [`super::implicit`]).
+    pub fn with_implicit_springs(mut self, implicit: bool) -> Self {
+        self.implicit = implicit.then(Box::default);
+        self
+    }
+
+    /// Whether the springs are integrated implicitly.
+    pub fn implicit_springs(&self) -> bool {
+        self.implicit.is_some()
+    }
+
+    /// Corrects the explicit sub-step `u_new` (from `u_old`) for the
+    /// springs of the last evaluation taken at its end (linearly implicit;
+    /// see [`super::implicit`]), `inverse_d(i)` being a free vertex's
+    /// integration coefficient h^2 / m' (`None`: its motion is imposed).
+    /// The tools' reported forces include the change. Does nothing when
+    /// the springs are explicit. Returns the solver's iterations.
+    pub fn correct_implicit(
+        &mut self,
+        inverse_d: impl Fn(usize) -> Option<Real>,
+        u_old: &[[Real; 3]],
+        u_new: &mut [[Real; 3]],
+    ) -> usize {
+        let Some(mut solver) = self.implicit.take() else {
+            return 0;
+        };
+        let mut change = std::mem::take(&mut self.tool_change_n);
+        change.resize(self.force_sum_n.len(), Vec3::ZERO);
+        solver.correct(self, inverse_d, u_old, u_new, &mut change);
+        if self.last_reported {
+            for (sum, c) in self.force_sum_n.iter_mut().zip(&change) {
+                *sum += *c;
+            }
+        }
+        let iterations = solver.iterations();
+        self.tool_change_n = change;
+        self.implicit = Some(solver);
+        iterations
     }
 
     /// The same with each tool's Coulomb friction (`per_tool[i]` for tool
@@ -333,6 +381,7 @@ impl ContactField {
         if reported {
             self.evaluations += 1;
         }
+        self.last_reported = reported;
         let alpha = self.damping_s_per_m;
         let damped = alpha > 0.0 && !masses_kg.is_empty();
         let mut most_damping: Real = 0.0;

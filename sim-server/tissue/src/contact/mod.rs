@@ -89,6 +89,7 @@ mod decl;
 pub mod field;
 pub mod friction;
 mod geometry;
+pub mod implicit;
 mod proxy;
 mod reaction;
 mod sampling;

@@ -246,7 +246,8 @@ impl Tools {
             claims: Claims::new(model.vertex_count()),
             law,
             field: ContactField::new(decls.len(), config.damping_s_per_m)
-                .with_friction(&decls.iter().map(|d| d.friction).collect::<Vec<_>>()),
+                .with_friction(&decls.iter().map(|d| d.friction).collect::<Vec<_>>())
+                .with_implicit_springs(config.implicit_springs),
             sampler: None,
             stiffness: None,
             last_inputs: vec![None; decls.len()],
@@ -426,12 +427,17 @@ impl Tools {
                 }
             }
             sampler.select(sim, &mut self.index, &self.adjacency, &mut self.field);
-            let omega2 = springs_omega2(
-                &self.field,
-                &mut self.spring_n_per_m,
-                &mut self.sprung,
-                sim.model(),
-            );
+            // Implicit springs do not bound the step.
+            let omega2 = if self.field.implicit_springs() {
+                0.0
+            } else {
+                springs_omega2(
+                    &self.field,
+                    &mut self.spring_n_per_m,
+                    &mut self.sprung,
+                    sim.model(),
+                )
+            };
             sim.set_contact_bound(omega2);
         }
         for (i, t) in self.tools.iter_mut().enumerate() {

@@ -390,6 +390,13 @@ impl<S: Storage> Explicit<S> {
             };
             field.add_forces(rest, &self.u, &self.next, at, &mut self.fmem);
             self.kernel_step();
+            if field.implicit_springs() {
+                // After the swap: `u` is the explicit prediction, `next`
+                // the sub-step's start.
+                let (coef, kind) = (&self.coef, &self.kind);
+                let inverse_d = |i: usize| (kind[i] == kind::FREE).then(|| coef[i][0]);
+                field.correct_implicit(inverse_d, &self.next, &mut self.u);
+            }
             k += 1;
         }
         self.steps += 1;
