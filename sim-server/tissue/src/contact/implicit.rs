@@ -161,7 +161,9 @@ impl ImplicitSprings {
             self.iterations += 1;
             self.apply(field, acting, false);
             let pq = dot(&self.p, &self.q);
-            if !(pq > 0.0) {
+            // A non-positive curvature (or NaN) cannot come from an SPD
+            // system except by round-off at convergence: stop there.
+            if pq.is_nan() || pq <= 0.0 {
                 break;
             }
             let alpha = rz / pq;
@@ -213,25 +215,24 @@ impl ImplicitSprings {
     /// q = (D + H) x (`from_x`) or (D + H) p.
     fn apply(&mut self, field: &ContactField, acting: impl Fn(usize) -> bool, from_x: bool) {
         let v = if from_x { &self.x } else { &self.p };
-        for s in 0..v.len() {
-            self.q[s] = v[s] * self.d[s];
+        for ((q, v), d) in self.q.iter_mut().zip(v).zip(&self.d) {
+            *q = *v * *d;
         }
         for (i, p) in field.points().iter().enumerate() {
             if !acting(i) {
                 continue;
             }
+            let slots = p.vertices.map(|vertex| self.slot[vertex as usize]);
             let mut y = Vec3::ZERO;
-            let mut slots = [u32::MAX; 3];
-            for k in 0..3 {
-                slots[k] = self.slot[p.vertices[k] as usize];
-                if slots[k] != u32::MAX {
-                    y += v[slots[k] as usize] * p.weights[k];
+            for (slot, w) in slots.iter().zip(p.weights) {
+                if *slot != u32::MAX {
+                    y += v[*slot as usize] * w;
                 }
             }
             let gy = field.spring_hessians()[i] * y;
-            for k in 0..3 {
-                if slots[k] != u32::MAX {
-                    self.q[slots[k] as usize] += gy * p.weights[k];
+            for (slot, w) in slots.iter().zip(p.weights) {
+                if *slot != u32::MAX {
+                    self.q[*slot as usize] += gy * w;
                 }
             }
         }
