@@ -106,14 +106,18 @@ impl Sampler {
         // This step's points: those of the selection within this step's
         // reach (what a selection without the margin takes), so the
         // margin costs neither distances in every sub-step nor sub-steps.
+        let u = sim.displacements();
         for part in 0..field.parts().len() {
             let sweep = field.parts()[part];
             let to = SegmentQuery::new(&sweep.to);
             let keep_m = step_keep_m(&sweep);
             let keep2 = keep_m * keep_m;
             for p in self.cache.points_of(part) {
+                // Positions from the slices: this runs over every kept
+                // point every step.
                 let x = (0..3).fold(Vec3::ZERO, |x, k| {
-                    x + sim.position(VertexId(p.vertices[k])) * p.weights[k]
+                    let v = p.vertices[k] as usize;
+                    x + (rest[v] + Vec3::from_array(u[v])) * p.weights[k]
                 });
                 if to.distance2(x) < keep2 {
                     field.push(ContactPoint {
