@@ -281,12 +281,14 @@ impl ContactField {
         // Its part may come later (a selection being recorded): then it
         // starts unstuck.
         let part = self.parts.get(p.part as usize);
-        let key = part.map_or(0, |part| point_key(&p, part));
-        let rough = part.is_some_and(|part| self.friction[part.tool].is_active());
-        let stick = if rough {
-            self.carried.get(key)
-        } else {
-            Stick::default()
+        // The key only where friction needs it (this runs for every point
+        // of every step).
+        let (key, stick) = match part {
+            Some(part) if self.friction[part.tool].is_active() => {
+                let key = point_key(&p, part);
+                (key, self.carried.get(key))
+            }
+            _ => (0, Stick::default()),
         };
         self.keys.push(key);
         self.sticks.push(stick);
