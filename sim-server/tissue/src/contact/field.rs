@@ -544,8 +544,50 @@ impl ContactField {
     }
 }
 
+/// Test fixtures shared by the contact modules' unit tests.
+#[cfg(test)]
+pub(crate) mod fixtures {
+    use super::*;
+
+    /// Adds a part swept from `from` to `to` (radius `radius_m`) and one
+    /// point on it with `vertices`, `weights` and stiffness `k_n_per_m`.
+    pub(crate) fn add_point(
+        f: &mut ContactField,
+        (from, to): (Segment, Segment),
+        tip: bool,
+        radius_m: Real,
+        (vertices, weights): ([u32; 3], [Real; 3]),
+        k_n_per_m: Real,
+    ) {
+        let part = f.add_part(PartSweep {
+            tool: 0,
+            tip,
+            from,
+            to,
+            radius_m,
+        });
+        f.push(ContactPoint {
+            vertices,
+            weights,
+            part,
+            stiffness_n_per_m: k_n_per_m,
+        });
+    }
+
+    /// The end of a single sub-step of `h_s`, without damping.
+    pub(crate) fn whole_step(h_s: Real) -> SubStep<'static> {
+        SubStep {
+            h_s,
+            step_s: h_s,
+            s: 1.0,
+            masses_kg: &[],
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::fixtures::{add_point, whole_step};
     use super::*;
 
     fn field(tip_z: Real) -> (ContactField, Vec<Vec3>) {
@@ -559,19 +601,14 @@ mod tests {
             a_m: Vec3::new(0.0, 0.0, tip_z + 0.01),
             b_m: Vec3::new(0.0, 0.0, tip_z),
         };
-        let part = f.add_part(PartSweep {
-            tool: 0,
-            tip: true,
-            from: seg,
-            to: seg,
-            radius_m: 0.002,
-        });
-        f.push(ContactPoint {
-            vertices: [0, 1, 2],
-            weights: [0.25, 0.25, 0.5],
-            part,
-            stiffness_n_per_m: 100.0,
-        });
+        add_point(
+            &mut f,
+            (seg, seg),
+            true,
+            0.002,
+            ([0, 1, 2], [0.25, 0.25, 0.5]),
+            100.0,
+        );
         (f, rest)
     }
 
@@ -664,28 +701,18 @@ mod tests {
             // Ten steps forward, then back.
             let dx = if k < 10 { step_m } else { -step_m };
             f.clear();
-            let part = f.add_part(PartSweep {
-                tool: 0,
-                tip: false,
-                from: seg(x),
-                to: seg(x + dx),
-                radius_m: 0.002,
-            });
-            f.push(ContactPoint {
-                vertices: [0, 1, 2],
-                weights: [0.25, 0.25, 0.5],
-                part,
-                stiffness_n_per_m: 100.0,
-            });
+            let sweep = (seg(x), seg(x + dx));
+            add_point(
+                &mut f,
+                sweep,
+                false,
+                0.002,
+                ([0, 1, 2], [0.25, 0.25, 0.5]),
+                100.0,
+            );
             x += dx;
             f.zero(&mut out);
-            let at = SubStep {
-                h_s: 1e-3,
-                step_s: 1e-3,
-                s: 1.0,
-                masses_kg: &[],
-            };
-            f.add_forces(&rest, &u, &u, at, &mut out);
+            f.add_forces(&rest, &u, &u, whole_step(1e-3), &mut out);
             let tool = f.force_n(0);
             assert!((tool.z - normal).abs() < 1e-12, "{tool}");
             // The tissue gets the opposite.

@@ -246,7 +246,8 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> Real {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::contact::field::{ContactPoint, ONSET_OF_RADIUS, PartSweep, SubStep};
+    use crate::contact::field::ONSET_OF_RADIUS;
+    use crate::contact::field::fixtures::{add_point, whole_step};
     use crate::contact::geometry::Segment;
 
     /// Two triangles sharing an edge (four vertices), a point on each,
@@ -264,30 +265,12 @@ mod tests {
             a_m: Vec3::new(-0.02, 0.005, 0.002),
             b_m: Vec3::new(0.03, 0.005, 0.002),
         };
-        let part = f.add_part(PartSweep {
-            tool: 0,
-            tip: false,
-            from: seg,
-            to: seg,
-            radius_m: 0.004,
-        });
-        for (vertices, weights) in [([0, 1, 2], [0.2, 0.5, 0.3]), ([1, 3, 2], [0.3, 0.3, 0.4])] {
-            f.push(ContactPoint {
-                vertices,
-                weights,
-                part,
-                stiffness_n_per_m: 500.0,
-            });
+        for point in [([0, 1, 2], [0.2, 0.5, 0.3]), ([1, 3, 2], [0.3, 0.3, 0.4])] {
+            add_point(&mut f, (seg, seg), false, 0.004, point, 500.0);
         }
         let u = vec![[0.0; 3]; 4];
         let mut out = vec![[0.0; 3]; 4];
-        let at = SubStep {
-            h_s: 1e-3,
-            step_s: 1e-3,
-            s: 1.0,
-            masses_kg: &[],
-        };
-        f.add_forces(&rest, &u, &u, at, &mut out);
+        f.add_forces(&rest, &u, &u, whole_step(1e-3), &mut out);
         assert!(f.penetrations_m().iter().all(|d| *d > 0.0));
         (f, rest)
     }
@@ -391,19 +374,14 @@ mod tests {
                 a_m: Vec3::new(0.0, 0.0, 0.0025),
                 b_m: Vec3::new(0.0, 0.0, 0.0015),
             };
-            let part = f.add_part(PartSweep {
-                tool: 0,
-                tip: true,
-                from: seg,
-                to: seg,
-                radius_m: 0.002,
-            });
-            f.push(ContactPoint {
-                vertices: [0, 1, 2],
-                weights: [1.0, 0.0, 0.0],
-                part,
-                stiffness_n_per_m: k,
-            });
+            add_point(
+                &mut f,
+                (seg, seg),
+                true,
+                0.002,
+                ([0, 1, 2], [1.0, 0.0, 0.0]),
+                k,
+            );
             let (mut prev, mut u) = (vec![[0.0; 3]; 3], vec![[0.0; 3]; 3]);
             let mut out = vec![[0.0; 3]; 3];
             let a = h * h / m;
@@ -411,13 +389,7 @@ mod tests {
             let (mut low, mut high) = (Real::INFINITY, Real::NEG_INFINITY);
             for step in 0..200 {
                 f.zero(&mut out);
-                let at = SubStep {
-                    h_s: h,
-                    step_s: h,
-                    s: 1.0,
-                    masses_kg: &[],
-                };
-                f.add_forces(&rest, &u, &prev, at, &mut out);
+                f.add_forces(&rest, &u, &prev, whole_step(h), &mut out);
                 let mut next = u.clone();
                 for d in 0..3 {
                     next[0][d] = a * (out[0][d] - 100.0 * u[0][d]) + 2.0 * u[0][d] - prev[0][d];
