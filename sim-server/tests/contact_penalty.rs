@@ -262,6 +262,22 @@ fn bad_contact_constants_are_scene_errors_with_their_line() {
         err.contains("bad.toml:9") && err.contains("stiffness_factor"),
         "{err}"
     );
+    // An unknown spring integration names its line and the choices.
+    let src = SceneSource {
+        name: "bad.toml".into(),
+        dir: PathBuf::from("."),
+        text: text.replace("stiffness_factor = -3.0", "springs = \"sometimes\""),
+    };
+    let err = src.parse().err().map(|e| e.to_string()).unwrap_or_else(|| {
+        build_scene(&src, &src.parse().unwrap())
+            .err()
+            .unwrap()
+            .to_string()
+    });
+    assert!(
+        err.contains("bad.toml:9") && err.contains("implicit") && err.contains("explicit"),
+        "{err}"
+    );
 }
 
 #[test]
