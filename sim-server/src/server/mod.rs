@@ -115,6 +115,10 @@ pub struct RunSummary {
     pub contact_fraction: Real,
     /// Wall time of each physics step (us): p50, p99, p99.9, max.
     pub step_us: StepPercentiles,
+    /// Wall time from the loop's wake-up (a pose or the step's due time)
+    /// to its force sample sent (us): pose intake and the tools' update,
+    /// the step, the sample; the simulation's share of device -> force.
+    pub turnaround_us: StepPercentiles,
     /// Simulated time dropped after stalls instead of fast-forwarded (s):
     /// simulated time ends this far behind wall time.
     pub dropped_time_s: Real,

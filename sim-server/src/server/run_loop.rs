@@ -43,6 +43,10 @@ pub struct RunLoop<'a, B: Backend> {
     scene_out: SceneOut,
     summary: RunSummary,
     step_times: StepHistogram,
+    /// From the loop's wake-up to its force sample sent.
+    turnaround_times: StepHistogram,
+    /// When the loop woke for this step (ns).
+    woke_ns: u64,
     start_ns: u64,
     pacing: Pacing,
     stalls_told: u64,
@@ -123,6 +127,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             scene_out,
             summary,
             step_times: StepHistogram::new(),
+            turnaround_times: StepHistogram::new(),
+            woke_ns: 0,
             start_ns,
             stalls_told: 0,
             last_stall_told: 0,
@@ -147,6 +153,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
     /// The newest live pose (fresh, its publisher alive) and the scripts
     /// into the tools: contact detected and imposed before the step.
     pub fn intake(&mut self) -> Result<Option<PoseMsg>, RunError> {
+        self.woke_ns = monotonic_ns();
         self.poses.drain()?;
         let t0 = monotonic_ns();
         let pose = self.poses.active(t0);
@@ -251,6 +258,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             .send_copy(msg)
             .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
         s.samples_published += 1;
+        self.turnaround_times
+            .record(monotonic_ns().saturating_sub(self.woke_ns));
         self.poses.check_publishers(&self.node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if s.steps.is_multiple_of(self.frame_every) {
@@ -335,6 +344,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.poses_received = self.poses.received;
         summary.pose_timeouts = self.poses.timeouts;
         summary.step_us = self.step_times.percentiles_us();
+        summary.turnaround_us = self.turnaround_times.percentiles_us();
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
         if let Some((counts, error)) = self.mesh_out.finish() {

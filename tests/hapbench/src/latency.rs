@@ -107,6 +107,9 @@ struct Report {
     tick_lateness_us: Stats,
     /// The simulation's physics step (its run summary's `step_us`).
     sim_step_us: serde_json::Value,
+    /// The simulation's turnaround, wake-up to sample sent (its run
+    /// summary's `turnaround_us`).
+    sim_turnaround_us: serde_json::Value,
     /// Steps the simulation started early on a fresh pose.
     sim_steps_on_pose: u64,
     /// Steps the simulation took.
@@ -330,6 +333,7 @@ pub fn run(args: &Args) -> Result<()> {
         device_to_force_us: stats(&mut dev2f),
         tick_lateness_us: stats(&mut ticks),
         sim_step_us: sim_summary["step_us"].clone(),
+        sim_turnaround_us: sim_summary["turnaround_us"].clone(),
         sim_steps_on_pose: sim_summary["steps_on_pose"].as_u64().unwrap_or(0),
         sim_steps: sim_summary["steps"].as_u64().unwrap_or(0),
     };
@@ -350,16 +354,20 @@ pub fn run(args: &Args) -> Result<()> {
             s.count, s.p50, s.p99, s.p999, s.max
         );
     }
-    let step = |k: &str| report.sim_step_us[k].as_f64().unwrap_or(f64::NAN);
-    println!(
-        "{:<22} {:>8} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
-        "sim step",
-        report.sim_steps,
-        step("p50"),
-        step("p99"),
-        step("p999"),
-        step("max")
-    );
+    for (name, v) in [
+        ("sim step", &report.sim_step_us),
+        ("sim turnaround", &report.sim_turnaround_us),
+    ] {
+        let at = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "{name:<22} {:>8} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
+            report.sim_steps,
+            at("p50"),
+            at("p99"),
+            at("p999"),
+            at("max")
+        );
+    }
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("cannot write {}", path.display()))?;

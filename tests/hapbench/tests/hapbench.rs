@@ -299,6 +299,12 @@ fn hapbench_latency_measures_the_system_beside_its_baselines() {
     );
     // The simulation's own step time, beside the latencies.
     assert!(v["sim_step_us"]["p50"].as_f64().unwrap() > 0.0, "{v}");
+    // Its turnaround (wake-up to sample sent) contains the step.
+    let (turn, step) = (
+        v["sim_turnaround_us"]["max"].as_f64().unwrap(),
+        v["sim_step_us"]["max"].as_f64().unwrap(),
+    );
+    assert!(turn >= step, "turnaround max {turn} < step max {step}: {v}");
     assert!(v["sim_steps"].as_u64().unwrap() > 100, "{v}");
     assert!(dir.join("latency.svg").exists());
 }
