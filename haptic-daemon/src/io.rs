@@ -5,7 +5,11 @@
 //! It sleeps parked (at most 1 ms) and the RT thread unparks it after each
 //! pose write, so a pose is published one thread wake-up after the device
 //! read; it then notifies the session's `pose-ready` event, which wakes a
-//! simulation waiting for its next step.
+//! simulation waiting for its next step. With a spin window
+//! ([`IoSpin`], `haptic-daemon run --io-spin-us`) it instead wakes shortly
+//! before the next pose is due and polls the slot, so the pose reaches the
+//! simulation after one wake-up (the simulation's), at the cost of the
+//! window's CPU every period.
 
 use crate::daemon::Shared;
 use crate::rt::LatenessHistogram;
@@ -110,12 +114,50 @@ pub(crate) fn write_row(w: &mut impl Write, t: &TelemetryTick) -> std::io::Resul
     )
 }
 
-/// Runs until the RT thread is done and the queue is drained.
+/// Polling for the next pose around the time it is due.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IoSpin {
+    /// The RT loop's period (ns): the next pose is due a period after the
+    /// last one's device read.
+    pub period_ns: u64,
+    /// The window (ns): polling starts half of it before the pose is due
+    /// and gives up at its end (then the thread parks as without it).
+    pub window_ns: u64,
+}
+
+impl IoSpin {
+    /// Polls `seq` until it differs from `last` or the window around
+    /// `last_read_ns + period` ends; sleeps (parked) until the window
+    /// opens. Returns whether a new pose came within it.
+    fn wait(&self, last_read_ns: u64, last: u64, seq: impl Fn() -> u64) -> bool {
+        let due = last_read_ns.saturating_add(self.period_ns);
+        let (open, close) = (
+            due.saturating_sub(self.window_ns / 2),
+            due.saturating_add(self.window_ns / 2),
+        );
+        let now = shared::monotonic_ns();
+        if now < open {
+            // An unpark (the pose came early) ends this sleep too.
+            std::thread::park_timeout(Duration::from_nanos(open - now));
+        }
+        while shared::monotonic_ns() < close {
+            if seq() != last {
+                return true;
+            }
+            std::hint::spin_loop();
+        }
+        seq() != last
+    }
+}
+
+/// Runs until the RT thread is done and the queue is drained; `spin`:
+/// poll for poses around their due time instead of waiting to be woken.
 pub fn run_io(
     shared: Arc<Shared>,
     session: SessionName,
     record: Option<PathBuf>,
     stats: Arc<Mutex<Stats>>,
+    spin: Option<IoSpin>,
 ) -> Result<(), IoError> {
     let node = services::node("haptic-daemon-io")?;
     let pose_pub = services::publisher(&services::pose_service(&node, &session)?)?;
@@ -147,6 +189,7 @@ pub fn run_io(
     let mut batch = TelemetryBatch::default();
     let mut batches = 0u64;
     let mut last_pose_seq = 0u64;
+    let mut last_read_ns = 0u64;
     let mut pose_msgs = 0u64;
     let mut next_seq = 0u64;
     let mut last_wake_ns = shared::monotonic_ns();
@@ -158,6 +201,7 @@ pub fn run_io(
             && p.seq != last_pose_seq
         {
             last_pose_seq = p.seq;
+            last_read_ns = p.t_ns;
             // Pose seq starts at 1: a force sample's pose_seq 0 means "no pose".
             pose_msgs += 1;
             let mut msg = PoseMsg {
@@ -238,8 +282,17 @@ pub fn run_io(
         if done && shared.telemetry.is_empty() {
             break;
         }
-        // Until the RT thread's next pose (or 1 ms).
-        std::thread::park_timeout(Duration::from_millis(1));
+        match spin {
+            // Poll around the next pose's due time (once a pose came).
+            Some(spin) if last_read_ns != 0 && !done => {
+                let seq = || shared.pose.read().map_or(last_pose_seq, |p| p.seq);
+                if !spin.wait(last_read_ns, last_pose_seq, seq) {
+                    std::thread::park_timeout(Duration::from_millis(1));
+                }
+            }
+            // Until the RT thread's next pose (or 1 ms).
+            _ => std::thread::park_timeout(Duration::from_millis(1)),
+        }
     }
     if batch.count > 0 {
         batch.seq = batches;
@@ -249,4 +302,49 @@ pub fn run_io(
         w.flush().map_err(record_err)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::Cell;
+
+    const MS: u64 = 1_000_000;
+
+    #[test]
+    fn the_spin_returns_when_the_pose_changes_within_the_window() {
+        let spin = IoSpin {
+            period_ns: MS,
+            window_ns: 10 * MS,
+        };
+        // Due now: the window is open; the slot changes at the third look.
+        let polls = Cell::new(0u64);
+        let seq = || {
+            polls.set(polls.get() + 1);
+            if polls.get() >= 3 { 8 } else { 7 }
+        };
+        let last_read = shared::monotonic_ns() - MS;
+        assert!(spin.wait(last_read, 7, seq));
+        assert_eq!(polls.get(), 3);
+    }
+
+    #[test]
+    fn the_spin_gives_up_at_the_window_end_and_does_not_wait_for_a_past_one() {
+        let spin = IoSpin {
+            period_ns: MS,
+            window_ns: 2 * MS,
+        };
+        // A window long past: one look, no wait.
+        let polls = Cell::new(0u64);
+        let seq = || {
+            polls.set(polls.get() + 1);
+            7
+        };
+        assert!(!spin.wait(shared::monotonic_ns() - 100 * MS, 7, seq));
+        assert_eq!(polls.get(), 1);
+        // A window open now: it polls until the window closes, then gives up.
+        let start = shared::monotonic_ns();
+        assert!(!spin.wait(start - MS, 7, || 7));
+        assert!(shared::monotonic_ns() >= start + MS - MS / 10);
+    }
 }

@@ -8,7 +8,7 @@ use haptic_daemon::device::{
     Device, HandModel, Haply, Path, Plugin, Replay, Simulated, Trajectory,
 };
 use haptic_daemon::extrapolate::Method;
-use haptic_daemon::io::{Stats, run_io};
+use haptic_daemon::io::{IoSpin, Stats, run_io};
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
 use record_cmd::{RecordArgs, record_main};
@@ -107,6 +107,13 @@ struct RunArgs {
     /// lateness, more CPU; at most half a period).
     #[arg(long, default_value_t = 0)]
     spin_us: u64,
+    /// The I/O thread polls for each pose in a window of this many
+    /// microseconds around its due time instead of being woken by the RT
+    /// thread: one thread wake-up less on the pose's way to the
+    /// simulation, the window's CPU every period (0: off; at most a
+    /// period).
+    #[arg(long, default_value_t = 0)]
+    io_spin_us: u64,
     /// No live status line.
     #[arg(long)]
     quiet: bool,
@@ -252,6 +259,11 @@ fn main() -> Result<()> {
         signal_hook::flag::register(sig, stop_signal.clone())?;
     }
     let stats = Arc::new(Mutex::new(Stats::default()));
+    let period_ns = (1e9 / args.rate).round() as u64;
+    let io_spin = (args.io_spin_us > 0).then(|| IoSpin {
+        period_ns,
+        window_ns: args.io_spin_us.saturating_mul(1000).min(period_ns),
+    });
     let io = {
         let (shared, session, record, stats) = (
             shared.clone(),
@@ -261,9 +273,8 @@ fn main() -> Result<()> {
         );
         std::thread::Builder::new()
             .name("haptic-io".into())
-            .spawn(move || run_io(shared, session, record, stats))?
+            .spawn(move || run_io(shared, session, record, stats, io_spin))?
     };
-    let period_ns = (1e9 / args.rate).round() as u64;
     let spin_ns = args.spin_us.saturating_mul(1000);
     let (report_tx, report_rx) = std::sync::mpsc::channel::<RtReport>();
     let rt = {

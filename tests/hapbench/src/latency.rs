@@ -52,6 +52,11 @@ pub struct Args {
     /// --dt-s`).
     #[arg(long)]
     pub dt_s: Option<f64>,
+    /// The daemon's I/O thread polls for poses in a window of this many
+    /// microseconds (`haptic-daemon run --io-spin-us`; 0: woken by the RT
+    /// thread).
+    #[arg(long, default_value_t = 0)]
+    pub io_spin_us: u64,
 }
 
 /// Flags of the hidden probe publisher (the baseline's other process).
@@ -249,6 +254,7 @@ pub fn run(args: &Args) -> Result<()> {
     let sim_args: Vec<&str> = sim_args.iter().map(String::as_str).collect();
     let mut sim = spawn(&sim_args, sibling("sim-server")?)?;
     std::thread::sleep(Duration::from_millis(500));
+    let (daemon_for_s, io_spin_us) = ((d + 0.5).to_string(), args.io_spin_us.to_string());
     let mut daemon = spawn(
         &[
             "run",
@@ -258,7 +264,9 @@ pub fn run(args: &Args) -> Result<()> {
             "--session",
             &session_name,
             "--duration-s",
-            &(d + 0.5).to_string(),
+            &daemon_for_s,
+            "--io-spin-us",
+            &io_spin_us,
         ],
         sibling("haptic-daemon")?,
     )?;
