@@ -66,8 +66,9 @@ impl ImplicitSprings {
     /// Corrects `u_new` (the explicit prediction u*) for the springs of
     /// `field`'s last evaluation, from `u_old` (u at the sub-step's
     /// start); `inverse_d(i)` is a_i = 1 / D_i for a free vertex, `None`
-    /// for one whose motion is imposed. Returns, per tool, the change of
-    /// the force on the tool that the implicit springs make (N).
+    /// for one whose motion is imposed. Writes into `tool_change_n`, per
+    /// tool, the change of the force on the tool that the implicit springs
+    /// make (N).
     pub fn correct(
         &mut self,
         field: &ContactField,
