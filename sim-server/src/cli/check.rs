@@ -247,7 +247,18 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
         } else {
             b.tools
                 .iter()
-                .map(|t| format!("{} ({:?})", t.name, t.kind).to_lowercase())
+                .map(|t| {
+                    let kind = format!("{:?}", t.kind).to_lowercase();
+                    let f = t.friction;
+                    if f.is_active() {
+                        format!(
+                            "{} ({kind}, friction mu_s {}, mu_d {})",
+                            t.name, f.static_coefficient, f.dynamic_coefficient
+                        )
+                    } else {
+                        format!("{} ({kind})", t.name)
+                    }
+                })
                 .collect::<Vec<_>>()
                 .join(", ")
         }
