@@ -24,7 +24,7 @@
 //! turning of the normal around the tool stay explicit (the damping is
 //! bounded as before; the turning is soft).
 
-use super::field::ContactField;
+use super::field::{ContactField, ContactPoint};
 use crate::math::{Mat3, Real, Vec3};
 
 /// Iterations at most (the system's condition is about 1 + k_p / (m / h^2),
@@ -94,7 +94,6 @@ impl ImplicitSprings {
             }
             for v in p.vertices {
                 let vi = v as usize;
-                let delta = Vec3::from_array(u_new[vi]) - Vec3::from_array(u_old[vi]);
                 match inverse_d(vi) {
                     Some(a) if a > 0.0 && self.slot[vi] == u32::MAX => {
                         self.slot[vi] = self.vertices.len() as u32;
@@ -102,7 +101,8 @@ impl ImplicitSprings {
                         self.d.push(1.0 / a);
                     }
                     Some(a) if a > 0.0 => {}
-                    _ => self.known[vi] = delta,
+                    // Imposed: its motion is known.
+                    _ => self.known[vi] = Vec3::from_array(u_new[vi]) - Vec3::from_array(u_old[vi]),
                 }
             }
         }
@@ -132,10 +132,7 @@ impl ImplicitSprings {
                 continue;
             }
             let g = hessians[i];
-            let y = (0..3).fold(Vec3::ZERO, |y, k| {
-                y + self.known[p.vertices[k] as usize] * p.weights[k]
-            });
-            let gy = g * y;
+            let gy = g * at_point(p, |v| self.known[v]);
             for k in 0..3 {
                 let slot = self.slot[p.vertices[k] as usize];
                 if slot != u32::MAX {
@@ -190,15 +187,9 @@ impl ImplicitSprings {
             if !acting(i) {
                 continue;
             }
-            let y = (0..3).fold(Vec3::ZERO, |y, k| {
-                let v = p.vertices[k] as usize;
-                let slot = self.slot[v];
-                let delta = if slot == u32::MAX {
-                    self.known[v]
-                } else {
-                    self.x[slot as usize]
-                };
-                y + delta * p.weights[k]
+            let y = at_point(p, |v| match self.slot[v] {
+                u32::MAX => self.known[v],
+                slot => self.x[slot as usize],
             });
             tool_change_n[field.parts()[p.part as usize].tool] += hessians[i] * y;
         }
@@ -238,6 +229,14 @@ impl ImplicitSprings {
             }
         }
     }
+}
+
+/// J_p applied to per-vertex `value`: its weighted sum over the point's
+/// triangle.
+fn at_point(p: &ContactPoint, value: impl Fn(usize) -> Vec3) -> Vec3 {
+    (0..3).fold(Vec3::ZERO, |y, k| {
+        y + value(p.vertices[k] as usize) * p.weights[k]
+    })
 }
 
 fn dot(a: &[Vec3], b: &[Vec3]) -> Real {
