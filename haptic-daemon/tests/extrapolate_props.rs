@@ -86,7 +86,7 @@ proptest! {
         let f = e.force(t, p);
         let bound = match accepted.as_slice() {
             [] => 0.0,
-            [.., last] if matches!(m, Method::LocalModel | Method::LocalNormal) => {
+            [.., last] if matches!(m, Method::LocalModel | Method::LocalNormal | Method::LocalProblem) => {
                 norm(last.force_n) + frobenius(&last.stiffness_n_per_m) * norm(sub(last.position_m, p))
             }
             [last] => norm(last.force_n),

@@ -134,6 +134,106 @@ pub struct ForceMsg {
     pub tools: [ToolForce; MAX_TOOLS],
 }
 
+/// [`LocalContactMsg`]: at most this many vertices.
+pub const LOCAL_MAX_VERTICES: usize = 24;
+/// [`LocalContactMsg`]: at most this many contact points.
+pub const LOCAL_MAX_POINTS: usize = 1024;
+/// [`LocalContactMsg`]: at most this many tool parts (tip, shaft).
+pub const LOCAL_MAX_PARTS: usize = 2;
+/// [`LocalContactMsg::compliance_m_per_n`]: entries (3 x 24 squared).
+pub const LOCAL_COMPLIANCE_LEN: usize = 9 * LOCAL_MAX_VERTICES * LOCAL_MAX_VERTICES;
+
+/// A tool part of [`LocalContactMsg`]: a capsule (64 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.LocalPart.v1")]
+pub struct LocalPart {
+    /// One end of the segment (m).
+    pub a_m: [f64; 3],
+    /// The other end (m).
+    pub b_m: [f64; 3],
+    /// Radius (m).
+    pub radius_m: f64,
+    /// Penetration over which a point's spring force grows quadratically
+    /// (m): `k d^2 / (2 d0)` below it, `k (d - d0 / 2)` past it.
+    pub onset_m: f64,
+}
+
+/// A contact point of [`LocalContactMsg`] (40 bytes): on the triangle of
+/// vertices `slots` (indices into the message's vertices) at barycentric
+/// `weights`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.LocalPoint.v1")]
+pub struct LocalPoint {
+    /// Barycentric weights (sum 1).
+    pub weights: [f64; 3],
+    /// Spring stiffness (N/m).
+    pub stiffness_n_per_m: f64,
+    /// The triangle's vertices (indices < `vertex_count`).
+    pub slots: [u16; 3],
+    /// The part it faces (index < `part_count`).
+    pub part: u16,
+}
+
+/// Sim -> daemon: the contact problem around one tool after a step (the
+/// `local-contact` stream; see `docs/protocol.md`): the tool's capsules,
+/// the surface points near it with their vertices' positions, and the
+/// tissue's compliance at those vertices, for the daemon to solve again at
+/// every tick (the `local-problem` extrapolator).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("hapsim.LocalContactMsg.v1")]
+pub struct LocalContactMsg {
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// The tool (index in the scene's tools).
+    pub tool: u32,
+    /// `seq` of the force message of the step it was taken at.
+    pub seq: u64,
+    /// `CLOCK_MONOTONIC` (ns) when it was taken.
+    pub t_ns: u64,
+    /// The tool position the step used (m).
+    pub tool_position_m: [f64; 3],
+    /// Parts used.
+    pub part_count: u32,
+    /// Vertices used.
+    pub vertex_count: u32,
+    /// Points used.
+    pub point_count: u32,
+    /// Padding.
+    pub reserved: u32,
+    /// The tool's capsules.
+    pub parts: [LocalPart; LOCAL_MAX_PARTS],
+    /// The vertices' positions (m).
+    pub positions_m: [[f64; 3]; LOCAL_MAX_VERTICES],
+    /// The points.
+    pub points: [LocalPoint; LOCAL_MAX_POINTS],
+    /// The tissue's compliance at the vertices, (K^-1)_VV (m/N), row-major
+    /// `3 vertex_count` square (the first `(3 vertex_count)^2` entries).
+    pub compliance_m_per_n: [f64; LOCAL_COMPLIANCE_LEN],
+}
+
+impl Default for LocalContactMsg {
+    fn default() -> Self {
+        Self {
+            version: PROTOCOL_VERSION,
+            tool: 0,
+            seq: 0,
+            t_ns: 0,
+            tool_position_m: [0.0; 3],
+            part_count: 0,
+            vertex_count: 0,
+            point_count: 0,
+            reserved: 0,
+            parts: [LocalPart::default(); LOCAL_MAX_PARTS],
+            positions_m: [[0.0; 3]; LOCAL_MAX_VERTICES],
+            points: [LocalPoint::default(); LOCAL_MAX_POINTS],
+            compliance_m_per_n: [0.0; LOCAL_COMPLIANCE_LEN],
+        }
+    }
+}
+
 /// Sim -> viewer: the user header of the mesh-state slice stream (the slice
 /// holds `vertex_count` positions as `[f32; 3]` in metres).
 #[repr(C)]
@@ -384,6 +484,15 @@ mod tests {
         t.set_name(&"é".repeat(20));
         assert_eq!(t.name(), "é".repeat(16));
         assert_eq!(std::mem::size_of::<TelemetryTick>(), 88);
+        assert_eq!(std::mem::size_of::<LocalPart>(), 64);
+        assert_eq!(std::mem::size_of::<LocalPoint>(), 40);
+        assert_eq!(
+            std::mem::size_of::<LocalContactMsg>(),
+            64 + 64 * LOCAL_MAX_PARTS
+                + 24 * LOCAL_MAX_VERTICES
+                + 40 * LOCAL_MAX_POINTS
+                + 8 * LOCAL_COMPLIANCE_LEN
+        );
         assert_eq!(
             std::mem::size_of::<TelemetryBatch>(),
             16 + 88 * TELEMETRY_BATCH

@@ -4,8 +4,8 @@
 
 use crate::SessionName;
 use crate::protocol::{
-    ForceMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, RestHeader, SceneInfo, TelemetryBatch,
-    TopologyHeader,
+    ForceMsg, LocalContactMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, RestHeader, SceneInfo,
+    TelemetryBatch, TopologyHeader,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -49,6 +49,8 @@ pub mod stream {
     pub const REST: &str = "rest";
     /// Sim -> clients: the surface as built, before any cut, once.
     pub const SURFACE0: &str = "surface0";
+    /// Sim -> daemon: the contact problem around a tool.
+    pub const LOCAL_CONTACT: &str = "local-contact";
 }
 
 /// Why a service could not be used.
@@ -182,6 +184,15 @@ pub fn force_service(
     session: &SessionName,
 ) -> Result<PortFactory<Ipc, ForceMsg, ()>, ServiceError> {
     open(node, session, stream::FORCE, FORCE_BUFFER_MAX)
+}
+
+/// The local-contact stream (sim -> daemon): the contact problem around
+/// a tool, newest kept on overflow (the daemon needs only the latest).
+pub fn local_contact_service(
+    node: &Node<Ipc>,
+    session: &SessionName,
+) -> Result<PortFactory<Ipc, LocalContactMsg, ()>, ServiceError> {
+    open(node, session, stream::LOCAL_CONTACT, FORCE_BUFFER_LATEST)
 }
 
 /// The scene-info stream (sim -> clients): published once at start, kept

@@ -1,11 +1,16 @@
 //! The force sample on the wire: a step's tool reports and reactions into
 //! the protocol's `ForceMsg` (the only conversion from the simulation's
-//! [`Reaction`] to the wire: the server and hapbench both use it).
+//! [`Reaction`] to the wire: the server and hapbench both use it), and the
+//! contact problem around a tool into `LocalContactMsg`.
 
 use crate::backend::Backend;
-use crate::contact::{ContactReport, Reaction, Tools};
+use crate::contact::field::ONSET_OF_RADIUS;
+use crate::contact::{ContactReport, LocalContact, Reaction, Tools};
 use crate::math::Vec3;
-use shared::protocol::{CONTACT, CUTTING, ForceMsg, GRIPPING, MAX_TOOLS, ToolForce};
+use shared::protocol::{
+    CONTACT, CUTTING, ForceMsg, GRIPPING, LOCAL_MAX_PARTS, LOCAL_MAX_POINTS, LOCAL_MAX_VERTICES,
+    LocalContactMsg, LocalPart, LocalPoint, MAX_TOOLS, PROTOCOL_VERSION, ToolForce,
+};
 
 /// Each tool's protocol flags from its report of the step.
 pub fn tool_flags(reports: &[ContactReport]) -> [u32; MAX_TOOLS] {
@@ -55,6 +60,82 @@ pub fn tool_force(r: &Reaction, position_m: Vec3, pose_seq: u64, flags: u32) -> 
         flags,
         reserved: 0,
     }
+}
+
+/// Tool `tool`'s contact problem after a step as the wire carries it (the
+/// `local-contact` stream), taken at the step whose force message has
+/// `seq`, `t_ns`; `lc` within the message's capacity (as
+/// [`local_contact_into`] asks for it).
+pub fn local_contact_msg(
+    lc: &LocalContact,
+    tool: u32,
+    seq: u64,
+    t_ns: u64,
+    out: &mut LocalContactMsg,
+) {
+    let nv = lc.vertices.len().min(LOCAL_MAX_VERTICES);
+    let np = lc.points.len().min(LOCAL_MAX_POINTS);
+    let nc = lc.parts.len().min(LOCAL_MAX_PARTS);
+    out.version = PROTOCOL_VERSION;
+    out.tool = tool;
+    out.seq = seq;
+    out.t_ns = t_ns;
+    out.tool_position_m = lc.tool_position_m.to_array();
+    out.part_count = nc as u32;
+    out.vertex_count = nv as u32;
+    out.point_count = np as u32;
+    for (o, p) in out.parts.iter_mut().zip(&lc.parts[..nc]) {
+        *o = LocalPart {
+            a_m: p.segment.a_m.to_array(),
+            b_m: p.segment.b_m.to_array(),
+            radius_m: p.radius_m,
+            onset_m: ONSET_OF_RADIUS * p.radius_m,
+        };
+    }
+    for (o, x) in out.positions_m.iter_mut().zip(&lc.positions_m[..nv]) {
+        *o = x.to_array();
+    }
+    for (o, p) in out.points.iter_mut().zip(&lc.points[..np]) {
+        *o = LocalPoint {
+            weights: p.weights,
+            stiffness_n_per_m: p.stiffness_n_per_m,
+            slots: p.slots,
+            part: p.part as u16,
+        };
+    }
+    let n = 3 * nv;
+    if lc.compliance_m_per_n.len() == n * n {
+        out.compliance_m_per_n[..n * n].copy_from_slice(&lc.compliance_m_per_n);
+    } else {
+        // Without a compliance (never published so): nothing to solve.
+        out.vertex_count = 0;
+        out.point_count = 0;
+    }
+}
+
+/// How far beyond a step's reach the contact problem sent to the haptic
+/// loop reaches (m): what a hand moving at 50 mm/s covers in the ~60 ms a
+/// 30 Hz sample is old when the next one arrives. Measured (`hapbench
+/// extrapolation`, box paths): 2 mm loses the tool off the sampled
+/// surface in slides, 3 and 4 mm give the same errors.
+pub const LOCAL_MARGIN_M: f64 = 3e-3;
+
+/// Tool `tool`'s contact problem after the last step into `lc`, within the
+/// wire's capacity; false when there is none (see [`Tools::local_contact`]).
+pub fn local_contact_into<B: Backend>(
+    tools: &mut Tools,
+    sim: &B,
+    tool: usize,
+    lc: &mut LocalContact,
+) -> bool {
+    tools.local_contact(
+        sim,
+        tool,
+        LOCAL_MARGIN_M,
+        LOCAL_MAX_VERTICES,
+        LOCAL_MAX_POINTS,
+        lc,
+    )
 }
 
 #[cfg(test)]

@@ -42,6 +42,7 @@
 
 mod formulas;
 pub mod local;
+pub mod local_problem;
 
 pub use formulas::{
     MAX_POSITION_FACTOR, MAX_TIME_FACTOR, MIN_STEP_M, linear, local_model, paper_position_factor,
@@ -117,17 +118,25 @@ pub enum Method {
     /// force while the dimple travels with the tool), pressing and
     /// withdrawing follow the contact's true normal stiffness.
     LocalNormal,
+    /// The simulation's contact problem around the tool, solved again for
+    /// each tool position ([`local_problem`]: the surface near the tool,
+    /// its contact springs and the tissue's compliance, sent with each
+    /// step on the `local-contact` stream). Without a problem (none
+    /// received yet, a backend or mesh that cannot give one) it renders as
+    /// [`Method::LocalNormal`].
+    LocalProblem,
 }
 
 impl Method {
     /// Every method, in telemetry code order.
-    pub const ALL: [Method; 6] = [
+    pub const ALL: [Method; 7] = [
         Method::Constant,
         Method::LinearTime,
         Method::LinearPosition,
         Method::LinearPositionSigned,
         Method::LocalModel,
         Method::LocalNormal,
+        Method::LocalProblem,
     ];
 
     /// The command-line name.
@@ -139,6 +148,7 @@ impl Method {
             Method::LinearPositionSigned => "linear-position-signed",
             Method::LocalModel => "local-model",
             Method::LocalNormal => "local-normal",
+            Method::LocalProblem => "local-problem",
         }
     }
 
@@ -236,14 +246,16 @@ impl Extrapolator {
                 position_m,
             ),
             (Method::LocalModel, _) => f_n,
-            (Method::LocalNormal, _) if last.in_contact => local_normal_unilateral(
-                f_n,
-                &last.stiffness_n_per_m,
-                self.max_stiffness_n_per_m,
-                last.position_m,
-                position_m,
-            ),
-            (Method::LocalNormal, _) => f_n,
+            (Method::LocalNormal | Method::LocalProblem, _) if last.in_contact => {
+                local_normal_unilateral(
+                    f_n,
+                    &last.stiffness_n_per_m,
+                    self.max_stiffness_n_per_m,
+                    last.position_m,
+                    position_m,
+                )
+            }
+            (Method::LocalNormal | Method::LocalProblem, _) => f_n,
             (_, None) => f_n,
             (Method::LinearTime, Some(prev)) => time_factor(prev.t_ns, last.t_ns, now_ns)
                 .map_or(f_n, |k| linear(prev.force_n, f_n, k)),

@@ -39,7 +39,8 @@ fn names_round_trip() {
             "linear-position",
             "linear-position-signed",
             "local-model",
-            "local-normal"
+            "local-normal",
+            "local-problem"
         ]
     );
     for m in Method::ALL {

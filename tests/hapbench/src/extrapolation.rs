@@ -27,6 +27,83 @@ use sim_server::wire::{force_sample, tool_flags};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use haptic_daemon::extrapolate::local_problem::{LocalContactMsg, LocalProblem};
+use sim_server::contact::LocalContact;
+use sim_server::wire::{local_contact_into, local_contact_msg};
+
+/// `local-problem` rendered while the simulation runs (its problems are
+/// too large to keep for the whole path): after step j, the ticks in the
+/// window in which sample j is the newest delivered one.
+struct LocalRender<'a> {
+    lp: LocalProblem,
+    lc: LocalContact,
+    msg: Box<LocalContactMsg>,
+    fallback: Extrapolator,
+    hand: &'a [[f64; 3]],
+    haptic_s: f64,
+    sim_s: f64,
+    rendered: Vec<[f64; 3]>,
+}
+
+impl<'a> LocalRender<'a> {
+    fn new(hand: &'a [[f64; 3]], haptic_s: f64, sim_s: f64, ticks: usize) -> Self {
+        Self {
+            lp: LocalProblem::new(),
+            lc: LocalContact::default(),
+            msg: Box::default(),
+            fallback: Extrapolator::new(Method::LocalProblem),
+            hand,
+            haptic_s,
+            sim_s,
+            rendered: Vec::with_capacity(ticks),
+        }
+    }
+
+    /// After step `j` (its sample `sample`): the problem through the wire
+    /// as the server sends it, then the ticks until the next delivery.
+    fn after_step<B: sim_server::backend::Backend>(
+        &mut self,
+        j: usize,
+        sample: &Sample,
+        tools: &mut sim_server::contact::Tools,
+        sim: &B,
+    ) {
+        let ns = |t: f64| (t * 1e9).round() as u64;
+        let delivered = ForceSample {
+            t_ns: ns((j + 1) as f64 * self.sim_s),
+            seq: j as u64,
+            ..*sample
+        };
+        if local_contact_into(tools, sim, 0, &mut self.lc) {
+            local_contact_msg(&self.lc, 0, j as u64, delivered.t_ns, &mut self.msg);
+            if self.lp.set_from_wire(&self.msg).is_err() {
+                self.lp.clear();
+            }
+        } else {
+            self.lp.clear();
+        }
+        // Ticks before the first delivery render nothing.
+        while self.rendered.len() < self.hand.len()
+            && (self.rendered.len() as f64) * self.haptic_s < (j + 1) as f64 * self.sim_s - 1e-12
+        {
+            self.rendered.push([0.0; 3]);
+        }
+        self.fallback.push(&delivered);
+        let end = (j + 2) as f64 * self.sim_s - 1e-12;
+        while self.rendered.len() < self.hand.len()
+            && (self.rendered.len() as f64) * self.haptic_s < end
+        {
+            let k = self.rendered.len();
+            let p = self.hand[k];
+            let f = self
+                .lp
+                .render(&delivered, p)
+                .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
+            self.rendered.push(f);
+        }
+    }
+}
+
 use crate::phases::{Phase, away_from_snaps, classify, dropouts, near_snaps, rms_by_phase};
 use crate::plot::{Log, Series, chart};
 use crate::progress::bar;
@@ -139,6 +216,7 @@ fn simulate(
     poses: impl Iterator<Item = ([f64; 3], f64)>,
     steps: usize,
     bar: &ProgressBar,
+    mut local: Option<&mut LocalRender>,
 ) -> Result<(Vec<Sample>, usize)> {
     let scene = build_scene(src, &src.parse()?)?;
     anyhow::ensure!(
@@ -173,6 +251,9 @@ fn simulate(
             out.len()
         );
         out.push(sample);
+        if let Some(l) = local.as_deref_mut() {
+            l.after_step(out.len() - 1, &sample, &mut p.tools, &p.sim);
+        }
         bar.inc(1);
     }
     Ok((out, most_substeps))
@@ -317,12 +398,14 @@ pub fn run(args: &Args) -> Result<()> {
     let b = bar(ticks, "truth");
     let haptic_poses = || (0..).map(|k| traj.sample(k as f64 * h));
     let (truth, truth_substeps) =
-        simulate(&src, h, 1, haptic_poses(), ticks, &b).context("ground truth")?;
+        simulate(&src, h, 1, haptic_poses(), ticks, &b, None).context("ground truth")?;
     b.finish();
     let b = bar(ticks, "truth, twice the sub-steps");
-    let (check, check_substeps) = simulate(&src, h, 2, haptic_poses(), ticks, &b)
+    let (check, check_substeps) = simulate(&src, h, 2, haptic_poses(), ticks, &b, None)
         .context("ground truth with twice the sub-steps")?;
     b.finish();
+    let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
+    let mut local = LocalRender::new(&hand[..ticks], h, s, ticks);
     let b = bar(sim_steps, "simulation");
     let (samples, _) = simulate(
         &src,
@@ -331,6 +414,7 @@ pub fn run(args: &Args) -> Result<()> {
         (0..).map(|j| traj.sample(j as f64 * s)),
         sim_steps,
         &b,
+        Some(&mut local),
     )
     .context("simulation at the simulation rate")?;
     b.finish();
@@ -338,7 +422,6 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(path) = &args.samples {
         write_samples(path, s, &samples)?;
     }
-    let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.force_n).collect();
     let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.force_n).collect();
     let phases = classify(&truth_f, &hand, h);
@@ -346,7 +429,21 @@ pub fn run(args: &Args) -> Result<()> {
     let ns = |t: f64| (t * 1e9).round() as u64;
     let mut methods = BTreeMap::new();
     let mut rendered_all = Vec::new();
+    // Every extrapolator but `local-problem` from the samples alone; that
+    // one was rendered during the simulation.
+    local.rendered.resize(ticks, [0.0; 3]);
+    let mut local_rendered = Some(std::mem::take(&mut local.rendered));
     for method in Method::ALL {
+        if method == Method::LocalProblem
+            && let Some(rendered) = local_rendered.take()
+        {
+            methods.insert(
+                method.name(),
+                figures(&rendered, &truth_f, &hand, &phases, &snaps),
+            );
+            rendered_all.push((method.name(), rendered));
+            continue;
+        }
         let mut ex = Extrapolator::new(method);
         let mut next = 0;
         let mut rendered = Vec::with_capacity(ticks);

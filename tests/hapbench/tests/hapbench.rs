@@ -196,6 +196,18 @@ fn box_truth_holds(scene: &str) {
     );
     let methods = v["methods"].as_object().expect("methods");
     assert!(!methods.is_empty(), "{v}");
+    if !scene.to_string_lossy().contains("friction") {
+        // The contact problem solved again at each tick follows onsets and
+        // presses the samples cannot (a tenth of the constant hold's error
+        // there; measured 0.02-0.04x), and takes energy from the hand.
+        let phase = |m: &str, p: &str| num(&methods[m]["rms_error_by_phase_n"][p], p);
+        for p in ["onset", "press"] {
+            let (lp, c) = (phase("local-problem", p), phase("constant", p));
+            assert!(lp < 0.1 * c, "local-problem {p}: {lp} N against {c} N\n{v}");
+        }
+        let e = num(&methods["local-problem"]["net_energy_j"], "net_energy_j");
+        assert!(e <= 0.0, "local-problem puts {e} J into the hand\n{v}");
+    }
     for (m, r) in methods {
         for key in ["rms_error_n", "max_error_n", "p99_jump_n", "net_energy_j"] {
             assert!(num(&r[key], key).is_finite(), "{m}.{key}: {r}");

@@ -96,7 +96,7 @@ impl Sampler {
                 let from = field.points().len();
                 let sweep = field.parts()[part];
                 let extra_m = REUSE_MARGIN_OF_RADIUS * sweep.radius_m;
-                let slack_m = self.sample_part(sim, index, adj, part as u16, field, extra_m);
+                let slack_m = self.sample_part(sim, index, adj, part as u16, field, extra_m, true);
                 self.cache.record(&sweep, slack_m, field, from);
             }
             field.clear_points();
@@ -141,7 +141,22 @@ impl Sampler {
         field: &mut ContactField,
     ) {
         self.cache.invalidate();
-        self.sample_part(sim, index, adj, part, field, 0.0);
+        self.sample_part(sim, index, adj, part, field, 0.0, true);
+    }
+
+    /// Adds to `field` the points within the step's reach of part `part`
+    /// or `extra_m` further, leaving the selection kept for the next steps
+    /// alone (for [`super::local::LocalContact`]).
+    pub fn sample_around<B: Backend + ?Sized>(
+        &mut self,
+        sim: &B,
+        index: &SurfaceIndex,
+        adj: &Adjacency,
+        part: u16,
+        field: &mut ContactField,
+        extra_m: Real,
+    ) {
+        self.sample_part(sim, index, adj, part, field, extra_m, false);
     }
 
     /// How often selections were replayed and made afresh.
@@ -158,7 +173,9 @@ impl Sampler {
     /// touch the field's part `part` during the step (within its radius
     /// plus half of it of the part at either end of the step) or lie
     /// `extra_m` further. Returns how far beyond that reach points were
-    /// kept, from the part at the end of the step (m).
+    /// kept, from the part at the end of the step (m). `record`: the
+    /// triangles' lattices go into the selection being made.
+    #[allow(clippy::too_many_arguments)]
     fn sample_part<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
@@ -167,6 +184,7 @@ impl Sampler {
         part: u16,
         field: &mut ContactField,
         extra_m: Real,
+        record: bool,
     ) -> Real {
         let sweep = field.parts()[part as usize];
         let r = sweep.radius_m;
@@ -236,7 +254,9 @@ impl Sampler {
                     let area0 = 0.5 * (x0[1] - x0[0]).cross(x0[2] - x0[0]).length();
                     let n = subdivisions(&x0, &x, spacing_m);
                     let ids = tri.map(|w| w.0);
-                    self.cache.note_lattice(ids, n, spacing_m);
+                    if record {
+                        self.cache.note_lattice(ids, n, spacing_m);
+                    }
                     let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
                     let near = |c: Vec3, r: Real| to.distance2(c).sqrt() < keep_m + r;
                     for_each_centroid_near(n, &x, near, |w| {

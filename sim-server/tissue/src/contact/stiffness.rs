@@ -209,6 +209,28 @@ impl Solver {
         }
     }
 
+    /// W = (K^-1)_VV (m/N, row-major, 3|V| x 3|V|) of the vertices
+    /// `verts` into `out`; false without a factor (the diagonal blocks
+    /// alone would not be the tissue's compliance).
+    pub(super) fn compliance(
+        &mut self,
+        model: &ElasticModel,
+        verts: &[u32],
+        out: &mut Vec<Real>,
+    ) -> bool {
+        self.refresh(model);
+        if self.factor.is_none() {
+            return false;
+        }
+        self.verts.clear();
+        self.verts.extend_from_slice(verts);
+        let nv = 3 * verts.len();
+        self.fill_s(model, nv);
+        out.clear();
+        out.extend_from_slice(&self.s);
+        true
+    }
+
     /// K_eff with each point's Hessian `hessian(p)`.
     fn effective(
         &mut self,

@@ -203,6 +203,17 @@ impl ContactStiffness {
         }
     }
 
+    /// The tissue's compliance at `verts` into `out` (see
+    /// [`super::local::LocalContact::compliance_m_per_n`]); false when
+    /// there is none to give: the solver runs on the worker thread, or the
+    /// mesh is too large for a factor.
+    pub fn compliance(&mut self, model: &ElasticModel, verts: &[u32], out: &mut Vec<Real>) -> bool {
+        match (&self.link, &mut self.solver) {
+            (None, Some(solver)) => solver.compliance(model, verts, out),
+            _ => false,
+        }
+    }
+
     /// The newest stiffness of tool `tool` (N/m).
     pub fn stiffness(&self, tool: usize) -> Mat3 {
         self.newest.get(tool).copied().unwrap_or(Mat3::ZERO)

@@ -5,7 +5,8 @@ use super::ToolDecl;
 use super::adjacency::Adjacency;
 use super::claims::Claims;
 use super::config::{ContactConfig, ContactLaw};
-use super::field::ContactField;
+use super::field::{ContactField, PartSweep};
+use super::local::LocalContact;
 use super::proxy::Proxy;
 use super::sampling::Sampler;
 use super::stiffness_thread::{ContactStiffness, StiffnessSolves};
@@ -88,6 +89,16 @@ pub struct Tools {
     /// `sprung`.
     spring_n_per_m: Vec<Real>,
     sprung: Vec<u32>,
+    /// Scratch of [`Tools::local_contact`].
+    local: LocalScratch,
+}
+
+/// Scratch of [`Tools::local_contact`], kept across calls.
+#[derive(Default)]
+struct LocalScratch {
+    field: ContactField,
+    slot: Vec<u32>,
+    order: Vec<(Real, usize)>,
 }
 
 /// Why contact cannot run as the scene asks.
@@ -255,6 +266,10 @@ impl Tools {
             mark: vec![false; model.vertex_count()],
             spring_n_per_m: vec![0.0; model.vertex_count()],
             sprung: Vec::new(),
+            local: LocalScratch {
+                field: ContactField::new(decls.len(), 0.0),
+                ..Default::default()
+            },
         }
     }
 
@@ -445,6 +460,77 @@ impl Tools {
             self.reports[i] = t.commit(sim, &self.claims, jaw);
         }
         &self.reports
+    }
+
+    /// The contact problem around tool `tool` after the last step into
+    /// `out` (see [`LocalContact`]): the points within the step's reach of
+    /// its parts or `margin_m` further, at most `max_vertices` vertices and
+    /// `max_points` points, nearest first. False (and `out` empty) when
+    /// there is none: the projection law, a tool without a pose or with
+    /// friction (the problem is frictionless), or no
+    /// exact compliance (the stiffness solved on its worker thread, or a
+    /// mesh above [`super::MAX_FACTOR_VERTICES`]).
+    pub fn local_contact<B: Backend + ?Sized>(
+        &mut self,
+        sim: &B,
+        tool: usize,
+        margin_m: Real,
+        max_vertices: usize,
+        max_points: usize,
+        out: &mut LocalContact,
+    ) -> bool {
+        out.clear();
+        let (Some(sampler), Some(stiffness), Some(t)) =
+            (&mut self.sampler, &mut self.stiffness, self.tools.get(tool))
+        else {
+            return false;
+        };
+        // The problem is frictionless: with friction it would let the
+        // tissue slide where the simulation holds it.
+        let Some(pose) = t.pose().filter(|_| !t.decl().friction.is_active()) else {
+            return false;
+        };
+        let local = &mut self.local;
+        local.field.clear();
+        for sweep in t.sweeps().into_iter().flatten() {
+            // Standing at the step's end: the reach is the tool's alone.
+            local.field.add_part(PartSweep {
+                from: sweep.to,
+                ..sweep
+            });
+        }
+        self.index.refit(sim);
+        for part in 0..local.field.parts().len() {
+            sampler.sample_around(
+                sim,
+                &self.index,
+                &self.adjacency,
+                part as u16,
+                &mut local.field,
+                margin_m,
+            );
+        }
+        local.slot.resize(sim.model().vertex_count(), u32::MAX);
+        out.take_points(
+            &local.field,
+            |v| sim.position(VertexId(v)),
+            max_vertices.min(u16::MAX as usize),
+            max_points,
+            &mut local.slot,
+            &mut local.order,
+        );
+        out.tool_position_m = pose.end_m;
+        let model = sim.model();
+        for &v in &out.vertices {
+            out.velocities_m_per_s.push(sim.velocity(VertexId(v)));
+            out.masses_kg.push(model.masses_kg()[v as usize]);
+            out.damping_kg_s.push(model.damping_kg_s()[v as usize]);
+        }
+        if !stiffness.compliance(sim.model(), &out.vertices, &mut out.compliance_m_per_n) {
+            out.clear();
+            return false;
+        }
+        true
     }
 
     /// The force on tool `i` and its contact stiffness after the step.

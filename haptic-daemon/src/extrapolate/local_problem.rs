@@ -1,0 +1,687 @@
+//! The `local-problem` extrapolator: the simulation's contact problem
+//! around the tool, solved again for each new tool position (the idea of
+//! SOFA's LCPForceFeedback, Saupin, Duriez, Cotin 2008, with the penalty
+//! contact of this project instead of Signorini's law).
+//!
+//! With each force sample the simulation sends the surface near the tool:
+//! its contact points (barycentric on the surface triangles, with their
+//! spring stiffness k_p), the positions x of the triangles' vertices V, the
+//! tool's capsules, and the tissue's compliance W = (K^-1)_VV. For a tool
+//! moved by dx from the sample, the vertices move by delta, the stationary
+//! point of
+//!
+//! ```text
+//! Pi(delta) = 1/2 delta^T S delta + delta^T f0 + sum_p E_p(y_p(delta), capsules + dx)
+//! ```
+//!
+//! with S = W^-1 (the tissue condensed on V, exact for the linear model),
+//! f0 the penalty forces on V at the sample (so delta = 0 solves the
+//! sample's own pose), y_p the point's position and E_p its spring energy
+//! (the law of the simulation's field: `k d^2 / (2 d0)` up to the onset
+//! depth d0, `k (d - d0/2)` past it, d the penetration into the capsule).
+//! Newton's method with a backtracking line search on Pi finds it (warm
+//! started from the previous tick; with a Hessian that is not positive
+//! definite, as a round tool on a crease can make it, the springs' part
+//! alone, which is). The force rendered is the sample's force plus the
+//! change of the points' force on the tool: exact at the sample's pose,
+//! continuous, and zero when no point touches the moved tool.
+//!
+//! What it adds over the local model: the geometry. Sliding over a faceted
+//! or curved surface, the contact points, their normals and which of them
+//! touch change with the tool, and the coupling between them through the
+//! tissue is W's; a vertex slipping around the probe (a snap) is in the
+//! problem. What it leaves out: the tissue's inertia and damping
+//! (quasi-static), friction, points beyond the margin the simulation
+//! sampled, other tools' contacts (held as they were).
+//!
+//! Fixed capacity ([`MAX_VERTICES`], [`MAX_POINTS`]): after
+//! [`LocalProblem::new`] neither [`LocalProblem::set`] nor
+//! [`LocalProblem::solve`] allocates.
+
+use super::ForceSample;
+use crate::math::{V3, ZERO, add, dot, norm, scale, sub};
+pub use shared::protocol::{
+    LOCAL_MAX_PARTS as MAX_PARTS, LOCAL_MAX_POINTS as MAX_POINTS,
+    LOCAL_MAX_VERTICES as MAX_VERTICES, LocalContactMsg, LocalPart as Capsule, LocalPoint as Point,
+};
+/// Newton iterations per solve at most.
+const MAX_ITERATIONS: usize = 30;
+/// A Newton iteration moves no vertex further than this many tool radii.
+const TRUST_OF_RADIUS: f64 = 0.25;
+/// Converged when no vertex moves more than this in an iteration (m).
+const TOLERANCE_M: f64 = 1e-8;
+/// Converged when no vertex's forces are out of balance by this (N): a
+/// hundredth of a haptic device's force resolution.
+const TOLERANCE_N: f64 = 1e-4;
+/// Points closer than this to touching are in the Newton iterations (m);
+/// a check over all points after them catches the rest.
+const CANDIDATE_SLACK_M: f64 = 1e-3;
+
+/// Why a problem was refused (the extrapolator then holds the sample).
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum LocalProblemError {
+    /// More than the fixed capacity.
+    #[error(
+        "the local problem has {vertices} vertices, {points} points, {parts} parts; at most {MAX_VERTICES}, {MAX_POINTS}, {MAX_PARTS}"
+    )]
+    TooLarge {
+        /// Vertices given.
+        vertices: usize,
+        /// Points given.
+        points: usize,
+        /// Parts given.
+        parts: usize,
+    },
+    /// The sizes disagree, an index is out of range or a value is not
+    /// finite.
+    #[error("the local problem is malformed: {0}")]
+    Malformed(&'static str),
+    /// W is not positive definite.
+    #[error("the local problem's compliance is not positive definite")]
+    NotDefinite,
+}
+
+/// The problem of one sample and the scratch to solve it (see the module
+/// docs).
+#[derive(Clone, Debug)]
+pub struct LocalProblem {
+    tool_m: V3,
+    parts: [Capsule; MAX_PARTS],
+    part_count: usize,
+    x: Vec<V3>,
+    points: Vec<Point>,
+    /// S = W^-1, row-major (3V)^2.
+    s: Vec<f64>,
+    /// Forces on V at the sample (N), 3V.
+    f0: Vec<f64>,
+    /// The points' force on the tool at the sample (N).
+    tool_force0_n: V3,
+    /// The previous solution (warm start), 3V.
+    delta: Vec<f64>,
+    // Scratch, 3V or (3V)^2.
+    grad: Vec<f64>,
+    hess: Vec<f64>,
+    step: Vec<f64>,
+    trial: Vec<f64>,
+    forces: Vec<f64>,
+    /// The trust region: the most a vertex moves per iteration (m).
+    max_move_m: f64,
+    /// The points that may touch in this solve (indices).
+    active: Vec<u16>,
+    /// delta at the start of the solve.
+    start: Vec<f64>,
+    ready: bool,
+    /// The force message `seq` of the step the problem was taken at.
+    seq: u64,
+    /// The latest sample rendered from: its `seq`, and the points' force
+    /// on the tool at its position less that at the problem's own.
+    base: Option<(u64, V3)>,
+}
+
+impl Default for LocalProblem {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LocalProblem {
+    /// An empty problem with its full capacity allocated.
+    pub fn new() -> Self {
+        let n = 3 * MAX_VERTICES;
+        let part = Capsule {
+            a_m: ZERO,
+            b_m: ZERO,
+            radius_m: 0.0,
+            onset_m: 0.0,
+        };
+        Self {
+            tool_m: ZERO,
+            parts: [part; MAX_PARTS],
+            part_count: 0,
+            x: Vec::with_capacity(MAX_VERTICES),
+            points: Vec::with_capacity(MAX_POINTS),
+            s: Vec::with_capacity(n * n),
+            f0: Vec::with_capacity(n),
+            tool_force0_n: ZERO,
+            delta: Vec::with_capacity(n),
+            grad: Vec::with_capacity(n),
+            hess: Vec::with_capacity(n * n),
+            step: Vec::with_capacity(n),
+            trial: Vec::with_capacity(n),
+            forces: Vec::with_capacity(n),
+            max_move_m: 0.0,
+            active: Vec::with_capacity(MAX_POINTS),
+            start: Vec::with_capacity(n),
+            ready: false,
+            seq: 0,
+            base: None,
+        }
+    }
+
+    /// Whether a problem is set.
+    pub fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// Forgets the problem.
+    pub fn clear(&mut self) {
+        self.ready = false;
+    }
+
+    /// The force message `seq` of the step the problem was taken at.
+    pub fn seq(&self) -> u64 {
+        self.seq
+    }
+
+    /// Sets the problem a message carries (see [`LocalProblem::set`]).
+    pub fn set_from_wire(&mut self, msg: &LocalContactMsg) -> Result<(), LocalProblemError> {
+        self.ready = false;
+        let (nv, np, nc) = (
+            msg.vertex_count as usize,
+            msg.point_count as usize,
+            msg.part_count as usize,
+        );
+        if nv > MAX_VERTICES || np > MAX_POINTS || nc > MAX_PARTS {
+            return Err(LocalProblemError::TooLarge {
+                vertices: nv,
+                points: np,
+                parts: nc,
+            });
+        }
+        self.set(
+            msg.tool_position_m,
+            &msg.parts[..nc],
+            &msg.positions_m[..nv],
+            &msg.points[..np],
+            &msg.compliance_m_per_n[..9 * nv * nv],
+        )?;
+        self.seq = msg.seq;
+        Ok(())
+    }
+
+    /// The force to render (N) with the tool at `tool_m`, `latest` being
+    /// the newest force sample (taken at the problem's step or after it):
+    /// the sample's force plus the change of the points' force on the tool
+    /// from the sample's position to `tool_m`; zero when no point touches
+    /// the tool there. `None` without a problem or when a solve fails (the
+    /// caller falls back to another method).
+    pub fn render(&mut self, latest: &ForceSample, tool_m: V3) -> Option<V3> {
+        if !self.ready || latest.seq < self.seq {
+            return None;
+        }
+        let base = match self.base {
+            Some((seq, base)) if seq == latest.seq => base,
+            _ => {
+                // Once per sample: where the problem puts the sample.
+                let base = if latest.seq == self.seq {
+                    ZERO
+                } else {
+                    self.solve(latest.position_m)?.0
+                };
+                self.base = Some((latest.seq, base));
+                base
+            }
+        };
+        let (change, touching) = self.solve(tool_m)?;
+        Some(if touching {
+            add(latest.force_n, sub(change, base))
+        } else {
+            ZERO
+        })
+    }
+
+    /// Sets the problem of a sample: the tool at `tool_m`, its `parts`,
+    /// the vertices at `positions_m`, the `points`, and the compliance
+    /// `w` (m/N, row-major 3V x 3V). On an error the problem is cleared.
+    pub fn set(
+        &mut self,
+        tool_m: V3,
+        parts: &[Capsule],
+        positions_m: &[V3],
+        points: &[Point],
+        w: &[f64],
+    ) -> Result<(), LocalProblemError> {
+        self.ready = false;
+        let (nv, np) = (positions_m.len(), points.len());
+        if nv > MAX_VERTICES || np > MAX_POINTS || parts.len() > MAX_PARTS {
+            return Err(LocalProblemError::TooLarge {
+                vertices: nv,
+                points: np,
+                parts: parts.len(),
+            });
+        }
+        let n = 3 * nv;
+        if w.len() != n * n {
+            return Err(LocalProblemError::Malformed("compliance size"));
+        }
+        let finite = |v: &V3| v.iter().all(|x| x.is_finite());
+        if !finite(&tool_m)
+            || !positions_m.iter().all(finite)
+            || !w.iter().all(|x| x.is_finite())
+            || !parts
+                .iter()
+                .all(|p| finite(&p.a_m) && finite(&p.b_m) && p.radius_m > 0.0 && p.onset_m > 0.0)
+        {
+            return Err(LocalProblemError::Malformed("a value is not finite"));
+        }
+        for p in points {
+            if p.slots.iter().any(|s| *s as usize >= nv)
+                || p.part as usize >= parts.len()
+                || !(p.stiffness_n_per_m >= 0.0 && p.stiffness_n_per_m.is_finite())
+                || !p.weights.iter().all(|w| w.is_finite())
+            {
+                return Err(LocalProblemError::Malformed("a point"));
+            }
+        }
+        self.tool_m = tool_m;
+        self.parts[..parts.len()].copy_from_slice(parts);
+        self.part_count = parts.len();
+        self.max_move_m = parts
+            .iter()
+            .map(|p| p.radius_m)
+            .fold(f64::INFINITY, f64::min)
+            * TRUST_OF_RADIUS;
+        self.base = None;
+        self.seq = 0;
+        self.x.clear();
+        self.x.extend_from_slice(positions_m);
+        self.points.clear();
+        self.points.extend_from_slice(points);
+        // S = W^-1: Cholesky of W, then its solve on the unit columns.
+        self.hess.clear();
+        self.hess.extend_from_slice(w);
+        if !cholesky(&mut self.hess, n) {
+            return Err(LocalProblemError::NotDefinite);
+        }
+        self.s.clear();
+        self.s.resize(n * n, 0.0);
+        for c in 0..n {
+            self.step.clear();
+            self.step.resize(n, 0.0);
+            self.step[c] = 1.0;
+            cholesky_solve(&self.hess, &mut self.step, n);
+            for r in 0..n {
+                self.s[r * n + c] = self.step[r];
+            }
+        }
+        // Symmetric in exact arithmetic.
+        for r in 0..n {
+            for c in 0..r {
+                let m = 0.5 * (self.s[r * n + c] + self.s[c * n + r]);
+                self.s[r * n + c] = m;
+                self.s[c * n + r] = m;
+            }
+        }
+        self.delta.clear();
+        self.delta.resize(n, 0.0);
+        self.f0.clear();
+        self.f0.resize(n, 0.0);
+        self.active.clear();
+        self.active.extend(0..points.len() as u16);
+        let mut f0 = std::mem::take(&mut self.f0);
+        self.tool_force0_n = self.evaluate(&self.delta, ZERO, &mut f0, None).1;
+        self.f0 = f0;
+        // No surface near the tool: nothing to solve (the caller's
+        // fallback renders the sample).
+        self.ready = n > 0 && !points.is_empty();
+        Ok(())
+    }
+
+    /// The points' force on the tool (N) with the tool at `tool_m`, less
+    /// the same at the sample's pose; `None` without a problem or when the
+    /// solve fails (then the caller holds the sample). The second value
+    /// says whether any point touches the tool there.
+    pub fn solve(&mut self, tool_m: V3) -> Option<(V3, bool)> {
+        if !self.ready || !tool_m.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let n = self.delta.len();
+        let dx = sub(tool_m, self.tool_m);
+        let mut forces = std::mem::take(&mut self.forces);
+        forces.resize(n, 0.0);
+        // Newton over the points near the tool; then a check over all that
+        // no other point touches, else again with a wider selection.
+        let mut slack_m = CANDIDATE_SLACK_M;
+        let mut out = None;
+        self.start.clear();
+        self.start.extend_from_slice(&self.delta);
+        for _ in 0..3 {
+            // Each round from the warm start: a point the last round left
+            // out may have gone through the capsule.
+            self.delta.copy_from_slice(&self.start);
+            self.select(dx, slack_m);
+            if !self.newton(dx, &mut forces) {
+                break;
+            }
+            if !self.others_touch(dx) {
+                self.active.clear();
+                self.active.extend(0..self.points.len() as u16);
+                let (_, tool, touching) = self.evaluate(&self.delta, dx, &mut forces, None);
+                let change = sub(tool, self.tool_force0_n);
+                out = change
+                    .iter()
+                    .all(|x| x.is_finite())
+                    .then_some((change, touching));
+                break;
+            }
+            slack_m *= 4.0;
+        }
+        self.forces = forces;
+        out
+    }
+
+    /// The active points: those within `slack_m` of touching the tool moved
+    /// by `dx` at the current delta.
+    fn select(&mut self, dx: V3, slack_m: f64) {
+        self.active.clear();
+        for (i, p) in self.points.iter().enumerate() {
+            if self.gap_m(p, &self.delta, dx) < slack_m {
+                self.active.push(i as u16);
+            }
+        }
+    }
+
+    /// Whether a point outside the active ones touches the tool.
+    fn others_touch(&self, dx: V3) -> bool {
+        let mut k = 0;
+        for (i, p) in self.points.iter().enumerate() {
+            if self.active.get(k) == Some(&(i as u16)) {
+                k += 1;
+                continue;
+            }
+            if self.gap_m(p, &self.delta, dx) < 0.0 {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Point `p`'s gap to its capsule (m; negative: penetrating).
+    fn gap_m(&self, p: &Point, delta: &[f64], dx: V3) -> f64 {
+        let y = self.point_position(p, delta);
+        let c = &self.parts[p.part as usize];
+        let (closest, _) = closest_on_segment(add(c.a_m, dx), add(c.b_m, dx), y);
+        norm(sub(y, closest)) - c.radius_m
+    }
+
+    /// Point `p`'s position with the vertices moved by `delta` (m).
+    fn point_position(&self, p: &Point, delta: &[f64]) -> V3 {
+        let mut y = ZERO;
+        for k in 0..3 {
+            let v = p.slots[k] as usize;
+            let moved = [
+                self.x[v][0] + delta[3 * v],
+                self.x[v][1] + delta[3 * v + 1],
+                self.x[v][2] + delta[3 * v + 2],
+            ];
+            y = add(y, scale(moved, p.weights[k]));
+        }
+        y
+    }
+
+    /// Newton down Pi over the active points from the current delta
+    /// (warm start); false if no Hessian could be factored.
+    fn newton(&mut self, dx: V3, forces: &mut [f64]) -> bool {
+        let n = self.delta.len();
+        let mut energy = self.energy(&self.delta, dx, forces);
+        for _ in 0..MAX_ITERATIONS {
+            // Gradient S delta + f0 - f(delta).
+            self.grad.clear();
+            for (r, (row, f)) in self.s.chunks_exact(n).zip(forces.iter()).enumerate() {
+                let sd: f64 = row.iter().zip(&self.delta).map(|(a, b)| a * b).sum();
+                self.grad.push(sd + self.f0[r] - f);
+            }
+            if self.grad.iter().all(|g| g.abs() < TOLERANCE_N) {
+                break;
+            }
+            // The full Hessian, or where it is not positive definite (a
+            // round tool dragging tissue sideways makes a saddle) the
+            // springs' part alone, which is.
+            self.fill_hessian(dx, forces, false);
+            if !cholesky(&mut self.hess, n) {
+                self.fill_hessian(dx, forces, true);
+                if !cholesky(&mut self.hess, n) {
+                    return false;
+                }
+            }
+            self.step.clear();
+            self.step.extend(self.grad.iter().map(|g| -g));
+            cholesky_solve(&self.hess, &mut self.step, n);
+            self.trust_region();
+            let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
+            // Backtracking on Pi (Armijo).
+            let mut alpha = 1.0;
+            let mut accepted = false;
+            for _ in 0..30 {
+                self.trial.clear();
+                self.trial.extend(
+                    self.delta
+                        .iter()
+                        .zip(&self.step)
+                        .map(|(d, s)| d + alpha * s),
+                );
+                let trial = std::mem::take(&mut self.trial);
+                let e = self.energy(&trial, dx, forces);
+                self.trial = trial;
+                if e <= energy + 1e-4 * alpha * slope || slope >= 0.0 || slope.is_nan() {
+                    energy = e;
+                    accepted = true;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            if !accepted {
+                // No descent left: a minimum to rounding.
+                self.energy(&self.delta, dx, forces);
+                return true;
+            }
+            std::mem::swap(&mut self.delta, &mut self.trial);
+            let moved = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())) * alpha;
+            if moved < TOLERANCE_M {
+                break;
+            }
+        }
+        true
+    }
+
+    /// S plus the points' Hessian at the current delta (the springs'
+    /// part alone if asked) into `hess`.
+    fn fill_hessian(&mut self, dx: V3, forces: &mut [f64], springs_only: bool) {
+        self.hess.clear();
+        self.hess.extend_from_slice(&self.s);
+        let mut hess = std::mem::take(&mut self.hess);
+        self.evaluate(&self.delta, dx, forces, Some((&mut hess, springs_only)));
+        self.hess = hess;
+    }
+
+    /// Scales the step so that no vertex moves more than the trust
+    /// region: a long step could carry surface points through the capsule
+    /// to its far side (where the penalty pushes them on: another, wrong,
+    /// equilibrium).
+    fn trust_region(&mut self) {
+        let longest = self
+            .step
+            .chunks_exact(3)
+            .map(|s| norm([s[0], s[1], s[2]]))
+            .fold(0.0f64, f64::max);
+        if longest > self.max_move_m {
+            let k = self.max_move_m / longest;
+            self.step.iter_mut().for_each(|s| *s *= k);
+        }
+    }
+
+    /// Pi at `delta` with the tool moved by `dx`; the forces on V into
+    /// `forces`.
+    fn energy(&self, delta: &[f64], dx: V3, forces: &mut [f64]) -> f64 {
+        let n = delta.len();
+        let (e_contact, _, _) = self.evaluate(delta, dx, forces, None);
+        let mut e = e_contact;
+        for r in 0..n {
+            let sd: f64 = (0..n).map(|c| self.s[r * n + c] * delta[c]).sum();
+            e += delta[r] * (0.5 * sd + self.f0[r]);
+        }
+        e
+    }
+
+    /// The points' energy (J), force on the tool (N) and whether any
+    /// touches it, with the vertices moved by `delta` and the tool by
+    /// `dx`; their forces on V into `forces`; with `hess`, their Hessian
+    /// added to it (the springs' part alone if asked).
+    fn evaluate(
+        &self,
+        delta: &[f64],
+        dx: V3,
+        forces: &mut [f64],
+        mut hess: Option<(&mut [f64], bool)>,
+    ) -> (f64, V3, bool) {
+        let n = delta.len();
+        let mut touching = false;
+        forces.iter_mut().for_each(|f| *f = 0.0);
+        let mut energy = 0.0;
+        let mut tool = ZERO;
+        for &i in &self.active {
+            let p = &self.points[i as usize];
+            let y = self.point_position(p, delta);
+            let c = &self.parts[p.part as usize];
+            let (a, b) = (add(c.a_m, dx), add(c.b_m, dx));
+            let (closest, interior) = closest_on_segment(a, b, y);
+            let gap = sub(y, closest);
+            let dist = norm(gap);
+            let depth = c.radius_m - dist;
+            if depth <= 0.0 || dist <= 1e-12 * c.radius_m {
+                continue;
+            }
+            touching = true;
+            let normal = scale(gap, 1.0 / dist);
+            let (e, f, slope) = spring(p.stiffness_n_per_m, depth, c.onset_m);
+            energy += e;
+            tool = sub(tool, scale(normal, f));
+            for k in 0..3 {
+                let v = p.slots[k] as usize;
+                for r in 0..3 {
+                    forces[3 * v + r] += p.weights[k] * f * normal[r];
+                }
+            }
+            let Some((h, springs_only)) = hess.as_mut() else {
+                continue;
+            };
+            // The point's Hessian: slope n n^T - f/dist (I - n n^T - a a^T).
+            let axis = {
+                let d = sub(b, a);
+                let l = norm(d);
+                if interior && l > 0.0 {
+                    scale(d, 1.0 / l)
+                } else {
+                    ZERO
+                }
+            };
+            let mut g = [[0.0; 3]; 3];
+            for (r, row) in g.iter_mut().enumerate() {
+                for (col, x) in row.iter_mut().enumerate() {
+                    let nn = normal[r] * normal[col];
+                    *x = slope * nn;
+                    if !*springs_only {
+                        let id = if r == col { 1.0 } else { 0.0 };
+                        *x -= f / dist * (id - nn - axis[r] * axis[col]);
+                    }
+                }
+            }
+            for (i, &vi) in p.slots.iter().enumerate() {
+                for (j, &vj) in p.slots.iter().enumerate() {
+                    let w = p.weights[i] * p.weights[j];
+                    let (si, sj) = (3 * vi as usize, 3 * vj as usize);
+                    for (r, row) in g.iter().enumerate() {
+                        for (col, x) in row.iter().enumerate() {
+                            h[(si + r) * n + sj + col] += w * x;
+                        }
+                    }
+                }
+            }
+        }
+        (energy, tool, touching)
+    }
+}
+
+/// The point of segment a-b closest to `y`, and whether it lies strictly
+/// inside.
+fn closest_on_segment(a: V3, b: V3, y: V3) -> (V3, bool) {
+    let d = sub(b, a);
+    let l2 = dot(d, d);
+    if l2 <= 0.0 {
+        return (a, false);
+    }
+    let t = dot(sub(y, a), d) / l2;
+    if t <= 0.0 {
+        (a, false)
+    } else if t >= 1.0 {
+        (b, false)
+    } else {
+        (add(a, scale(d, t)), true)
+    }
+}
+
+/// A point's spring at penetration `d` (m): energy (J), force (N) and
+/// slope (N/m), with the quadratic onset over `d0` (the law of the
+/// simulation's contact field, `tissue::contact::field::spring`).
+fn spring(k: f64, d: f64, d0: f64) -> (f64, f64, f64) {
+    if d < d0 {
+        (
+            k * d * d * d / (6.0 * d0),
+            k * d * d / (2.0 * d0),
+            k * d / d0,
+        )
+    } else {
+        (
+            k * (d0 * d0 / 6.0 + 0.5 * (d * d - d0 * d0) - 0.5 * d0 * (d - d0)),
+            k * (d - 0.5 * d0),
+            k,
+        )
+    }
+}
+
+/// Cholesky factor L (lower, in place, row-major n x n) of a symmetric
+/// matrix; false if it is not positive definite. Hand-written: it runs on
+/// the RT thread on fixed buffers, for n of a few tens.
+fn cholesky(a: &mut [f64], n: usize) -> bool {
+    for j in 0..n {
+        let mut d = a[j * n + j];
+        for k in 0..j {
+            d -= a[j * n + k] * a[j * n + k];
+        }
+        if d.is_nan() || d <= 0.0 || !d.is_finite() {
+            return false;
+        }
+        let d = d.sqrt();
+        a[j * n + j] = d;
+        for i in j + 1..n {
+            let mut s = a[i * n + j];
+            for k in 0..j {
+                s -= a[i * n + k] * a[j * n + k];
+            }
+            a[i * n + j] = s / d;
+        }
+    }
+    true
+}
+
+/// Solves L L^T x = b in place with the factor of [`cholesky`].
+fn cholesky_solve(l: &[f64], b: &mut [f64], n: usize) {
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= l[i * n + k] * b[k];
+        }
+        b[i] = s / l[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= l[k * n + i] * b[k];
+        }
+        b[i] = s / l[i * n + i];
+    }
+}
+
+#[cfg(test)]
+#[path = "local_problem_tests.rs"]
+mod tests;

@@ -1,0 +1,179 @@
+use super::*;
+
+const K_P: f64 = 300.0;
+const R: f64 = 0.005;
+const C: f64 = 0.01; // m/N per vertex
+
+/// A triangle in z = 0 under a ball (a capsule of zero length) whose
+/// bottom is `depth` below it at the centroid; the vertices on independent
+/// springs of compliance C; one point at the centroid.
+fn press(depth: f64) -> (LocalProblem, V3) {
+    let x = [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]];
+    let c = [0.01 / 3.0, 0.01 / 3.0, 0.0];
+    let centre = [c[0], c[1], R - depth];
+    let ball = Capsule {
+        a_m: centre,
+        b_m: centre,
+        radius_m: R,
+        onset_m: 0.02 * R,
+    };
+    let point = Point {
+        slots: [0, 1, 2],
+        weights: [1.0 / 3.0; 3],
+        part: 0,
+        stiffness_n_per_m: K_P,
+    };
+    let mut w = vec![0.0; 81];
+    for i in 0..9 {
+        w[i * 9 + i] = C;
+    }
+    let mut p = LocalProblem::new();
+    p.set(centre, &[ball], &x, &[point], &w).unwrap();
+    (p, centre)
+}
+
+#[test]
+fn at_the_samples_pose_nothing_changes() {
+    let (mut p, centre) = press(0.001);
+    let (df, touching) = p.solve(centre).unwrap();
+    assert!(touching);
+    assert!(norm(df) < 1e-12, "{df:?}");
+}
+
+#[test]
+fn pressing_further_meets_the_spring_in_series_with_the_tissue() {
+    // Past the onset the point's spring is linear: pressing dz further
+    // adds k dz with 1/k = 1/k_p + sum w^2 C (the tissue's compliance at
+    // the point), the vertices taking the point's force by its weights.
+    let (mut p, centre) = press(0.001);
+    let dz = 2e-4;
+    let (df, _) = p.solve([centre[0], centre[1], centre[2] - dz]).unwrap();
+    let k = 1.0 / (1.0 / K_P + C / 3.0);
+    assert!((df[2] - k * dz).abs() < 1e-9 * k, "{df:?} vs {}", k * dz);
+    assert!(df[0].abs() < 1e-12 && df[1].abs() < 1e-12);
+}
+
+#[test]
+fn withdrawing_past_the_surface_releases_everything() {
+    let (mut p, centre) = press(0.001);
+    let f0 = p.tool_force0_n;
+    let (df, touching) = p.solve([centre[0], centre[1], centre[2] + 0.01]).unwrap();
+    assert!(!touching);
+    assert!(norm(add(df, f0)) < 1e-12, "{df:?} {f0:?}");
+}
+
+#[test]
+fn the_forces_are_minus_the_gradient_of_the_energy() {
+    let (p, _) = press(0.0005);
+    let n = 9;
+    let delta: Vec<f64> = (0..n).map(|i| 1e-5 * ((i * 7 % 5) as f64 - 2.0)).collect();
+    let dx = [3e-4, -1e-4, -2e-4];
+    let mut f = vec![0.0; n];
+    p.evaluate(&delta, dx, &mut f, None);
+    for i in 0..n {
+        let h = 1e-9;
+        let mut plus = delta.clone();
+        plus[i] += h;
+        let mut minus = delta.clone();
+        minus[i] -= h;
+        let mut scratch = vec![0.0; n];
+        let ep = p.evaluate(&plus, dx, &mut scratch, None).0;
+        let em = p.evaluate(&minus, dx, &mut scratch, None).0;
+        let fd = -(ep - em) / (2.0 * h);
+        assert!(
+            (fd - f[i]).abs() < 1e-6 * f[i].abs().max(1e-3),
+            "{i}: {fd} vs {}",
+            f[i]
+        );
+    }
+}
+
+#[test]
+fn the_hessian_is_the_derivative_of_the_forces() {
+    let (p, _) = press(0.0005);
+    let n = 9;
+    let delta = vec![0.0; n];
+    let dx = [2e-4, 1e-4, -3e-4];
+    let mut h = vec![0.0; n * n];
+    let mut f = vec![0.0; n];
+    p.evaluate(&delta, dx, &mut f, Some((&mut h, false)));
+    for j in 0..n {
+        let e = 1e-8;
+        let mut plus = delta.clone();
+        plus[j] += e;
+        let mut minus = delta.clone();
+        minus[j] -= e;
+        let (mut fp, mut fm) = (vec![0.0; n], vec![0.0; n]);
+        p.evaluate(&plus, dx, &mut fp, None);
+        p.evaluate(&minus, dx, &mut fm, None);
+        for i in 0..n {
+            let fd = -(fp[i] - fm[i]) / (2.0 * e);
+            assert!(
+                (fd - h[i * n + j]).abs() < 1e-4 * K_P,
+                "{i},{j}: {fd} vs {}",
+                h[i * n + j]
+            );
+        }
+    }
+}
+
+#[test]
+fn sliding_off_the_edge_of_the_triangle_loses_the_contact_smoothly() {
+    // Moving sideways off the only triangle: the force falls to zero
+    // without a jump between neighbouring positions.
+    let (mut p, centre) = press(0.001);
+    let mut last: Option<V3> = None;
+    for i in 0..200 {
+        let x = centre[0] + i as f64 * 1e-4;
+        let (df, _) = p.solve([x, centre[1], centre[2]]).unwrap();
+        let f = add(df, p.tool_force0_n);
+        if let Some(l) = last {
+            assert!(norm(sub(f, l)) < 0.05, "jump at {x}: {l:?} -> {f:?}");
+        }
+        last = Some(f);
+    }
+    assert!(norm(last.unwrap()) < 1e-12);
+}
+
+#[test]
+fn bad_problems_are_refused() {
+    let mut p = LocalProblem::new();
+    let ball = Capsule {
+        a_m: ZERO,
+        b_m: ZERO,
+        radius_m: R,
+        onset_m: 1e-4,
+    };
+    let x = [[0.0; 3]; 3];
+    let pt = Point {
+        slots: [0, 1, 3],
+        weights: [1.0 / 3.0; 3],
+        part: 0,
+        stiffness_n_per_m: 1.0,
+    };
+    let w: Vec<f64> = (0..81)
+        .map(|i| if i % 10 == 0 { 1.0 } else { 0.0 })
+        .collect();
+    assert!(matches!(
+        p.set(ZERO, &[ball], &x, &[pt], &w),
+        Err(LocalProblemError::Malformed(_))
+    ));
+    let pt = Point {
+        slots: [0, 1, 2],
+        ..pt
+    };
+    assert_eq!(
+        p.set(ZERO, &[ball], &x, &[pt], &w[..80]),
+        Err(LocalProblemError::Malformed("compliance size"))
+    );
+    let mut bad = w.clone();
+    bad[0] = -1.0;
+    assert_eq!(
+        p.set(ZERO, &[ball], &x, &[pt], &bad),
+        Err(LocalProblemError::NotDefinite)
+    );
+    assert!(!p.is_ready());
+    assert!(p.solve(ZERO).is_none());
+    assert!(p.set(ZERO, &[ball], &x, &[pt], &w).is_ok());
+    assert!(p.solve([f64::NAN, 0.0, 0.0]).is_none());
+}

@@ -1,0 +1,170 @@
+//! The contact problem the simulation sends to the haptic loop (the
+//! `local-contact` stream and the `local-problem` extrapolator), checked
+//! against the simulation itself: its compliance is the tissue's static
+//! response at its vertices, and solved again for a moved tool it predicts
+//! the force the simulation settles to there.
+
+use haptic_daemon::extrapolate::ForceSample;
+use haptic_daemon::extrapolate::local_problem::{LocalContactMsg, LocalProblem};
+use shared::protocol::ForceMsg;
+use sim_server::contact::{LocalContact, StiffnessSolves, ToolInput};
+use sim_server::prelude::*;
+use sim_server::prepare::{Prepared, prepare};
+use sim_server::scene::{SceneSource, build_scene};
+use sim_server::wire::{force_sample, local_contact_into, local_contact_msg, tool_flags};
+use std::path::PathBuf;
+
+/// A 40 x 20 x 20 mm block on 5 mm cells, fixed at the bottom, with a
+/// 2.5 mm probe; damped so that it settles in a few hundred steps.
+fn block() -> Prepared<Explicit<f64>> {
+    let text = r#"
+[mesh]
+generate = { shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }
+
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 40.0
+
+[[fixed]]
+name = "bottom"
+select = { box_m = [[-0.001, -0.001, -0.001], [0.041, 0.021, 0.0001]] }
+
+[[tool]]
+name = "probe"
+kind = "grasper"
+fulcrum_m = [0.02, 0.01, 0.15]
+length_m = 0.3
+radius_m = 0.0025
+tip_length_m = 0.01
+"#;
+    let src = SceneSource {
+        name: "<block>".into(),
+        dir: PathBuf::from("."),
+        text: text.into(),
+    };
+    let built = build_scene(&src, &src.parse().unwrap()).unwrap();
+    let mut p = prepare::<f64>(built, Some(1e-3)).unwrap();
+    p.tools.set_stiffness_solves(StiffnessSolves::Inline);
+    p
+}
+
+/// `steps` steps with the tip at `tip`; the last force message.
+fn hold(p: &mut Prepared<Explicit<f64>>, tip: Vec3, steps: usize) -> ForceMsg {
+    let mut msg = ForceMsg::default();
+    for k in 0..steps {
+        let input = [Some(ToolInput {
+            tip_m: tip,
+            jaw_opening: 1.0,
+        })];
+        p.tools.update(&mut p.sim, &input);
+        let flags = tool_flags(p.tools.step(&mut p.sim));
+        msg = force_sample(ForceMsg::default(), &p.tools, &p.sim, k as u64 + 1, &flags);
+        msg.seq = k as u64;
+    }
+    msg
+}
+
+const TOP_M: f64 = 0.02;
+
+/// The probe's tip 2.5 mm into the top between vertices.
+fn pressed() -> (Prepared<Explicit<f64>>, Vec3, ForceMsg) {
+    let mut p = block();
+    let at = Vec3::new(0.0185, 0.0085, TOP_M + 0.0025 - 0.0025);
+    for k in 0..=100 {
+        hold(&mut p, at + Vec3::Z * (0.005 * (1.0 - k as f64 / 100.0)), 1);
+    }
+    let msg = hold(&mut p, at, 600);
+    (p, at, msg)
+}
+
+#[test]
+fn the_compliance_is_the_tissues_static_response_at_its_vertices() {
+    let (mut p, _, _) = pressed();
+    let mut lc = LocalContact::default();
+    assert!(local_contact_into(&mut p.tools, &p.sim, 0, &mut lc));
+    let nv = lc.vertices.len();
+    assert!(nv >= 6 && !lc.points.is_empty(), "{nv} vertices");
+    // Loads on V alone, solved statically with the bottom fixed: the
+    // displacements at V are W times the loads.
+    let model = p.sim.model();
+    let mut fixed = Dirichlet::new(model.vertex_count());
+    for (v, x) in model.mesh().positions_m().iter().enumerate() {
+        if x.z < 1e-4 {
+            fixed.fix(VertexId::from(v));
+        }
+    }
+    let mut loads = vec![Vec3::ZERO; model.vertex_count()];
+    let f: Vec<f64> = (0..3 * nv)
+        .map(|i| ((i * 7919) % 13) as f64 * 0.01 - 0.06)
+        .collect();
+    for (k, &v) in lc.vertices.iter().enumerate() {
+        loads[v as usize] = Vec3::new(f[3 * k], f[3 * k + 1], f[3 * k + 2]);
+    }
+    let u = solve_static(model, &fixed, &loads).unwrap().displacement_m;
+    let n = 3 * nv;
+    let w = &lc.compliance_m_per_n;
+    let mut worst: f64 = 0.0;
+    let mut size: f64 = 0.0;
+    for (k, &v) in lc.vertices.iter().enumerate() {
+        for r in 0..3 {
+            let wf: f64 = (0..n).map(|c| w[(3 * k + r) * n + c] * f[c]).sum();
+            worst = worst.max((wf - u[v as usize][r]).abs());
+            size = size.max(u[v as usize][r].abs());
+        }
+    }
+    assert!(size > 1e-6, "the loads move V: {size} m");
+    assert!(
+        worst <= 1e-9 * size.max(1e-3),
+        "W f vs K^-1 f: {worst} m of {size}"
+    );
+    // Symmetric (a compliance).
+    for i in 0..n {
+        for j in 0..i {
+            assert!((w[i * n + j] - w[j * n + i]).abs() <= 1e-12 * w[i * n + i].abs());
+        }
+    }
+}
+
+#[test]
+fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
+    let (mut p, at, msg_a) = pressed();
+    let mut lc = LocalContact::default();
+    assert!(local_contact_into(&mut p.tools, &p.sim, 0, &mut lc));
+    let mut wire = Box::<LocalContactMsg>::default();
+    local_contact_msg(&lc, 0, msg_a.seq, msg_a.t_ns, &mut wire);
+    let mut lp = LocalProblem::new();
+    lp.set_from_wire(&wire).unwrap();
+    let sample = ForceSample::from_wire(&msg_a, 0).unwrap();
+    assert!(sample.in_contact && sample.force_n[2] > 0.05, "{sample:?}");
+    // At the sample's own pose the problem renders the sample.
+    let same = lp.render(&sample, sample.position_m).unwrap();
+    assert!((0..3).all(|i| (same[i] - sample.force_n[i]).abs() < 1e-12));
+    // 0.6 mm deeper and 1 mm aside, slowly, then settled.
+    let b = at + Vec3::new(0.001, 0.0, -0.0006);
+    for k in 1..=200 {
+        hold(&mut p, at.lerp(b, k as f64 / 200.0), 1);
+    }
+    let settled = ForceSample::from_wire(&hold(&mut p, b, 600), 0).unwrap();
+    let predicted = lp.render(&sample, b.to_array()).unwrap();
+    let err: f64 = (0..3)
+        .map(|i| (predicted[i] - settled.force_n[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let change: f64 = (0..3)
+        .map(|i| (settled.force_n[i] - sample.force_n[i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    eprintln!(
+        "sample {:?} -> settled {:?}, predicted {predicted:?}: error {err:.5} N of a {change:.4} N change",
+        sample.force_n, settled.force_n
+    );
+    assert!(change > 0.02, "the move changes the force: {change} N");
+    assert!(err < 0.1 * change, "error {err} N of a {change} N change");
+    // Withdrawn above the surface: nothing.
+    let free = lp
+        .render(&sample, (at + Vec3::Z * 0.01).to_array())
+        .unwrap();
+    assert_eq!(free, [0.0; 3]);
+}
