@@ -30,6 +30,7 @@
 //! telemetry tick is a protocol struct and has no field for them).
 
 use crate::device::{Device, DeviceError, DeviceState};
+use crate::extrapolate::local_problem::LocalProblem;
 use crate::extrapolate::{Extrapolator, ForceSample, Method};
 use crate::live::{Live, LiveConfig, LiveError, LiveGuard};
 use crate::math::is_finite;
@@ -63,6 +64,10 @@ pub struct Shared {
     pub pose_rereferences: AtomicU64,
     /// Force samples not rendered because they ran faster than wall time.
     pub samples_not_live: AtomicU64,
+    /// Contact problems set up for `local-problem`.
+    pub local_problems: AtomicU64,
+    /// Contact problems refused (another protocol version, malformed).
+    pub local_problems_refused: AtomicU64,
     /// Ticks on which the passivity controller added damping.
     pub passivity_ticks: AtomicU64,
     /// Energy the passivity controller set out to dissipate (J, f64 bits).
@@ -83,6 +88,8 @@ impl Shared {
             poses_rejected: AtomicU64::new(0),
             pose_rereferences: AtomicU64::new(0),
             samples_not_live: AtomicU64::new(0),
+            local_problems: AtomicU64::new(0),
+            local_problems_refused: AtomicU64::new(0),
             passivity_ticks: AtomicU64::new(0),
             passivity_dissipated_j_bits: AtomicU64::new(0f64.to_bits()),
             io_thread: OnceLock::new(),
@@ -180,6 +187,8 @@ pub struct RtLoop<D: Device> {
     last_sample_t_ns: Option<u64>,
     last_force_n: [f64; 3],
     tick: u64,
+    /// `local-problem`: the newest contact problem from the I/O thread.
+    local: Option<triple_buffer::Output<LocalProblem>>,
 }
 
 impl<D: Device> RtLoop<D> {
@@ -228,7 +237,35 @@ impl<D: Device> RtLoop<D> {
             last_sample_t_ns: None,
             last_force_n: [0.0; 3],
             tick: 0,
+            local: None,
         }
+    }
+
+    /// Renders `local-problem` from the contact problems `output` receives
+    /// (the I/O thread sets them up: [`crate::io::run_io`]); without them,
+    /// or while none fits the newest sample, it renders as `local-normal`.
+    pub fn with_local_problems(mut self, output: triple_buffer::Output<LocalProblem>) -> Self {
+        self.local = Some(output);
+        self
+    }
+
+    /// The extrapolated force at `now_ns` for the current device position:
+    /// the contact problem's answer with `local-problem` when there is one
+    /// for the newest sample, else the extrapolator's.
+    fn extrapolate(&mut self, now_ns: u64) -> [f64; 3] {
+        let position = self.last.position_m;
+        if self.method == Method::LocalProblem
+            && let (Some(out), Some(latest)) = (self.local.as_mut(), self.extrapolator.latest())
+        {
+            let latest = *latest;
+            out.update();
+            if let Some(f) = out.output_buffer_mut().render(&latest, position)
+                && is_finite(f)
+            {
+                return f;
+            }
+        }
+        self.extrapolator.force(now_ns, position)
     }
 
     /// Enables the device output.
@@ -317,7 +354,7 @@ impl<D: Device> RtLoop<D> {
         // rejected (non-finite) samples must look stale, not fresh.
         self.last_sample_t_ns = self.extrapolator.latest().map(|s| s.t_ns);
         // 4-5. Extrapolate and make safe.
-        let mut requested = self.extrapolator.force(now_ns, self.last.position_m);
+        let mut requested = self.extrapolate(now_ns);
         if poisoned {
             requested = [f64::NAN; 3];
         }

@@ -8,6 +8,7 @@ use haptic_daemon::device::{
     Device, HandModel, Haply, Path, Plugin, Replay, Simulated, Trajectory,
 };
 use haptic_daemon::extrapolate::Method;
+use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoSpin, Stats, run_io};
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
@@ -141,6 +142,9 @@ struct Summary {
     max_stiffness_n_per_m: f64,
     samples_received: u64,
     samples_not_live: u64,
+    /// `local-problem`: contact problems set up, and refused.
+    local_problems: u64,
+    local_problems_refused: u64,
     poses_rejected: u64,
     pose_rereferences: u64,
     passivity: bool,
@@ -264,6 +268,15 @@ fn main() -> Result<()> {
         period_ns,
         window_ns: args.io_spin_us.saturating_mul(1000).min(period_ns),
     });
+    // `local-problem`: the I/O thread sets up each contact problem, the RT
+    // thread solves the newest (a triple buffer between them, allocated
+    // here).
+    let (local_in, local_out) = if method == Method::LocalProblem {
+        let (i, o) = triple_buffer::triple_buffer(&LocalProblem::new());
+        (Some(i), Some(o))
+    } else {
+        (None, None)
+    };
     let io = {
         let (shared, session, record, stats) = (
             shared.clone(),
@@ -273,7 +286,7 @@ fn main() -> Result<()> {
         );
         std::thread::Builder::new()
             .name("haptic-io".into())
-            .spawn(move || run_io(shared, session, record, stats, io_spin))?
+            .spawn(move || run_io(shared, session, record, stats, io_spin, local_in))?
     };
     let spin_ns = args.spin_us.saturating_mul(1000);
     let (report_tx, report_rx) = std::sync::mpsc::channel::<RtReport>();
@@ -307,6 +320,7 @@ fn main() -> Result<()> {
                         safety,
                         chain,
                         sub,
+                        local_out,
                         shared.clone(),
                         period_ns,
                         spin_ns,
@@ -317,6 +331,7 @@ fn main() -> Result<()> {
                         safety,
                         chain,
                         sub,
+                        local_out,
                         shared.clone(),
                         period_ns,
                         spin_ns,
@@ -327,6 +342,7 @@ fn main() -> Result<()> {
                         safety,
                         chain,
                         sub,
+                        local_out,
                         shared.clone(),
                         period_ns,
                         spin_ns,
@@ -337,6 +353,7 @@ fn main() -> Result<()> {
                         safety,
                         chain,
                         sub,
+                        local_out,
                         shared.clone(),
                         period_ns,
                         spin_ns,
@@ -425,6 +442,8 @@ fn main() -> Result<()> {
         max_stiffness_n_per_m: stiffness_cap,
         samples_received: shared.samples.load(Ordering::Relaxed),
         samples_not_live: shared.samples_not_live.load(Ordering::Relaxed),
+        local_problems: shared.local_problems.load(Ordering::Relaxed),
+        local_problems_refused: shared.local_problems_refused.load(Ordering::Relaxed),
         poses_rejected: shared.poses_rejected.load(Ordering::Relaxed),
         pose_rereferences: shared.pose_rereferences.load(Ordering::Relaxed),
         passivity: chain.passivity.enabled,
@@ -452,6 +471,13 @@ fn main() -> Result<()> {
         summary.pose_rereferences,
         summary.passivity_active_ticks
     );
+    if method == Method::LocalProblem {
+        out!(
+            "local-problem: {} contact problems set up, {} refused",
+            summary.local_problems,
+            summary.local_problems_refused
+        );
+    }
     for w in &summary.warnings {
         say!("warning: {w}");
     }
@@ -472,11 +498,15 @@ fn run_loop<D: Device>(
     safety: SafetyConfig,
     chain: ChainConfig,
     sub: iceoryx2::port::subscriber::Subscriber<services::Ipc, shared::protocol::ForceMsg, ()>,
+    local: Option<triple_buffer::Output<LocalProblem>>,
     shared: Arc<Shared>,
     period_ns: u64,
     spin_ns: u64,
 ) -> Result<(u64, u64)> {
     let mut rt = RtLoop::with_chain(device, method, safety, chain, Some(sub), shared.clone());
+    if let Some(local) = local {
+        rt = rt.with_local_problems(local);
+    }
     let start = monotonic_ns();
     rt.enable(start)?;
     let mut pacer = Pacer::new(period_ns, start).with_spin(spin_ns);

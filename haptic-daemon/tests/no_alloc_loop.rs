@@ -10,6 +10,7 @@ use haptic_daemon::device::{
     Device, DeviceError, DeviceSpecs, DeviceState, HandModel, Path, Simulated,
 };
 use haptic_daemon::extrapolate::Method;
+use haptic_daemon::extrapolate::local_problem::{Capsule, LocalContactMsg, LocalProblem, Point};
 use haptic_daemon::safety::SafetyConfig;
 use shared::alloc_count::{Counting, count};
 use shared::protocol::{CONTACT, ForceMsg, PROTOCOL_VERSION};
@@ -86,6 +87,13 @@ fn ten_thousand_ticks_allocate_nothing() {
             Some(sub),
             shared.clone(),
         );
+        // local-problem: contact problems handed over as the I/O thread
+        // does (set up outside the count), solved in the tick.
+        let (mut local_in, local_out) = triple_buffer::triple_buffer(&LocalProblem::new());
+        if method == Method::LocalProblem {
+            rt = rt.with_local_problems(local_out);
+        }
+        let mut problem = Box::<LocalContactMsg>::default();
         let t0 = 1_000_000_000u64;
         rt.enable(t0).unwrap();
         let mut allocations = 0;
@@ -109,6 +117,11 @@ fn ten_thousand_ticks_allocate_nothing() {
                     [[100.0, 0.0, 0.0], [0.0, 100.0, 0.0], [0.0, 0.0, 100.0]];
                 msg.tools[0].flags = CONTACT;
                 publisher.send_copy(msg).unwrap();
+                if k % 12 == 0 {
+                    surface_under(&mut problem, msg.tools[0].position_m, k, now);
+                    local_in.input_buffer_mut().set_from_wire(&problem).unwrap();
+                    local_in.publish();
+                }
             }
             allocations += count(|| rt.tick(now, 0)).1;
             // Keep the telemetry queue from filling (the I/O thread's job).
@@ -127,5 +140,44 @@ fn ten_thousand_ticks_allocate_nothing() {
         assert!(load(&shared.pose_rereferences) > 0);
         let f = rt.last_force_n();
         assert!(f.iter().all(|x| x.is_finite()));
+    }
+}
+
+/// A contact problem: a 5 x 5 cm triangle 4 cm up, with 25 points, under a
+/// probe at `tool_m`.
+fn surface_under(msg: &mut LocalContactMsg, tool_m: [f64; 3], seq: u64, t_ns: u64) {
+    msg.seq = seq;
+    msg.t_ns = t_ns;
+    msg.tool_position_m = tool_m;
+    msg.part_count = 1;
+    msg.parts[0] = Capsule {
+        a_m: tool_m,
+        b_m: [tool_m[0], tool_m[1], tool_m[2] + 0.01],
+        radius_m: 0.005,
+        onset_m: 1e-4,
+    };
+    msg.vertex_count = 3;
+    msg.positions_m[..3].copy_from_slice(&[
+        [-0.02, -0.02, 0.04],
+        [0.03, -0.02, 0.04],
+        [-0.02, 0.03, 0.04],
+    ]);
+    let mut n = 0;
+    for i in 0..5 {
+        for j in 0..5 - i {
+            let (a, b) = ((i as f64 + 0.3) / 5.0, (j as f64 + 0.3) / 5.0);
+            msg.points[n] = Point {
+                weights: [1.0 - a - b, a, b],
+                stiffness_n_per_m: 200.0,
+                slots: [0, 1, 2],
+                part: 0,
+            };
+            n += 1;
+        }
+    }
+    msg.point_count = n as u32;
+    msg.compliance_m_per_n[..81].fill(0.0);
+    for d in 0..9 {
+        msg.compliance_m_per_n[d * 9 + d] = 0.002;
     }
 }

@@ -98,6 +98,10 @@ pub type PoseReadyListener = Listener<Ipc>;
 pub type ForceSubscriber = Subscriber<Ipc, ForceMsg, ()>;
 /// Publisher of force samples (the simulation's, one per session).
 pub type ForcePublisher = Publisher<Ipc, ForceMsg, ()>;
+/// Sim -> daemon contact-problem publisher.
+pub type LocalContactPublisher = Publisher<Ipc, LocalContactMsg, ()>;
+/// Daemon side of the contact-problem stream.
+pub type LocalContactSubscriber = Subscriber<Ipc, LocalContactMsg, ()>;
 /// Publisher of the scene-info stream.
 pub type ScenePublisher = Publisher<Ipc, SceneInfo, ()>;
 /// Subscriber of the scene-info stream.
@@ -186,12 +190,15 @@ pub fn force_service(
     open(node, session, stream::FORCE, FORCE_BUFFER_MAX)
 }
 
+/// The local-contact service.
+pub type LocalContactService = PortFactory<Ipc, LocalContactMsg, ()>;
+
 /// The local-contact stream (sim -> daemon): the contact problem around
 /// a tool, newest kept on overflow (the daemon needs only the latest).
 pub fn local_contact_service(
     node: &Node<Ipc>,
     session: &SessionName,
-) -> Result<PortFactory<Ipc, LocalContactMsg, ()>, ServiceError> {
+) -> Result<LocalContactService, ServiceError> {
     open(node, session, stream::LOCAL_CONTACT, FORCE_BUFFER_LATEST)
 }
 

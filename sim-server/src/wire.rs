@@ -5,7 +5,7 @@
 
 use crate::backend::Backend;
 use crate::contact::field::ONSET_OF_RADIUS;
-use crate::contact::{ContactReport, LocalContact, Reaction, Tools};
+use crate::contact::{ContactReport, LocalContact, LocalSpec, Reaction, Tools};
 use crate::math::Vec3;
 use shared::protocol::{
     CONTACT, CUTTING, ForceMsg, GRIPPING, LOCAL_MAX_PARTS, LOCAL_MAX_POINTS, LOCAL_MAX_VERTICES,
@@ -120,22 +120,28 @@ pub fn local_contact_msg(
 /// surface in slides, 3 and 4 mm give the same errors.
 pub const LOCAL_MARGIN_M: f64 = 3e-3;
 
-/// Tool `tool`'s contact problem after the last step into `lc`, within the
-/// wire's capacity; false when there is none (see [`Tools::local_contact`]).
+/// The contact problem of tool `tool` the wire can carry: points
+/// [`LOCAL_MARGIN_M`] beyond the step's reach, within the message's
+/// capacity.
+pub fn local_spec(tool: usize) -> LocalSpec {
+    LocalSpec {
+        tool,
+        margin_m: LOCAL_MARGIN_M,
+        max_vertices: LOCAL_MAX_VERTICES,
+        max_points: LOCAL_MAX_POINTS,
+    }
+}
+
+/// Tool `tool`'s contact problem after the last step into `lc`, now, as
+/// the wire can carry it; false when there is none (see
+/// [`Tools::local_contact`]).
 pub fn local_contact_into<B: Backend>(
     tools: &mut Tools,
     sim: &B,
     tool: usize,
     lc: &mut LocalContact,
 ) -> bool {
-    tools.local_contact(
-        sim,
-        tool,
-        LOCAL_MARGIN_M,
-        LOCAL_MAX_VERTICES,
-        LOCAL_MAX_POINTS,
-        lc,
-    )
+    tools.local_contact(sim, local_spec(tool), lc)
 }
 
 #[cfg(test)]

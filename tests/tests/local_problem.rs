@@ -168,3 +168,63 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
         .unwrap();
     assert_eq!(free, [0.0; 3]);
 }
+
+/// The real processes: `sim-server run` on the box scene and
+/// `haptic-daemon run --extrapolation local-problem` with the simulated
+/// hand palpating it. The simulation publishes contact problems once the
+/// daemon subscribes, the daemon sets them up and renders from them.
+#[test]
+fn the_daemon_renders_the_problems_the_simulation_sends() {
+    use std::process::Stdio;
+    use std::time::Duration;
+    use system_tests::{
+        Peer, binary, daemon_run, finish, read_json, scratch_dir, wait_bounded, wait_for,
+    };
+    let session = format!("localproblem{}", std::process::id());
+    let dir = scratch_dir("local-problem");
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let mut sim = std::process::Command::new(binary("sim-server"))
+        .args([
+            "run",
+            "--quiet",
+            "--session",
+            &session,
+            "--duration-s",
+            "60",
+        ])
+        .arg("--scene")
+        .arg(data.join("box-probe.toml"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server");
+    wait_for(&session, Peer::Simulation);
+    let json = dir.join("daemon.json");
+    let daemon = daemon_run(&session)
+        .arg("--device")
+        .arg(format!(
+            "simulated:{}",
+            data.join("box-palpate.csv").display()
+        ))
+        .args(["--extrapolation", "local-problem", "--duration-s", "4"])
+        .arg("--json")
+        .arg(&json)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start haptic-daemon");
+    finish(daemon, Duration::from_secs(30), "haptic-daemon");
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(sim.id() as libc::pid_t, libc::SIGTERM) };
+    wait_bounded(&mut sim, Duration::from_secs(10), "sim-server");
+    let d = read_json(&json);
+    let num = |k: &str| d[k].as_f64().unwrap_or_else(|| panic!("{k}: {d}"));
+    assert_eq!(d["extrapolation"], "local-problem", "{d}");
+    // One every few milliseconds while the probe is near the surface
+    // (about 3 of the 4 s).
+    assert!(num("local_problems") > 100.0, "{d}");
+    assert_eq!(num("local_problems_refused"), 0.0, "{d}");
+    // The palpation's force (about 0.5 N at 6 mm), within the limit.
+    let max = num("max_force_n");
+    assert!(max > 0.1 && max <= num("force_limit_n"), "{d}");
+}

@@ -44,8 +44,12 @@ pub use shared::protocol::{
     LOCAL_MAX_PARTS as MAX_PARTS, LOCAL_MAX_POINTS as MAX_POINTS,
     LOCAL_MAX_VERTICES as MAX_VERTICES, LocalContactMsg, LocalPart as Capsule, LocalPoint as Point,
 };
-/// Newton iterations per solve at most.
-const MAX_ITERATIONS: usize = 30;
+/// A problem taken this long before the newest sample is not used (ns).
+pub const MAX_AGE_NS: u64 = 100_000_000;
+/// Newton iterations per solve at most, over its rounds: bounds the RT
+/// thread's time (an unfinished solve goes on from where it stopped at
+/// the next tick).
+const RENDER_ITERATIONS: usize = 16;
 /// A Newton iteration moves no vertex further than this many tool radii.
 const TRUST_OF_RADIUS: f64 = 0.25;
 /// Converged when no vertex moves more than this in an iteration (m).
@@ -56,6 +60,15 @@ const TOLERANCE_N: f64 = 1e-4;
 /// Points closer than this to touching are in the Newton iterations (m);
 /// a check over all points after them catches the rest.
 const CANDIDATE_SLACK_M: f64 = 1e-3;
+
+/// Where [`LocalProblem::evaluate`] adds the points' Hessian: a block
+/// over the vertices `slot` maps to `0..size / 3`.
+struct Block<'a> {
+    h: &'a mut [f64],
+    springs_only: bool,
+    slot: &'a [u16],
+    size: usize,
+}
 
 /// Why a problem was refused (the extrapolator then holds the sample).
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -82,8 +95,9 @@ pub enum LocalProblemError {
 }
 
 /// The problem of one sample and the scratch to solve it (see the module
-/// docs).
-#[derive(Clone, Debug)]
+/// docs). A clone has the full capacity too (the triple buffer that hands
+/// problems to the RT thread is made of clones).
+#[derive(Debug)]
 pub struct LocalProblem {
     tool_m: V3,
     parts: [Capsule; MAX_PARTS],
@@ -92,6 +106,18 @@ pub struct LocalProblem {
     points: Vec<Point>,
     /// S = W^-1, row-major (3V)^2.
     s: Vec<f64>,
+    /// W itself.
+    w: Vec<f64>,
+    /// Per vertex: its slot among the touched vertices T (u16::MAX: not
+    /// touched), and T.
+    tslot: Vec<u16>,
+    tverts: Vec<u16>,
+    /// Scratch: the points' Hessian on T, I + G_T W_TT, W g, the T-sized
+    /// solve.
+    gt: Vec<f64>,
+    m: Vec<f64>,
+    z: Vec<f64>,
+    y: Vec<f64>,
     /// Forces on V at the sample (N), 3V.
     f0: Vec<f64>,
     /// The points' force on the tool at the sample (N).
@@ -110,12 +136,69 @@ pub struct LocalProblem {
     active: Vec<u16>,
     /// delta at the start of the solve.
     start: Vec<f64>,
+    /// S delta, S step, and S trial (kept so that no product with S is
+    /// needed inside the iterations: S W = I gives S step cheaply).
+    sd: Vec<f64>,
+    sstep: Vec<f64>,
+    trial_sd: Vec<f64>,
+    /// Newton iterations left in this render (bounds the RT thread's time).
+    budget: usize,
+    /// Whether `active` is a selection with the normal slack, and the tool
+    /// motion it was made for.
+    selected: bool,
+    selected_dx: V3,
     ready: bool,
     /// The force message `seq` of the step the problem was taken at.
     seq: u64,
+    /// When it was taken (ns).
+    t_ns: u64,
     /// The latest sample rendered from: its `seq`, and the points' force
     /// on the tool at its position less that at the problem's own.
     base: Option<(u64, V3)>,
+}
+
+impl Clone for LocalProblem {
+    fn clone(&self) -> Self {
+        let mut out = Self::new();
+        out.clone_from(self);
+        out
+    }
+
+    fn clone_from(&mut self, o: &Self) {
+        let copy = |d: &mut Vec<f64>, s: &Vec<f64>| {
+            d.clear();
+            d.extend_from_slice(s);
+        };
+        self.tool_m = o.tool_m;
+        self.parts = o.parts;
+        self.part_count = o.part_count;
+        self.x.clear();
+        self.x.extend_from_slice(&o.x);
+        self.points.clear();
+        self.points.extend_from_slice(&o.points);
+        copy(&mut self.s, &o.s);
+        copy(&mut self.w, &o.w);
+        self.tslot.clear();
+        self.tslot.extend_from_slice(&o.tslot);
+        copy(&mut self.f0, &o.f0);
+        self.tool_force0_n = o.tool_force0_n;
+        copy(&mut self.delta, &o.delta);
+        copy(&mut self.grad, &o.grad);
+        copy(&mut self.hess, &o.hess);
+        copy(&mut self.step, &o.step);
+        copy(&mut self.trial, &o.trial);
+        copy(&mut self.forces, &o.forces);
+        self.max_move_m = o.max_move_m;
+        self.active.clear();
+        self.active.extend_from_slice(&o.active);
+        self.selected = o.selected;
+        self.selected_dx = o.selected_dx;
+        copy(&mut self.start, &o.start);
+        self.ready = o.ready;
+        self.seq = o.seq;
+        self.t_ns = o.t_ns;
+        self.base = o.base;
+    }
 }
 
 impl Default for LocalProblem {
@@ -141,6 +224,13 @@ impl LocalProblem {
             x: Vec::with_capacity(MAX_VERTICES),
             points: Vec::with_capacity(MAX_POINTS),
             s: Vec::with_capacity(n * n),
+            w: Vec::with_capacity(n * n),
+            tslot: Vec::with_capacity(MAX_VERTICES),
+            tverts: Vec::with_capacity(MAX_VERTICES),
+            gt: Vec::with_capacity(n * n),
+            m: Vec::with_capacity(n * n),
+            z: Vec::with_capacity(n),
+            y: Vec::with_capacity(n),
             f0: Vec::with_capacity(n),
             tool_force0_n: ZERO,
             delta: Vec::with_capacity(n),
@@ -152,8 +242,15 @@ impl LocalProblem {
             max_move_m: 0.0,
             active: Vec::with_capacity(MAX_POINTS),
             start: Vec::with_capacity(n),
+            sd: Vec::with_capacity(n),
+            sstep: Vec::with_capacity(n),
+            trial_sd: Vec::with_capacity(n),
+            budget: 0,
+            selected: false,
+            selected_dx: ZERO,
             ready: false,
             seq: 0,
+            t_ns: 0,
             base: None,
         }
     }
@@ -196,6 +293,7 @@ impl LocalProblem {
             &msg.compliance_m_per_n[..9 * nv * nv],
         )?;
         self.seq = msg.seq;
+        self.t_ns = msg.t_ns;
         Ok(())
     }
 
@@ -206,7 +304,13 @@ impl LocalProblem {
     /// the tool there. `None` without a problem or when a solve fails (the
     /// caller falls back to another method).
     pub fn render(&mut self, latest: &ForceSample, tool_m: V3) -> Option<V3> {
-        if !self.ready || latest.seq < self.seq {
+        // A problem newer than the sample (a restarted simulation) or
+        // much older (the simulation stopped sending them) says nothing
+        // about it.
+        if !self.ready
+            || latest.seq < self.seq
+            || latest.t_ns.saturating_sub(self.t_ns) > MAX_AGE_NS
+        {
             return None;
         }
         let base = match self.base {
@@ -283,11 +387,16 @@ impl LocalProblem {
             * TRUST_OF_RADIUS;
         self.base = None;
         self.seq = 0;
+        self.t_ns = 0;
         self.x.clear();
         self.x.extend_from_slice(positions_m);
         self.points.clear();
         self.points.extend_from_slice(points);
         // S = W^-1: Cholesky of W, then its solve on the unit columns.
+        self.w.clear();
+        self.w.extend_from_slice(w);
+        self.tslot.clear();
+        self.tslot.resize(nv, u16::MAX);
         self.hess.clear();
         self.hess.extend_from_slice(w);
         if !cholesky(&mut self.hess, n) {
@@ -318,6 +427,7 @@ impl LocalProblem {
         self.f0.resize(n, 0.0);
         self.active.clear();
         self.active.extend(0..points.len() as u16);
+        self.selected = false;
         let mut f0 = std::mem::take(&mut self.f0);
         self.tool_force0_n = self.evaluate(&self.delta, ZERO, &mut f0, None).1;
         self.f0 = f0;
@@ -337,35 +447,55 @@ impl LocalProblem {
         }
         let n = self.delta.len();
         let dx = sub(tool_m, self.tool_m);
+        self.budget = RENDER_ITERATIONS;
         let mut forces = std::mem::take(&mut self.forces);
         forces.resize(n, 0.0);
         // Newton over the points near the tool; then a check over all that
-        // no other point touches, else again with a wider selection.
+        // no other point touches, else again with a wider selection. With
+        // the iteration budget spent, the state reached stands (the next
+        // tick goes on from it).
         let mut slack_m = CANDIDATE_SLACK_M;
-        let mut out = None;
         self.start.clear();
         self.start.extend_from_slice(&self.delta);
-        for _ in 0..3 {
-            // Each round from the warm start: a point the last round left
-            // out may have gone through the capsule.
-            self.delta.copy_from_slice(&self.start);
-            self.select(dx, slack_m);
+        for round in 0..3 {
+            if round > 0 {
+                // From the warm start again: a point the last round left
+                // out may have gone through the capsule.
+                self.delta.copy_from_slice(&self.start);
+            }
+            // The selection of an earlier tick serves while the tool is
+            // within half the slack of where it was made (points entering
+            // anyway are caught below).
+            let moved = norm(sub(dx, self.selected_dx));
+            if round > 0 || !self.selected || moved > 0.5 * CANDIDATE_SLACK_M {
+                self.select(dx, slack_m);
+                self.selected = round == 0;
+                self.selected_dx = dx;
+            }
             if !self.newton(dx, &mut forces) {
-                break;
+                self.forces = forces;
+                return None;
             }
             if !self.others_touch(dx) {
-                self.active.clear();
-                self.active.extend(0..self.points.len() as u16);
-                let (_, tool, touching) = self.evaluate(&self.delta, dx, &mut forces, None);
-                let change = sub(tool, self.tool_force0_n);
-                out = change
-                    .iter()
-                    .all(|x| x.is_finite())
-                    .then_some((change, touching));
                 break;
+            }
+            if self.budget == 0 || round == 2 {
+                // Points outside the iterations touch and no time is left
+                // to take them in: this tick says nothing (the caller
+                // falls back), the next starts where this one did.
+                self.delta.copy_from_slice(&self.start);
+                self.forces = forces;
+                return None;
             }
             slack_m *= 4.0;
         }
+        // No point outside the active ones touches: they are the force.
+        let (_, tool, touching) = self.evaluate(&self.delta, dx, &mut forces, None);
+        let change = sub(tool, self.tool_force0_n);
+        let out = change
+            .iter()
+            .all(|x| x.is_finite())
+            .then_some((change, touching));
         self.forces = forces;
         out
     }
@@ -423,30 +553,33 @@ impl LocalProblem {
     /// (warm start); false if no Hessian could be factored.
     fn newton(&mut self, dx: V3, forces: &mut [f64]) -> bool {
         let n = self.delta.len();
-        let mut energy = self.energy(&self.delta, dx, forces);
-        for _ in 0..MAX_ITERATIONS {
+        // S delta once, exactly; then kept up to date with S step.
+        self.sd.clear();
+        for row in self.s.chunks_exact(n) {
+            self.sd
+                .push(row.iter().zip(&self.delta).map(|(a, b)| a * b).sum());
+        }
+        let mut energy = self.energy(&self.delta, &self.sd, dx, forces);
+        while self.budget > 0 {
+            self.budget -= 1;
             // Gradient S delta + f0 - f(delta).
             self.grad.clear();
-            for (r, (row, f)) in self.s.chunks_exact(n).zip(forces.iter()).enumerate() {
-                let sd: f64 = row.iter().zip(&self.delta).map(|(a, b)| a * b).sum();
-                self.grad.push(sd + self.f0[r] - f);
-            }
+            self.grad.extend(
+                self.sd
+                    .iter()
+                    .zip(&self.f0)
+                    .zip(forces.iter())
+                    .map(|((s, f0), f)| s + f0 - f),
+            );
             if self.grad.iter().all(|g| g.abs() < TOLERANCE_N) {
                 break;
             }
-            // The full Hessian, or where it is not positive definite (a
-            // round tool dragging tissue sideways makes a saddle) the
-            // springs' part alone, which is.
-            self.fill_hessian(dx, forces, false);
-            if !cholesky(&mut self.hess, n) {
-                self.fill_hessian(dx, forces, true);
-                if !cholesky(&mut self.hess, n) {
-                    return false;
-                }
+            // The Newton step with the full Hessian, or where that is no
+            // descent (a round tool dragging tissue sideways makes a
+            // saddle) the springs' part alone, which always is.
+            if !self.newton_step(dx, forces, false) && !self.newton_step(dx, forces, true) {
+                return false;
             }
-            self.step.clear();
-            self.step.extend(self.grad.iter().map(|g| -g));
-            cholesky_solve(&self.hess, &mut self.step, n);
             self.trust_region();
             let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
             // Backtracking on Pi (Armijo).
@@ -460,9 +593,15 @@ impl LocalProblem {
                         .zip(&self.step)
                         .map(|(d, s)| d + alpha * s),
                 );
-                let trial = std::mem::take(&mut self.trial);
-                let e = self.energy(&trial, dx, forces);
-                self.trial = trial;
+                self.trial_sd.clear();
+                self.trial_sd
+                    .extend(self.sd.iter().zip(&self.sstep).map(|(d, s)| d + alpha * s));
+                let (trial, trial_sd) = (
+                    std::mem::take(&mut self.trial),
+                    std::mem::take(&mut self.trial_sd),
+                );
+                let e = self.energy(&trial, &trial_sd, dx, forces);
+                (self.trial, self.trial_sd) = (trial, trial_sd);
                 if e <= energy + 1e-4 * alpha * slope || slope >= 0.0 || slope.is_nan() {
                     energy = e;
                     accepted = true;
@@ -472,10 +611,11 @@ impl LocalProblem {
             }
             if !accepted {
                 // No descent left: a minimum to rounding.
-                self.energy(&self.delta, dx, forces);
+                self.energy(&self.delta, &self.sd, dx, forces);
                 return true;
             }
             std::mem::swap(&mut self.delta, &mut self.trial);
+            std::mem::swap(&mut self.sd, &mut self.trial_sd);
             let moved = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())) * alpha;
             if moved < TOLERANCE_M {
                 break;
@@ -484,14 +624,95 @@ impl LocalProblem {
         true
     }
 
-    /// S plus the points' Hessian at the current delta (the springs'
-    /// part alone if asked) into `hess`.
-    fn fill_hessian(&mut self, dx: V3, forces: &mut [f64], springs_only: bool) {
-        self.hess.clear();
-        self.hess.extend_from_slice(&self.s);
-        let mut hess = std::mem::take(&mut self.hess);
-        self.evaluate(&self.delta, dx, forces, Some((&mut hess, springs_only)));
-        self.hess = hess;
+    /// The Newton step -H^-1 g into `step`, H = S + G with G the points'
+    /// Hessian (the springs' part alone if asked), G nonzero only on the
+    /// vertices T of the touching points: by the push-through identity
+    /// H^-1 = (I - W_:T (I + G_T W_TT)^-1 G_T P) W, a solve of size 3|T|
+    /// instead of 3|V|. False if it is not a descent direction (or the
+    /// small system is singular).
+    fn newton_step(&mut self, dx: V3, forces: &mut [f64], springs_only: bool) -> bool {
+        let n = self.delta.len();
+        // T.
+        for v in self.tverts.drain(..) {
+            self.tslot[v as usize] = u16::MAX;
+        }
+        for &i in &self.active {
+            let p = &self.points[i as usize];
+            if self.gap_m(p, &self.delta, dx) < 0.0 {
+                for &v in &p.slots {
+                    if self.tslot[v as usize] == u16::MAX {
+                        self.tslot[v as usize] = self.tverts.len() as u16;
+                        self.tverts.push(v);
+                    }
+                }
+            }
+        }
+        let t = 3 * self.tverts.len();
+        // z = W g.
+        self.z.clear();
+        for row in self.w.chunks_exact(n) {
+            self.z
+                .push(row.iter().zip(&self.grad).map(|(a, b)| a * b).sum());
+        }
+        self.step.clear();
+        self.step.extend(self.z.iter().map(|z| -z));
+        // S step = -g + P_T^T y (S W = I).
+        self.sstep.clear();
+        self.sstep.extend(self.grad.iter().map(|g| -g));
+        if t > 0 {
+            let dof = |k: usize, tv: &[u16]| 3 * tv[k / 3] as usize + k % 3;
+            self.gt.clear();
+            self.gt.resize(t * t, 0.0);
+            let mut gt = std::mem::take(&mut self.gt);
+            self.evaluate(
+                &self.delta,
+                dx,
+                forces,
+                Some(Block {
+                    h: &mut gt,
+                    springs_only,
+                    slot: &self.tslot,
+                    size: t,
+                }),
+            );
+            self.gt = gt;
+            // y = (I + G_T W_TT)^-1 G_T z_T.
+            self.m.clear();
+            self.y.clear();
+            for k in 0..t {
+                let row = &self.gt[k * t..(k + 1) * t];
+                self.y.push(
+                    row.iter()
+                        .enumerate()
+                        .map(|(l, g)| g * self.z[dof(l, &self.tverts)])
+                        .sum(),
+                );
+                for mcol in 0..t {
+                    let dm = dof(mcol, &self.tverts);
+                    let x: f64 = row
+                        .iter()
+                        .enumerate()
+                        .map(|(l, g)| g * self.w[dof(l, &self.tverts) * n + dm])
+                        .sum();
+                    self.m.push(x + if k == mcol { 1.0 } else { 0.0 });
+                }
+            }
+            if !lu_solve(&mut self.m, &mut self.y, t) {
+                return false;
+            }
+            for k in 0..t {
+                self.sstep[dof(k, &self.tverts)] += self.y[k];
+            }
+            // step = -z + W_:T y.
+            for (r, out) in self.step.iter_mut().enumerate() {
+                let row = &self.w[r * n..(r + 1) * n];
+                *out += (0..t)
+                    .map(|k| row[dof(k, &self.tverts)] * self.y[k])
+                    .sum::<f64>();
+            }
+        }
+        let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
+        slope < 0.0 && self.step.iter().all(|x| x.is_finite())
     }
 
     /// Scales the step so that no vertex moves more than the trust
@@ -507,20 +728,19 @@ impl LocalProblem {
         if longest > self.max_move_m {
             let k = self.max_move_m / longest;
             self.step.iter_mut().for_each(|s| *s *= k);
+            self.sstep.iter_mut().for_each(|s| *s *= k);
         }
     }
 
-    /// Pi at `delta` with the tool moved by `dx`; the forces on V into
-    /// `forces`.
-    fn energy(&self, delta: &[f64], dx: V3, forces: &mut [f64]) -> f64 {
-        let n = delta.len();
+    /// Pi at `delta` (with `sd` = S delta) with the tool moved by `dx`;
+    /// the forces on V into `forces`.
+    fn energy(&self, delta: &[f64], sd: &[f64], dx: V3, forces: &mut [f64]) -> f64 {
         let (e_contact, _, _) = self.evaluate(delta, dx, forces, None);
-        let mut e = e_contact;
-        for r in 0..n {
-            let sd: f64 = (0..n).map(|c| self.s[r * n + c] * delta[c]).sum();
-            e += delta[r] * (0.5 * sd + self.f0[r]);
-        }
-        e
+        delta
+            .iter()
+            .zip(sd)
+            .zip(&self.f0)
+            .fold(e_contact, |e, ((d, s), f)| e + d * (0.5 * s + f))
     }
 
     /// The points' energy (J), force on the tool (N) and whether any
@@ -532,9 +752,8 @@ impl LocalProblem {
         delta: &[f64],
         dx: V3,
         forces: &mut [f64],
-        mut hess: Option<(&mut [f64], bool)>,
+        mut hess: Option<Block<'_>>,
     ) -> (f64, V3, bool) {
-        let n = delta.len();
         let mut touching = false;
         forces.iter_mut().for_each(|f| *f = 0.0);
         let mut energy = 0.0;
@@ -562,7 +781,7 @@ impl LocalProblem {
                     forces[3 * v + r] += p.weights[k] * f * normal[r];
                 }
             }
-            let Some((h, springs_only)) = hess.as_mut() else {
+            let Some(block) = hess.as_mut() else {
                 continue;
             };
             // The point's Hessian: slope n n^T - f/dist (I - n n^T - a a^T).
@@ -580,19 +799,23 @@ impl LocalProblem {
                 for (col, x) in row.iter_mut().enumerate() {
                     let nn = normal[r] * normal[col];
                     *x = slope * nn;
-                    if !*springs_only {
+                    if !block.springs_only {
                         let id = if r == col { 1.0 } else { 0.0 };
                         *x -= f / dist * (id - nn - axis[r] * axis[col]);
                     }
                 }
             }
+            let size = block.size;
             for (i, &vi) in p.slots.iter().enumerate() {
                 for (j, &vj) in p.slots.iter().enumerate() {
                     let w = p.weights[i] * p.weights[j];
-                    let (si, sj) = (3 * vi as usize, 3 * vj as usize);
+                    let (si, sj) = (
+                        3 * block.slot[vi as usize] as usize,
+                        3 * block.slot[vj as usize] as usize,
+                    );
                     for (r, row) in g.iter().enumerate() {
                         for (col, x) in row.iter().enumerate() {
-                            h[(si + r) * n + sj + col] += w * x;
+                            block.h[(si + r) * size + sj + col] += w * x;
                         }
                     }
                 }
@@ -662,6 +885,43 @@ fn cholesky(a: &mut [f64], n: usize) -> bool {
         }
     }
     true
+}
+
+/// Solves A x = b in place (A n x n row-major, destroyed) by Gaussian
+/// elimination with partial pivoting; false if A is singular.
+fn lu_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
+    for col in 0..n {
+        let mut pivot = col;
+        for r in col + 1..n {
+            if a[r * n + col].abs() > a[pivot * n + col].abs() {
+                pivot = r;
+            }
+        }
+        let d = a[pivot * n + col];
+        if d.abs() <= 1e-300 || d.is_nan() {
+            return false;
+        }
+        if pivot != col {
+            for j in 0..n {
+                a.swap(col * n + j, pivot * n + j);
+            }
+            b.swap(col, pivot);
+        }
+        for r in col + 1..n {
+            let f = a[r * n + col] / d;
+            if f != 0.0 {
+                for j in col..n {
+                    a[r * n + j] -= f * a[col * n + j];
+                }
+                b[r] -= f * b[col];
+            }
+        }
+    }
+    for r in (0..n).rev() {
+        let x = (r + 1..n).fold(b[r], |x, j| x - a[r * n + j] * b[j]);
+        b[r] = x / a[r * n + r];
+    }
+    b.iter().all(|x| x.is_finite())
 }
 
 /// Solves L L^T x = b in place with the factor of [`cholesky`].

@@ -96,7 +96,17 @@ fn the_hessian_is_the_derivative_of_the_forces() {
     let dx = [2e-4, 1e-4, -3e-4];
     let mut h = vec![0.0; n * n];
     let mut f = vec![0.0; n];
-    p.evaluate(&delta, dx, &mut f, Some((&mut h, false)));
+    p.evaluate(
+        &delta,
+        dx,
+        &mut f,
+        Some(Block {
+            h: &mut h,
+            springs_only: false,
+            slot: &[0, 1, 2],
+            size: 9,
+        }),
+    );
     for j in 0..n {
         let e = 1e-8;
         let mut plus = delta.clone();

@@ -12,6 +12,7 @@
 //! missed time is dropped, not fast-forwarded. A pose older than
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 
+pub mod local_out;
 pub mod outputs;
 pub mod pacing;
 pub mod poses;

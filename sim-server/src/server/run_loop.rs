@@ -7,6 +7,7 @@
 //! [`RunLoop::pace`] (real time: wait for the step's time or a fresh pose,
 //! drop the time a stall missed).
 
+use super::local_out::LocalOut;
 use super::outputs::{self, MeshOut};
 use super::pacing::Pacing;
 use super::poses::{PoseIntake, WaitEnd};
@@ -39,6 +40,7 @@ pub struct RunLoop<'a, B: Backend> {
     node: IpcNode,
     poses: PoseIntake,
     force_pub: ForcePublisher,
+    local_out: LocalOut,
     mesh_out: MeshOut,
     scene_out: SceneOut,
     summary: RunSummary,
@@ -88,6 +90,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             });
         }
         let force_pub = services::publisher(&force_service)?;
+        let local_out = LocalOut::new(&node, &cfg.session)?;
         let n = sim.model().vertex_count();
         let max_tris = 4 * sim.model().mesh().tet_count();
         let recorder = match &cfg.save_frames {
@@ -123,6 +126,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             node,
             poses,
             force_pub,
+            local_out,
             mesh_out,
             scene_out,
             summary,
@@ -260,6 +264,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         s.samples_published += 1;
         self.turnaround_times
             .record(monotonic_ns().saturating_sub(self.woke_ns));
+        // After the force sample: the problem reaches the daemon later
+        // than the force it explains, never before.
+        self.local_out
+            .publish(&mut self.contacts, s.samples_published - 1, now)?;
         self.poses.check_publishers(&self.node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if s.steps.is_multiple_of(self.frame_every) {

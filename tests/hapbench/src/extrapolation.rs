@@ -43,6 +43,8 @@ struct LocalRender<'a> {
     haptic_s: f64,
     sim_s: f64,
     rendered: Vec<[f64; 3]>,
+    /// Wall time of each tick's render (ns), what the RT thread pays.
+    render_ns: Vec<u64>,
 }
 
 impl<'a> LocalRender<'a> {
@@ -56,6 +58,7 @@ impl<'a> LocalRender<'a> {
             haptic_s,
             sim_s,
             rendered: Vec::with_capacity(ticks),
+            render_ns: Vec::with_capacity(ticks),
         }
     }
 
@@ -95,10 +98,12 @@ impl<'a> LocalRender<'a> {
         {
             let k = self.rendered.len();
             let p = self.hand[k];
+            let t0 = std::time::Instant::now();
             let f = self
                 .lp
                 .render(&delivered, p)
                 .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
+            self.render_ns.push(t0.elapsed().as_nanos() as u64);
             self.rendered.push(f);
         }
     }
@@ -193,6 +198,9 @@ struct Report {
     /// Ticks per phase.
     phase_ticks: BTreeMap<&'static str, usize>,
     methods: BTreeMap<&'static str, MethodResult>,
+    /// `local-problem`: wall time of one tick's render (us) over the
+    /// ticks it solved, p50 / p99 / max (this machine, this run).
+    local_problem_render_us: [f64; 3],
 }
 
 fn scene_source(path: Option<&Path>) -> Result<SceneSource> {
@@ -432,6 +440,15 @@ pub fn run(args: &Args) -> Result<()> {
     // Every extrapolator but `local-problem` from the samples alone; that
     // one was rendered during the simulation.
     local.rendered.resize(ticks, [0.0; 3]);
+    let render_us = {
+        let mut t = std::mem::take(&mut local.render_ns);
+        t.sort_unstable();
+        let q = |f: f64| {
+            t.get(((t.len() as f64 - 1.0) * f) as usize)
+                .map_or(0.0, |x| *x as f64 * 1e-3)
+        };
+        [q(0.5), q(0.99), q(1.0)]
+    };
     let mut local_rendered = Some(std::mem::take(&mut local.rendered));
     for method in Method::ALL {
         if method == Method::LocalProblem
@@ -481,6 +498,7 @@ pub fn run(args: &Args) -> Result<()> {
         },
         truth_dropout_ticks: dropouts(&truth_f, h),
         truth_snap_ticks: snaps.iter().filter(|n| **n).count(),
+        local_problem_render_us: render_us,
         phase_ticks: phases.iter().fold(BTreeMap::new(), |mut m, p| {
             *m.entry(p.name()).or_insert(0) += 1;
             m
@@ -519,6 +537,12 @@ pub fn run(args: &Args) -> Result<()> {
         }
         println!();
     }
+    println!(
+        "\nlocal-problem: a tick's render {:.1} us p50, {:.1} us p99, {:.1} us max",
+        report.local_problem_render_us[0],
+        report.local_problem_render_us[1],
+        report.local_problem_render_us[2]
+    );
     println!(
         "\ntruth: max |F| {:.3} N, {} dropout ticks, {} ticks near snaps; {} vs {} sub-steps per tick differ by {:.4} N RMS",
         report.truth_max_force_n,

@@ -51,6 +51,8 @@ pub struct LocalPart {
 /// The contact problem around one tool after a step (see the module docs).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LocalContact {
+    /// The step it was taken after (counted by [`super::Tools`] from 1).
+    pub step: u64,
     /// The tool's tip (proxy) position the step ended with (m).
     pub tool_position_m: Vec3,
     /// The tool's parts at the end of the step (tip, then shaft).
@@ -59,13 +61,6 @@ pub struct LocalContact {
     pub vertices: Vec<u32>,
     /// Their positions at the end of the step (m).
     pub positions_m: Vec<Vec3>,
-    /// Their velocities at the end of the step (m/s; zero on a backend
-    /// without dynamics).
-    pub velocities_m_per_s: Vec<Vec3>,
-    /// Their lumped masses (kg).
-    pub masses_kg: Vec<Real>,
-    /// Their lumped (mass-proportional) damping (kg/s).
-    pub damping_kg_s: Vec<Real>,
     /// The contact points within the margin.
     pub points: Vec<LocalPoint>,
     /// W = (K^-1)_VV (m/N), row-major, 3|V| x 3|V|, in the order of
@@ -79,9 +74,6 @@ impl LocalContact {
         self.parts.clear();
         self.vertices.clear();
         self.positions_m.clear();
-        self.velocities_m_per_s.clear();
-        self.masses_kg.clear();
-        self.damping_kg_s.clear();
         self.points.clear();
         self.compliance_m_per_n.clear();
     }

@@ -113,7 +113,7 @@ pub use stiffness::MAX_FACTOR_VERTICES;
 pub use stiffness_thread::{ContactStiffness, StiffnessSolves};
 pub use surface_index::SurfaceIndex;
 pub use tool::ToolContact;
-pub use tools::{ContactError, ToolInput, Tools};
+pub use tools::{ContactError, LocalSpec, ToolInput, Tools};
 
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};

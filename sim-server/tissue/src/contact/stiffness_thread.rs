@@ -20,6 +20,7 @@
 //! neither side allocates per step once warm.
 
 use super::field::ContactField;
+use super::local::LocalContact;
 use super::stiffness::{Snapshot, Solver};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Mat3, Real};
@@ -50,6 +51,8 @@ struct Job {
     snap: Snapshot,
     tools: usize,
     alive: Vec<bool>,
+    /// A contact problem whose compliance to fill in.
+    local: Option<Box<LocalContact>>,
 }
 
 /// A solved snapshot: its buffers back, and the stiffness per tool.
@@ -57,6 +60,7 @@ struct Done {
     snap: Snapshot,
     alive: Vec<bool>,
     stiffness: Vec<Mat3>,
+    local: Option<Box<LocalContact>>,
 }
 
 /// The worker's channel ends.
@@ -91,6 +95,10 @@ pub struct ContactStiffness {
     exact: bool,
     /// The scene's held vertices (to build a solver again).
     held: Vec<VertexId>,
+    /// The newest contact problem with its compliance, not yet taken.
+    local_ready: Option<Box<LocalContact>>,
+    /// A contact problem's buffers to fill next.
+    local_spare: Option<Box<LocalContact>>,
 }
 
 impl ContactStiffness {
@@ -110,6 +118,8 @@ impl ContactStiffness {
             copy: Some(Box::new(model.clone())),
             newest: Vec::new(),
             held: held.to_vec(),
+            local_ready: None,
+            local_spare: None,
         }
     }
 
@@ -141,8 +151,18 @@ impl ContactStiffness {
     }
 
     /// Takes in the step's contact (`field`, `tools` tools) on `model`,
-    /// `dt_s` after the previous one.
-    pub fn update(&mut self, model: &ElasticModel, field: &ContactField, tools: usize, dt_s: Real) {
+    /// `dt_s` after the previous one. With `local`, a contact problem is
+    /// made alongside the stiffness: `local` fills its points (false: none
+    /// now) when a snapshot is solved, and the solver adds the compliance
+    /// ([`ContactStiffness::take_local`] gives it when done).
+    pub fn update(
+        &mut self,
+        model: &ElasticModel,
+        field: &ContactField,
+        tools: usize,
+        dt_s: Real,
+        local: Option<&mut dyn FnMut(&mut LocalContact) -> bool>,
+    ) {
         self.newest.resize(tools, Mat3::ZERO);
         if self.mode == StiffnessSolves::Worker && self.link.is_none() {
             self.start(model);
@@ -153,6 +173,22 @@ impl ContactStiffness {
                 self.snap.fill(field);
                 for (t, k) in self.newest.iter_mut().enumerate() {
                     *k = solver.stiffness(model, &self.snap, t);
+                }
+                if let Some(make) = local {
+                    let mut lc = self.local_spare.take().unwrap_or_default();
+                    let solved = make(&mut lc) && {
+                        let LocalContact {
+                            vertices,
+                            compliance_m_per_n,
+                            ..
+                        } = &mut *lc;
+                        solver.compliance(model, vertices, compliance_m_per_n)
+                    };
+                    if solved {
+                        self.keep_local(lc);
+                    } else {
+                        self.local_spare = Some(lc);
+                    }
                 }
             }
             return;
@@ -165,6 +201,13 @@ impl ContactStiffness {
                     *k = d;
                 }
                 link.busy = false;
+                if let Some(lc) = done.local {
+                    if lc.compliance_m_per_n.is_empty() {
+                        self.local_spare = Some(lc);
+                    } else if let Some(old) = self.local_ready.replace(lc) {
+                        self.local_spare = Some(old);
+                    }
+                }
             }
             Err(TryRecvError::Empty) => {}
             Err(TryRecvError::Disconnected) => {
@@ -183,7 +226,10 @@ impl ContactStiffness {
             // No contact: no stiffness, and nothing for the worker.
             self.newest.fill(Mat3::ZERO);
         }
-        let due = touching != link.touching || (touching && link.waited_s >= HAND_OVER_EVERY_S);
+        // A contact problem is wanted near the surface too (the tool
+        // approaching): then a hand-over at the same pace in contact or not.
+        let due = touching != link.touching
+            || ((touching || local.is_some()) && link.waited_s >= HAND_OVER_EVERY_S);
         if !link.busy && due {
             link.waited_s = 0.0;
             link.touching = touching;
@@ -194,10 +240,20 @@ impl ContactStiffness {
                 self.alive.extend_from_slice(model.topology().alive());
             }
             link.sent_topology = topology;
+            let local = local.and_then(|make| {
+                let mut lc = self.local_spare.take().unwrap_or_default();
+                if make(&mut lc) {
+                    Some(lc)
+                } else {
+                    self.local_spare = Some(lc);
+                    None
+                }
+            });
             let job = Job {
                 snap: std::mem::take(&mut self.snap),
                 tools,
                 alive: std::mem::take(&mut self.alive),
+                local,
             };
             link.busy = link.jobs.send(job).is_ok();
         }
@@ -211,6 +267,26 @@ impl ContactStiffness {
         match (&self.link, &mut self.solver) {
             (None, Some(solver)) => solver.compliance(model, verts, out),
             _ => false,
+        }
+    }
+
+    /// The newest contact problem with its compliance (see
+    /// [`ContactStiffness::update`]), once; give its buffers back with
+    /// [`ContactStiffness::recycle_local`].
+    pub fn take_local(&mut self) -> Option<Box<LocalContact>> {
+        self.local_ready.take()
+    }
+
+    /// Buffers for the next contact problem.
+    pub fn recycle_local(&mut self, lc: Box<LocalContact>) {
+        self.local_spare = Some(lc);
+    }
+
+    /// Keeps `lc` as the newest problem (an older one not taken becomes
+    /// the spare).
+    fn keep_local(&mut self, lc: Box<LocalContact>) {
+        if let Some(old) = self.local_ready.replace(lc) {
+            self.local_spare = Some(old);
         }
     }
 
@@ -241,10 +317,22 @@ impl ContactStiffness {
                     for t in 0..job.tools {
                         results.push(solver.stiffness(&own, &job.snap, t));
                     }
+                    let mut local = job.local;
+                    if let Some(lc) = local.as_deref_mut() {
+                        let LocalContact {
+                            vertices,
+                            compliance_m_per_n,
+                            ..
+                        } = lc;
+                        if !solver.compliance(&own, vertices, compliance_m_per_n) {
+                            compliance_m_per_n.clear();
+                        }
+                    }
                     let reply = Done {
                         snap: job.snap,
                         alive: job.alive,
                         stiffness: std::mem::take(&mut results),
+                        local,
                     };
                     if outbox.send(reply).is_err() {
                         return;

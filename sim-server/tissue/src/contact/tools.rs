@@ -89,16 +89,95 @@ pub struct Tools {
     /// `sprung`.
     spring_n_per_m: Vec<Real>,
     sprung: Vec<u32>,
-    /// Scratch of [`Tools::local_contact`].
+    /// The contact problems' request and scratch.
     local: LocalScratch,
+    /// Steps taken.
+    steps: u64,
 }
 
-/// Scratch of [`Tools::local_contact`], kept across calls.
+/// Which contact problem [`Tools::set_local_contact`] makes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalSpec {
+    /// The tool.
+    pub tool: usize,
+    /// How far beyond the step's reach of its parts points are taken (m).
+    pub margin_m: Real,
+    /// At most this many vertices (the points nearest the tool first).
+    pub max_vertices: usize,
+    /// At most this many points.
+    pub max_points: usize,
+}
+
+/// The contact problems' request and scratch, kept across calls.
 #[derive(Default)]
 struct LocalScratch {
+    spec: Option<LocalSpec>,
     field: ContactField,
     slot: Vec<u32>,
     order: Vec<(Real, usize)>,
+}
+
+/// What sampling a contact problem's points borrows from [`Tools`].
+struct LocalSampling<'a> {
+    sampler: &'a mut Sampler,
+    index: &'a mut SurfaceIndex,
+    adjacency: &'a Adjacency,
+    scratch: &'a mut LocalScratch,
+    tools: &'a [ToolContact],
+    step: u64,
+}
+
+impl LocalSampling<'_> {
+    /// The points, vertices and parts of `spec`'s problem into `out` (no
+    /// compliance); false if there is none.
+    fn sample<B: Backend + ?Sized>(
+        &mut self,
+        sim: &B,
+        spec: LocalSpec,
+        out: &mut LocalContact,
+    ) -> bool {
+        out.clear();
+        let Some(t) = self.tools.get(spec.tool) else {
+            return false;
+        };
+        // The problem is frictionless: with friction it would let the
+        // tissue slide where the simulation holds it.
+        let Some(pose) = t.pose().filter(|_| !t.decl().friction.is_active()) else {
+            return false;
+        };
+        let local = &mut *self.scratch;
+        local.field.clear();
+        for sweep in t.sweeps().into_iter().flatten() {
+            // Standing at the step's end: the reach is the tool's alone.
+            local.field.add_part(PartSweep {
+                from: sweep.to,
+                ..sweep
+            });
+        }
+        self.index.refit(sim);
+        for part in 0..local.field.parts().len() {
+            self.sampler.sample_around(
+                sim,
+                self.index,
+                self.adjacency,
+                part as u16,
+                &mut local.field,
+                spec.margin_m,
+            );
+        }
+        local.slot.resize(sim.model().vertex_count(), u32::MAX);
+        out.take_points(
+            &local.field,
+            |v| sim.position(VertexId(v)),
+            spec.max_vertices.min(u16::MAX as usize),
+            spec.max_points,
+            &mut local.slot,
+            &mut local.order,
+        );
+        out.tool_position_m = pose.end_m;
+        out.step = self.step;
+        !out.points.is_empty()
+    }
 }
 
 /// Why contact cannot run as the scene asks.
@@ -270,6 +349,7 @@ impl Tools {
                 field: ContactField::new(decls.len(), 0.0),
                 ..Default::default()
             },
+            steps: 0,
         }
     }
 
@@ -306,12 +386,28 @@ impl Tools {
         for (t, r) in self.tools.iter_mut().zip(&mut self.reports) {
             r.contact = t.after_step(&self.field, &mut self.mark);
         }
+        self.steps += 1;
         if let Some(k) = &mut self.stiffness {
+            let spec = self.local.spec;
+            let mut ctx = self.sampler.as_mut().map(|sampler| LocalSampling {
+                sampler,
+                index: &mut self.index,
+                adjacency: &self.adjacency,
+                scratch: &mut self.local,
+                tools: &self.tools,
+                step: self.steps,
+            });
+            let mut make = |lc: &mut LocalContact| match (&mut ctx, spec) {
+                (Some(ctx), Some(spec)) => ctx.sample(&*sim, spec, lc),
+                _ => false,
+            };
+            let wanted = spec.is_some() && self.law == ContactLaw::Penalty;
             k.update(
                 sim.model(),
                 &self.field,
                 self.stiffness_n_per_m.len(),
                 sim.dt_s(),
+                wanted.then_some(&mut make as &mut dyn FnMut(&mut LocalContact) -> bool),
             );
             for (i, out) in self.stiffness_n_per_m.iter_mut().enumerate() {
                 *out = k.stiffness(i);
@@ -462,71 +558,64 @@ impl Tools {
         &self.reports
     }
 
-    /// The contact problem around tool `tool` after the last step into
-    /// `out` (see [`LocalContact`]): the points within the step's reach of
-    /// its parts or `margin_m` further, at most `max_vertices` vertices and
-    /// `max_points` points, nearest first. False (and `out` empty) when
+    /// Makes a contact problem ([`LocalContact`]) alongside the contact
+    /// stiffness, every time the stiffness solver takes a snapshot (each
+    /// step offline, every few milliseconds live: the worker thread adds
+    /// the compliance); [`Tools::take_local_contact`] gives the newest.
+    /// `None` stops it.
+    pub fn set_local_contact(&mut self, spec: Option<LocalSpec>) {
+        self.local.spec = spec;
+    }
+
+    /// The newest finished contact problem (see
+    /// [`Tools::set_local_contact`]), once; give it back with
+    /// [`Tools::recycle_local_contact`] to reuse its buffers.
+    pub fn take_local_contact(&mut self) -> Option<Box<LocalContact>> {
+        self.stiffness
+            .as_mut()
+            .and_then(ContactStiffness::take_local)
+    }
+
+    /// Steps taken (what [`LocalContact::step`] counts).
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Gives a contact problem's buffers back.
+    pub fn recycle_local_contact(&mut self, lc: Box<LocalContact>) {
+        if let Some(k) = &mut self.stiffness {
+            k.recycle_local(lc);
+        }
+    }
+
+    /// The contact problem around tool `spec.tool` after the last step into
+    /// `out`, now (see [`LocalContact`]). False (and `out` empty) when
     /// there is none: the projection law, a tool without a pose or with
-    /// friction (the problem is frictionless), or no
-    /// exact compliance (the stiffness solved on its worker thread, or a
-    /// mesh above [`super::MAX_FACTOR_VERTICES`]).
+    /// friction (the problem is frictionless), no surface near it, or no
+    /// exact compliance here (the stiffness solved on its worker thread: use
+    /// [`Tools::set_local_contact`] then, or a mesh above
+    /// [`super::MAX_FACTOR_VERTICES`]).
     pub fn local_contact<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
-        tool: usize,
-        margin_m: Real,
-        max_vertices: usize,
-        max_points: usize,
+        spec: LocalSpec,
         out: &mut LocalContact,
     ) -> bool {
-        out.clear();
-        let (Some(sampler), Some(stiffness), Some(t)) =
-            (&mut self.sampler, &mut self.stiffness, self.tools.get(tool))
-        else {
+        let (Some(sampler), Some(stiffness)) = (&mut self.sampler, &mut self.stiffness) else {
+            out.clear();
             return false;
         };
-        // The problem is frictionless: with friction it would let the
-        // tissue slide where the simulation holds it.
-        let Some(pose) = t.pose().filter(|_| !t.decl().friction.is_active()) else {
-            return false;
+        let mut ctx = LocalSampling {
+            sampler,
+            index: &mut self.index,
+            adjacency: &self.adjacency,
+            scratch: &mut self.local,
+            tools: &self.tools,
+            step: self.steps,
         };
-        let local = &mut self.local;
-        local.field.clear();
-        for sweep in t.sweeps().into_iter().flatten() {
-            // Standing at the step's end: the reach is the tool's alone.
-            local.field.add_part(PartSweep {
-                from: sweep.to,
-                ..sweep
-            });
-        }
-        self.index.refit(sim);
-        for part in 0..local.field.parts().len() {
-            sampler.sample_around(
-                sim,
-                &self.index,
-                &self.adjacency,
-                part as u16,
-                &mut local.field,
-                margin_m,
-            );
-        }
-        local.slot.resize(sim.model().vertex_count(), u32::MAX);
-        out.take_points(
-            &local.field,
-            |v| sim.position(VertexId(v)),
-            max_vertices.min(u16::MAX as usize),
-            max_points,
-            &mut local.slot,
-            &mut local.order,
-        );
-        out.tool_position_m = pose.end_m;
-        let model = sim.model();
-        for &v in &out.vertices {
-            out.velocities_m_per_s.push(sim.velocity(VertexId(v)));
-            out.masses_kg.push(model.masses_kg()[v as usize]);
-            out.damping_kg_s.push(model.damping_kg_s()[v as usize]);
-        }
-        if !stiffness.compliance(sim.model(), &out.vertices, &mut out.compliance_m_per_n) {
+        if !ctx.sample(sim, spec, out)
+            || !stiffness.compliance(sim.model(), &out.vertices, &mut out.compliance_m_per_n)
+        {
             out.clear();
             return false;
         }
