@@ -486,6 +486,14 @@ mod tests {
         assert_eq!(std::mem::size_of::<TelemetryTick>(), 88);
         assert_eq!(std::mem::size_of::<LocalPart>(), 64);
         assert_eq!(std::mem::size_of::<LocalPoint>(), 40);
+        // docs/protocol.md gives this size and the offsets.
+        assert_eq!(std::mem::size_of::<LocalContactMsg>(), 83_200);
+        assert_eq!(std::mem::offset_of!(LocalContactMsg, parts), 64);
+        assert_eq!(std::mem::offset_of!(LocalContactMsg, points), 768);
+        assert_eq!(
+            std::mem::offset_of!(LocalContactMsg, compliance_m_per_n),
+            41_728
+        );
         assert_eq!(
             std::mem::size_of::<LocalContactMsg>(),
             64 + 64 * LOCAL_MAX_PARTS
