@@ -313,6 +313,8 @@ impl LocalProblem {
         {
             return None;
         }
+        // One budget for the whole tick.
+        self.budget = RENDER_ITERATIONS;
         let base = match self.base {
             Some((seq, base)) if seq == latest.seq => base,
             _ => {
@@ -320,13 +322,13 @@ impl LocalProblem {
                 let base = if latest.seq == self.seq {
                     ZERO
                 } else {
-                    self.solve(latest.position_m)?.0
+                    self.solve_within_budget(latest.position_m)?.0
                 };
                 self.base = Some((latest.seq, base));
                 base
             }
         };
-        let (change, touching) = self.solve(tool_m)?;
+        let (change, touching) = self.solve_within_budget(tool_m)?;
         Some(if touching {
             add(latest.force_n, sub(change, base))
         } else {
@@ -442,12 +444,17 @@ impl LocalProblem {
     /// solve fails (then the caller holds the sample). The second value
     /// says whether any point touches the tool there.
     pub fn solve(&mut self, tool_m: V3) -> Option<(V3, bool)> {
+        self.budget = RENDER_ITERATIONS;
+        self.solve_within_budget(tool_m)
+    }
+
+    /// [`LocalProblem::solve`] with the iterations left in `budget`.
+    fn solve_within_budget(&mut self, tool_m: V3) -> Option<(V3, bool)> {
         if !self.ready || !tool_m.iter().all(|x| x.is_finite()) {
             return None;
         }
         let n = self.delta.len();
         let dx = sub(tool_m, self.tool_m);
-        self.budget = RENDER_ITERATIONS;
         let mut forces = std::mem::take(&mut self.forces);
         forces.resize(n, 0.0);
         // Newton over the points near the tool; then a check over all that

@@ -57,6 +57,10 @@ pub struct Args {
     /// thread).
     #[arg(long, default_value_t = 0)]
     pub io_spin_us: u64,
+    /// The daemon's extrapolator (`haptic-daemon run --extrapolation`;
+    /// `local-problem` also has the simulation publish contact problems).
+    #[arg(long, value_enum, default_value_t = haptic_daemon::extrapolate::Method::LocalNormal)]
+    pub extrapolation: haptic_daemon::extrapolate::Method,
 }
 
 /// Flags of the hidden probe publisher (the baseline's other process).
@@ -267,6 +271,8 @@ pub fn run(args: &Args) -> Result<()> {
             &daemon_for_s,
             "--io-spin-us",
             &io_spin_us,
+            "--extrapolation",
+            args.extrapolation.name(),
         ],
         sibling("haptic-daemon")?,
     )?;
