@@ -187,7 +187,7 @@ pub struct RtLoop<D: Device> {
     last_sample_t_ns: Option<u64>,
     last_force_n: [f64; 3],
     tick: u64,
-    /// `local-problem`: the newest contact problem from the I/O thread.
+    /// `local-problem`: the newest contact problem, set up off this thread.
     local: Option<triple_buffer::Output<LocalProblem>>,
 }
 
@@ -242,7 +242,7 @@ impl<D: Device> RtLoop<D> {
     }
 
     /// Renders `local-problem` from the contact problems `output` receives
-    /// (the I/O thread sets them up: [`crate::io::run_io`]); without them,
+    /// (set up on their own thread: [`crate::local_setup::run_local_setup`]); without them,
     /// or while none fits the newest sample, it renders as `local-normal`.
     pub fn with_local_problems(mut self, output: triple_buffer::Output<LocalProblem>) -> Self {
         self.local = Some(output);

@@ -12,7 +12,6 @@
 //! window's CPU every period.
 
 use crate::daemon::Shared;
-use crate::extrapolate::local_problem::LocalProblem;
 use crate::rt::LatenessHistogram;
 use shared::SessionName;
 use shared::protocol::{
@@ -151,54 +150,16 @@ impl IoSpin {
     }
 }
 
-/// Sets the newest contact problem on `sub` up in `input`'s buffer and
-/// hands it to the RT thread (counted in `shared`; one of another protocol
-/// version or malformed is refused and counted).
-fn take_local_problems(
-    sub: &services::LocalContactSubscriber,
-    input: &mut triple_buffer::Input<LocalProblem>,
-    shared: &Shared,
-) {
-    let mut newest = None;
-    while let Ok(Some(sample)) = sub.receive() {
-        newest = Some(sample);
-    }
-    let Some(msg) = newest else {
-        return;
-    };
-    let ok =
-        msg.version == PROTOCOL_VERSION && input.input_buffer_mut().set_from_wire(&msg).is_ok();
-    if ok {
-        input.publish();
-        shared.local_problems.fetch_add(1, Ordering::Relaxed);
-    } else {
-        shared
-            .local_problems_refused
-            .fetch_add(1, Ordering::Relaxed);
-    }
-}
-
 /// Runs until the RT thread is done and the queue is drained; `spin`:
-/// poll for poses around their due time instead of waiting to be woken;
-/// `local`: set each contact problem the simulation sends up for the RT
-/// thread (the `local-problem` extrapolator: the set-up's dense
-/// factorisation stays off the RT thread).
+/// poll for poses around their due time instead of waiting to be woken.
 pub fn run_io(
     shared: Arc<Shared>,
     session: SessionName,
     record: Option<PathBuf>,
     stats: Arc<Mutex<Stats>>,
     spin: Option<IoSpin>,
-    mut local: Option<triple_buffer::Input<LocalProblem>>,
 ) -> Result<(), IoError> {
     let node = services::node("haptic-daemon-io")?;
-    let local_sub = match local {
-        Some(_) => Some(services::subscriber_with_buffer(
-            &services::local_contact_service(&node, &session)?,
-            services::FORCE_BUFFER_LATEST,
-        )?),
-        None => None,
-    };
     let pose_pub = services::publisher(&services::pose_service(&node, &session)?)?;
     let tele_pub = services::publisher(&services::telemetry_service(&node, &session)?)?;
     let force_service = services::force_service(&node, &session)?;
@@ -256,9 +217,6 @@ pub fn run_io(
             msg.tools[0].flags = TOOL_PRESENT;
             let _ = pose_pub.send_copy(msg);
             let _ = pose_ready.notify();
-        }
-        if let (Some(sub), Some(input)) = (&local_sub, local.as_mut()) {
-            take_local_problems(sub, input, &shared);
         }
         {
             let mut s = stats.lock().expect("stats lock");

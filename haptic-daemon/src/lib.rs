@@ -14,6 +14,7 @@ pub mod device;
 pub mod extrapolate;
 pub mod io;
 pub mod live;
+pub mod local_setup;
 pub mod math;
 pub mod plausible;
 pub mod record;

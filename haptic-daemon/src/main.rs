@@ -10,6 +10,7 @@ use haptic_daemon::device::{
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoSpin, Stats, run_io};
+use haptic_daemon::local_setup::run_local_setup;
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
 use record_cmd::{RecordArgs, record_main};
@@ -268,9 +269,9 @@ fn main() -> Result<()> {
         period_ns,
         window_ns: args.io_spin_us.saturating_mul(1000).min(period_ns),
     });
-    // `local-problem`: the I/O thread sets up each contact problem, the RT
-    // thread solves the newest (a triple buffer between them, allocated
-    // here).
+    // `local-problem`: a thread of its own sets up each contact problem,
+    // the RT thread solves the newest (a triple buffer between them,
+    // allocated here).
     let (local_in, local_out) = if method == Method::LocalProblem {
         let (i, o) = triple_buffer::triple_buffer(&LocalProblem::new());
         (Some(i), Some(o))
@@ -286,7 +287,18 @@ fn main() -> Result<()> {
         );
         std::thread::Builder::new()
             .name("haptic-io".into())
-            .spawn(move || run_io(shared, session, record, stats, io_spin, local_in))?
+            .spawn(move || run_io(shared, session, record, stats, io_spin))?
+    };
+    let local_setup = match local_in {
+        Some(input) => {
+            let (shared, session) = (shared.clone(), session.clone());
+            Some(
+                std::thread::Builder::new()
+                    .name("haptic-local".into())
+                    .spawn(move || run_local_setup(shared, session, input))?,
+            )
+        }
+        None => None,
     };
     let spin_ns = args.spin_us.saturating_mul(1000);
     let (report_tx, report_rx) = std::sync::mpsc::channel::<RtReport>();
@@ -416,6 +428,10 @@ fn main() -> Result<()> {
         .map_err(|_| anyhow::anyhow!("the I/O thread panicked"))?;
     let (ticks, overruns) = rt_result?;
     io_result?;
+    if let Some(t) = local_setup {
+        t.join()
+            .map_err(|_| anyhow::anyhow!("the contact-problem thread panicked"))??;
+    }
     let s = stats.lock().expect("stats");
     let mut warnings = warnings;
     if shared.flags.version_mismatch.load(Ordering::Relaxed) {
