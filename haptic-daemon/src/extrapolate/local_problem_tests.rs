@@ -187,3 +187,50 @@ fn bad_problems_are_refused() {
     assert!(p.set(ZERO, &[ball], &x, &[pt], &w).is_ok());
     assert!(p.solve([f64::NAN, 0.0, 0.0]).is_none());
 }
+
+fn sample_at(seq: u64, t_ns: u64, position_m: V3, force_n: V3) -> ForceSample {
+    ForceSample {
+        t_ns,
+        seq,
+        position_m,
+        force_n,
+        stiffness_n_per_m: [[0.0; 3]; 3],
+        in_contact: true,
+    }
+}
+
+#[test]
+fn render_uses_a_problem_only_with_the_samples_it_describes() {
+    let (mut p, centre) = press(0.001);
+    p.seq = 10;
+    p.t_ns = 1_000_000_000;
+    let f = [0.0, 0.0, 0.5];
+    // The sample it was taken with: the sample's force at its pose.
+    let own = sample_at(10, p.t_ns, centre, f);
+    let at = p.render(&own, centre).unwrap();
+    assert!(norm(sub(at, f)) < 1e-12, "{at:?}");
+    // A later sample 1 mm deeper: its force, plus the change from there.
+    let deeper = [centre[0], centre[1], centre[2] - 0.001];
+    let later = sample_at(12, p.t_ns + 2_000_000, deeper, [0.0, 0.0, 0.7]);
+    let same = p.render(&later, deeper).unwrap();
+    assert!(norm(sub(same, later.force_n)) < 1e-9, "{same:?}");
+    // An older problem than the sample (a restarted simulation), or one
+    // from long before it: none.
+    assert!(p.render(&sample_at(9, p.t_ns, centre, f), centre).is_none());
+    let stale = sample_at(500, p.t_ns + MAX_AGE_NS + 1, centre, f);
+    assert!(p.render(&stale, centre).is_none());
+    // Withdrawn: zero, not the sample's force.
+    let up = [centre[0], centre[1], centre[2] + 0.01];
+    assert_eq!(p.render(&own, up).unwrap(), [0.0; 3]);
+}
+
+#[test]
+fn a_clone_keeps_the_problem_and_its_capacity() {
+    let (p, centre) = press(0.001);
+    let mut q = p.clone();
+    assert!(q.s.capacity() >= 9 * MAX_VERTICES * MAX_VERTICES);
+    assert!(q.points.capacity() >= MAX_POINTS);
+    let (mut p, _) = (p, ());
+    let down = [centre[0], centre[1], centre[2] - 2e-4];
+    assert_eq!(p.solve(down), q.solve(down));
+}
