@@ -259,8 +259,11 @@ impl<D: Device> RtLoop<D> {
         {
             let latest = *latest;
             out.update();
-            if let Some(f) = out.output_buffer_mut().render(&latest, position)
-                && is_finite(f)
+            if let Some(f) = out.output_buffer_mut().render(
+                &latest,
+                position,
+                self.extrapolator.max_stiffness_n_per_m(),
+            ) && is_finite(f)
             {
                 return f;
             }

@@ -139,7 +139,9 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
     let sample = ForceSample::from_wire(&msg_a, 0).unwrap();
     assert!(sample.in_contact && sample.force_n[2] > 0.05, "{sample:?}");
     // At the sample's own pose the problem renders the sample.
-    let same = lp.render(&sample, sample.position_m).unwrap();
+    let same = lp
+        .render(&sample, sample.position_m, f64::INFINITY)
+        .unwrap();
     assert!((0..3).all(|i| (same[i] - sample.force_n[i]).abs() < 1e-12));
     // 0.6 mm deeper and 1 mm aside, slowly, then settled.
     let b = at + Vec3::new(0.001, 0.0, -0.0006);
@@ -147,7 +149,7 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
         hold(&mut p, at.lerp(b, k as f64 / 200.0), 1);
     }
     let settled = ForceSample::from_wire(&hold(&mut p, b, 600), 0).unwrap();
-    let predicted = lp.render(&sample, b.to_array()).unwrap();
+    let predicted = lp.render(&sample, b.to_array(), f64::INFINITY).unwrap();
     let err: f64 = (0..3)
         .map(|i| (predicted[i] - settled.force_n[i]).powi(2))
         .sum::<f64>()
@@ -164,7 +166,7 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
     assert!(err < 0.1 * change, "error {err} N of a {change} N change");
     // Withdrawn above the surface: nothing.
     let free = lp
-        .render(&sample, (at + Vec3::Z * 0.01).to_array())
+        .render(&sample, (at + Vec3::Z * 0.01).to_array(), f64::INFINITY)
         .unwrap();
     assert_eq!(free, [0.0; 3]);
 }

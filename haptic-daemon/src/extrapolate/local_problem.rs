@@ -301,9 +301,17 @@ impl LocalProblem {
     /// the newest force sample (taken at the problem's step or after it):
     /// the sample's force plus the change of the points' force on the tool
     /// from the sample's position to `tool_m`; zero when no point touches
-    /// the tool there. `None` without a problem or when a solve fails (the
-    /// caller falls back to another method).
-    pub fn render(&mut self, latest: &ForceSample, tool_m: V3) -> Option<V3> {
+    /// the tool there. The change is capped at `max_stiffness_n_per_m`
+    /// times the tool's distance from the sample's position (the secant
+    /// stiffness a device renders stably; infinite: no cap), direction
+    /// kept. `None` without a problem or when a solve fails (the caller
+    /// falls back to another method).
+    pub fn render(
+        &mut self,
+        latest: &ForceSample,
+        tool_m: V3,
+        max_stiffness_n_per_m: f64,
+    ) -> Option<V3> {
         // A problem newer than the sample (a restarted simulation) or
         // much older (the simulation stopped sending them) says nothing
         // about it.
@@ -329,11 +337,16 @@ impl LocalProblem {
             }
         };
         let (change, touching) = self.solve_within_budget(tool_m)?;
-        Some(if touching {
-            add(latest.force_n, sub(change, base))
-        } else {
-            ZERO
-        })
+        if !touching {
+            return Some(ZERO);
+        }
+        let mut d = sub(change, base);
+        let limit = max_stiffness_n_per_m * norm(sub(tool_m, latest.position_m));
+        let size = norm(d);
+        if size > limit {
+            d = scale(d, limit / size);
+        }
+        Some(add(latest.force_n, d))
     }
 
     /// Sets the problem of a sample: the tool at `tool_m`, its `parts`,

@@ -207,21 +207,32 @@ fn render_uses_a_problem_only_with_the_samples_it_describes() {
     let f = [0.0, 0.0, 0.5];
     // The sample it was taken with: the sample's force at its pose.
     let own = sample_at(10, p.t_ns, centre, f);
-    let at = p.render(&own, centre).unwrap();
+    let at = p.render(&own, centre, f64::INFINITY).unwrap();
     assert!(norm(sub(at, f)) < 1e-12, "{at:?}");
     // A later sample 1 mm deeper: its force, plus the change from there.
     let deeper = [centre[0], centre[1], centre[2] - 0.001];
     let later = sample_at(12, p.t_ns + 2_000_000, deeper, [0.0, 0.0, 0.7]);
-    let same = p.render(&later, deeper).unwrap();
+    let same = p.render(&later, deeper, f64::INFINITY).unwrap();
     assert!(norm(sub(same, later.force_n)) < 1e-9, "{same:?}");
     // An older problem than the sample (a restarted simulation), or one
     // from long before it: none.
-    assert!(p.render(&sample_at(9, p.t_ns, centre, f), centre).is_none());
+    assert!(
+        p.render(&sample_at(9, p.t_ns, centre, f), centre, f64::INFINITY)
+            .is_none()
+    );
     let stale = sample_at(500, p.t_ns + MAX_AGE_NS + 1, centre, f);
-    assert!(p.render(&stale, centre).is_none());
+    assert!(p.render(&stale, centre, f64::INFINITY).is_none());
     // Withdrawn: zero, not the sample's force.
     let up = [centre[0], centre[1], centre[2] + 0.01];
-    assert_eq!(p.render(&own, up).unwrap(), [0.0; 3]);
+    assert_eq!(p.render(&own, up, f64::INFINITY).unwrap(), [0.0; 3]);
+    // Capped: 1 mm deeper changes the force by at most cap x 1 mm, along
+    // the uncapped change.
+    let free = p.render(&own, deeper, f64::INFINITY).unwrap();
+    let capped = p.render(&own, deeper, 50.0).unwrap();
+    let (df, dc) = (sub(free, f), sub(capped, f));
+    assert!(norm(df) > 0.05 + 1e-6, "{df:?}");
+    assert!((norm(dc) - 0.05).abs() < 1e-12, "{dc:?}");
+    assert!(norm(sub(scale(df, 0.05 / norm(df)), dc)) < 1e-12);
 }
 
 #[test]

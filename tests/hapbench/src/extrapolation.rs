@@ -101,7 +101,7 @@ impl<'a> LocalRender<'a> {
             let t0 = std::time::Instant::now();
             let f = self
                 .lp
-                .render(&delivered, p)
+                .render(&delivered, p, f64::INFINITY)
                 .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
             self.render_ns.push(t0.elapsed().as_nanos() as u64);
             self.rendered.push(f);
