@@ -245,3 +245,25 @@ fn a_clone_keeps_the_problem_and_its_capacity() {
     let down = [centre[0], centre[1], centre[2] - 2e-4];
     assert_eq!(p.solve(down), q.solve(down));
 }
+
+#[test]
+fn in_contact_the_change_is_held_to_the_contacts_own_stiffness() {
+    let (mut p, centre) = press(0.001);
+    let deeper = [centre[0], centre[1], centre[2] - 0.001];
+    let mut own = sample_at(0, 0, centre, [0.0, 0.0, 0.5]);
+    // No stiffness published: the problem's own change (stiffer than
+    // 15 N/m over this millimetre).
+    let free = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
+    assert!(norm(free) > 0.02, "{free:?}");
+    // A contact stiffness of 10 N/m: at most 1.5 x 10 N/m x 1 mm.
+    own.stiffness_n_per_m = [[10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]];
+    let held = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
+    assert!(
+        (norm(held) - CHANGE_OF_STIFFNESS * 10.0 * 0.001).abs() < 1e-12,
+        "{held:?}"
+    );
+    // Not in contact (an onset): not held.
+    own.in_contact = false;
+    let onset = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
+    assert!((norm(onset) - norm(free)).abs() < 1e-12);
+}
