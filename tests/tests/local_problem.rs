@@ -196,6 +196,8 @@ fn the_daemon_renders_the_problems_the_simulation_sends() {
         ])
         .arg("--scene")
         .arg(data.join("box-probe.toml"))
+        .arg("--json")
+        .arg(dir.join("sim.json"))
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -231,4 +233,9 @@ fn the_daemon_renders_the_problems_the_simulation_sends() {
     // The palpation's force (about 0.5 N at 6 mm), within the limit.
     let max = num("max_force_n");
     assert!(max > 0.1 && max <= num("force_limit_n"), "{d}");
+    // The simulation's side: as many published, none dropped.
+    let sim_json = read_json(&dir.join("sim.json"));
+    let published = sim_json["local_problems"].as_u64().expect("local_problems");
+    assert!(published >= num("local_problems") as u64, "{sim_json}");
+    assert_eq!(sim_json["local_problems_dropped"], 0, "{sim_json}");
 }

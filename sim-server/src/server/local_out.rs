@@ -5,7 +5,7 @@
 //! every few milliseconds, and the compliance costs the stiffness
 //! worker sparse solves for vertices it has not seen.
 
-use super::{RunError, publish_err};
+use super::RunError;
 use shared::SessionName;
 use shared::protocol::LocalContactMsg;
 use shared::services::{self, IpcNode, LocalContactPublisher};
@@ -23,6 +23,8 @@ pub struct LocalOut {
     checked_ns: u64,
     /// Problems published.
     pub published: u64,
+    /// Problems that could not be published.
+    pub dropped: u64,
 }
 
 impl LocalOut {
@@ -36,13 +38,16 @@ impl LocalOut {
             wanted: false,
             checked_ns: 0,
             published: 0,
+            dropped: 0,
         })
     }
 
     /// After a step whose force message had `seq`, at `now_ns`: asks the
     /// tools for problems while someone listens, and publishes a finished
-    /// one (stamped with the `seq` of the step it was taken at).
-    pub fn publish(&mut self, tools: &mut Tools, seq: u64, now_ns: u64) -> Result<(), RunError> {
+    /// one (stamped with the `seq` of the step it was taken at). A problem
+    /// that cannot be published is dropped and counted (the daemon falls
+    /// back to `local-normal` without it); it never stops the simulation.
+    pub fn publish(&mut self, tools: &mut Tools, seq: u64, now_ns: u64) {
         if now_ns.saturating_sub(self.checked_ns) >= CHECK_EVERY_NS {
             self.checked_ns = now_ns;
             let wanted = !tools.is_empty() && services::subscriber_count(&self.factory) > 0;
@@ -52,26 +57,29 @@ impl LocalOut {
             }
         }
         let Some(lc) = tools.take_local_contact() else {
-            return Ok(());
+            return;
         };
         // Steps and messages advance together: the step it was taken at
         // is this many messages back.
         let taken_seq = seq.saturating_sub(tools.steps().saturating_sub(lc.step));
-        let sample = self
-            .publisher
-            .loan()
-            .map_err(|e| publish_err("contact problem")(format!("{e:?}")));
-        let result = sample.and_then(|mut sample| {
-            let msg: &mut LocalContactMsg = sample.payload_mut();
-            local_contact_msg(&lc, 0, taken_seq, now_ns, msg);
-            sample
-                .send()
-                .map(|_| ())
-                .map_err(|e| publish_err("contact problem")(format!("{e:?}")))
-        });
+        let sent = match self.publisher.loan() {
+            Ok(mut sample) => {
+                let msg: &mut LocalContactMsg = sample.payload_mut();
+                local_contact_msg(&lc, 0, taken_seq, now_ns, msg);
+                sample.send().is_ok()
+            }
+            Err(_) => false,
+        };
         tools.recycle_local_contact(lc);
-        result?;
-        self.published += 1;
-        Ok(())
+        if sent {
+            self.published += 1;
+        } else {
+            if self.dropped == 0 {
+                eprintln!(
+                    "sim-server: a contact problem could not be published (dropped and counted)"
+                );
+            }
+            self.dropped += 1;
+        }
     }
 }

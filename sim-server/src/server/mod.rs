@@ -139,6 +139,11 @@ pub struct RunSummary {
     pub max_barrier_elements: usize,
     /// With `--save-frames`: frames written to the VTU series.
     pub frames_saved: u64,
+    /// Contact problems published on `local-contact` (while a daemon
+    /// rendering `local-problem` subscribed), and those that could not be.
+    pub local_problems: u64,
+    /// See `local_problems`.
+    pub local_problems_dropped: u64,
     /// With `--save-frames`: frames not written because the disk was
     /// behind (the step is never delayed for them).
     pub frames_dropped: u64,

@@ -267,7 +267,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         // After the force sample: the problem reaches the daemon later
         // than the force it explains, never before.
         self.local_out
-            .publish(&mut self.contacts, s.samples_published - 1, now)?;
+            .publish(&mut self.contacts, s.samples_published - 1, now);
         self.poses.check_publishers(&self.node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if s.steps.is_multiple_of(self.frame_every) {
@@ -355,6 +355,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.turnaround_us = self.turnaround_times.percentiles_us();
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
+        summary.local_problems = self.local_out.published;
+        summary.local_problems_dropped = self.local_out.dropped;
         if let Some((counts, error)) = self.mesh_out.finish() {
             summary.frames_saved = counts.saved;
             summary.frames_dropped = counts.dropped;
