@@ -188,14 +188,11 @@ fn bad_problems_are_refused() {
     assert!(p.solve([f64::NAN, 0.0, 0.0]).is_none());
 }
 
+/// A sample in contact, without a stiffness.
 fn sample_at(seq: u64, t_ns: u64, position_m: V3, force_n: V3) -> ForceSample {
     ForceSample {
-        t_ns,
-        seq,
-        position_m,
-        force_n,
-        stiffness_n_per_m: [[0.0; 3]; 3],
         in_contact: true,
+        ..super::super::tests::sample(seq, t_ns, position_m, force_n)
     }
 }
 

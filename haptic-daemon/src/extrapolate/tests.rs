@@ -4,7 +4,8 @@ use super::*;
 
 const MS: u64 = 1_000_000;
 
-fn sample(seq: u64, t_ns: u64, position_m: V3, force_n: V3) -> ForceSample {
+/// A sample with no contact (also for `local_problem`'s tests).
+pub(super) fn sample(seq: u64, t_ns: u64, position_m: V3, force_n: V3) -> ForceSample {
     ForceSample {
         t_ns,
         seq,
