@@ -38,8 +38,12 @@
 //! [`LocalProblem::new`] neither [`LocalProblem::set`] nor
 //! [`LocalProblem::solve`] allocates.
 
+mod dense;
+mod newton;
+
 use super::ForceSample;
-use crate::math::{V3, ZERO, add, dot, norm, scale, spectral_norm, sub};
+use crate::math::{V3, ZERO, add, norm, scale, spectral_norm, sub};
+use dense::{cholesky, cholesky_solve};
 pub use shared::protocol::{
     LOCAL_MAX_PARTS as MAX_PARTS, LOCAL_MAX_POINTS as MAX_POINTS,
     LOCAL_MAX_VERTICES as MAX_VERTICES, LocalContactMsg, LocalPart as Capsule, LocalPoint as Point,
@@ -133,7 +137,8 @@ pub struct LocalProblem {
     delta: Vec<f64>,
     // Scratch, 3V or (3V)^2.
     grad: Vec<f64>,
-    hess: Vec<f64>,
+    /// Scratch of `set`: W's Cholesky factor.
+    w_factor: Vec<f64>,
     step: Vec<f64>,
     trial: Vec<f64>,
     forces: Vec<f64>,
@@ -191,7 +196,7 @@ impl Clone for LocalProblem {
         self.tool_force0_n = o.tool_force0_n;
         copy(&mut self.delta, &o.delta);
         copy(&mut self.grad, &o.grad);
-        copy(&mut self.hess, &o.hess);
+        copy(&mut self.w_factor, &o.w_factor);
         copy(&mut self.step, &o.step);
         copy(&mut self.trial, &o.trial);
         copy(&mut self.forces, &o.forces);
@@ -242,7 +247,7 @@ impl LocalProblem {
             tool_force0_n: ZERO,
             delta: Vec::with_capacity(n),
             grad: Vec::with_capacity(n),
-            hess: Vec::with_capacity(n * n),
+            w_factor: Vec::with_capacity(n * n),
             step: Vec::with_capacity(n),
             trial: Vec::with_capacity(n),
             forces: Vec::with_capacity(n),
@@ -431,9 +436,9 @@ impl LocalProblem {
         self.w.extend_from_slice(w);
         self.tslot.clear();
         self.tslot.resize(nv, u16::MAX);
-        self.hess.clear();
-        self.hess.extend_from_slice(w);
-        if !cholesky(&mut self.hess, n) {
+        self.w_factor.clear();
+        self.w_factor.extend_from_slice(w);
+        if !cholesky(&mut self.w_factor, n) {
             return Err(LocalProblemError::NotDefinite);
         }
         self.s.clear();
@@ -442,7 +447,7 @@ impl LocalProblem {
             self.step.clear();
             self.step.resize(n, 0.0);
             self.step[c] = 1.0;
-            cholesky_solve(&self.hess, &mut self.step, n);
+            cholesky_solve(&self.w_factor, &mut self.step, n);
             for r in 0..n {
                 self.s[r * n + c] = self.step[r];
             }
@@ -538,449 +543,7 @@ impl LocalProblem {
         self.forces = forces;
         out
     }
-
-    /// The active points: those within `slack_m` of touching the tool moved
-    /// by `dx` at the current delta.
-    fn select(&mut self, dx: V3, slack_m: f64) {
-        self.active.clear();
-        for (i, p) in self.points.iter().enumerate() {
-            if self.gap_m(p, &self.delta, dx) < slack_m {
-                self.active.push(i as u16);
-            }
-        }
-    }
-
-    /// Whether a point outside the active ones touches the tool.
-    fn others_touch(&self, dx: V3) -> bool {
-        let mut k = 0;
-        for (i, p) in self.points.iter().enumerate() {
-            if self.active.get(k) == Some(&(i as u16)) {
-                k += 1;
-                continue;
-            }
-            if self.gap_m(p, &self.delta, dx) < 0.0 {
-                return true;
-            }
-        }
-        false
-    }
-
-    /// Point `p`'s gap to its capsule (m; negative: penetrating).
-    fn gap_m(&self, p: &Point, delta: &[f64], dx: V3) -> f64 {
-        let y = self.point_position(p, delta);
-        let c = &self.parts[p.part as usize];
-        let (closest, _) = closest_on_segment(add(c.a_m, dx), add(c.b_m, dx), y);
-        norm(sub(y, closest)) - c.radius_m
-    }
-
-    /// Point `p`'s position with the vertices moved by `delta` (m).
-    fn point_position(&self, p: &Point, delta: &[f64]) -> V3 {
-        let mut y = ZERO;
-        for k in 0..3 {
-            let v = p.slots[k] as usize;
-            let moved = [
-                self.x[v][0] + delta[3 * v],
-                self.x[v][1] + delta[3 * v + 1],
-                self.x[v][2] + delta[3 * v + 2],
-            ];
-            y = add(y, scale(moved, p.weights[k]));
-        }
-        y
-    }
-
-    /// Newton down Pi over the active points from the current delta
-    /// (warm start); false if no Hessian could be factored.
-    fn newton(&mut self, dx: V3, forces: &mut [f64]) -> bool {
-        let n = self.delta.len();
-        // S delta once, exactly; then kept up to date with S step.
-        self.sd.clear();
-        for row in self.s.chunks_exact(n) {
-            self.sd
-                .push(row.iter().zip(&self.delta).map(|(a, b)| a * b).sum());
-        }
-        let mut energy = self.energy(&self.delta, &self.sd, dx, forces);
-        while self.budget > 0 {
-            self.budget -= 1;
-            // Gradient S delta + f0 - f(delta).
-            self.grad.clear();
-            self.grad.extend(
-                self.sd
-                    .iter()
-                    .zip(&self.f0)
-                    .zip(forces.iter())
-                    .map(|((s, f0), f)| s + f0 - f),
-            );
-            if self.grad.iter().all(|g| g.abs() < TOLERANCE_N) {
-                break;
-            }
-            // The Newton step with the full Hessian, or where that is no
-            // descent (a round tool dragging tissue sideways makes a
-            // saddle) the springs' part alone, which always is.
-            if !self.newton_step(dx, forces, false) && !self.newton_step(dx, forces, true) {
-                return false;
-            }
-            self.trust_region();
-            let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
-            // Backtracking on Pi (Armijo).
-            let mut alpha = 1.0;
-            let mut accepted = false;
-            for _ in 0..30 {
-                self.trial.clear();
-                self.trial.extend(
-                    self.delta
-                        .iter()
-                        .zip(&self.step)
-                        .map(|(d, s)| d + alpha * s),
-                );
-                self.trial_sd.clear();
-                self.trial_sd
-                    .extend(self.sd.iter().zip(&self.sstep).map(|(d, s)| d + alpha * s));
-                let (trial, trial_sd) = (
-                    std::mem::take(&mut self.trial),
-                    std::mem::take(&mut self.trial_sd),
-                );
-                let e = self.energy(&trial, &trial_sd, dx, forces);
-                (self.trial, self.trial_sd) = (trial, trial_sd);
-                if e <= energy + 1e-4 * alpha * slope || slope >= 0.0 || slope.is_nan() {
-                    energy = e;
-                    accepted = true;
-                    break;
-                }
-                alpha *= 0.5;
-            }
-            if !accepted {
-                // No descent left: a minimum to rounding.
-                self.energy(&self.delta, &self.sd, dx, forces);
-                return true;
-            }
-            std::mem::swap(&mut self.delta, &mut self.trial);
-            std::mem::swap(&mut self.sd, &mut self.trial_sd);
-            let moved = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())) * alpha;
-            if moved < TOLERANCE_M {
-                break;
-            }
-        }
-        true
-    }
-
-    /// The Newton step -H^-1 g into `step`, H = S + G with G the points'
-    /// Hessian (the springs' part alone if asked), G nonzero only on the
-    /// vertices T of the touching points: by the push-through identity
-    /// H^-1 = (I - W_:T (I + G_T W_TT)^-1 G_T P) W, a solve of size 3|T|
-    /// instead of 3|V|. False if it is not a descent direction (or the
-    /// small system is singular).
-    fn newton_step(&mut self, dx: V3, forces: &mut [f64], springs_only: bool) -> bool {
-        let n = self.delta.len();
-        // T.
-        for v in self.tverts.drain(..) {
-            self.tslot[v as usize] = u16::MAX;
-        }
-        for &i in &self.active {
-            let p = &self.points[i as usize];
-            if self.gap_m(p, &self.delta, dx) < 0.0 {
-                for &v in &p.slots {
-                    if self.tslot[v as usize] == u16::MAX {
-                        self.tslot[v as usize] = self.tverts.len() as u16;
-                        self.tverts.push(v);
-                    }
-                }
-            }
-        }
-        let t = 3 * self.tverts.len();
-        // z = W g.
-        self.z.clear();
-        for row in self.w.chunks_exact(n) {
-            self.z
-                .push(row.iter().zip(&self.grad).map(|(a, b)| a * b).sum());
-        }
-        self.step.clear();
-        self.step.extend(self.z.iter().map(|z| -z));
-        // S step = -g + P_T^T y (S W = I).
-        self.sstep.clear();
-        self.sstep.extend(self.grad.iter().map(|g| -g));
-        if t > 0 {
-            let dof = |k: usize, tv: &[u16]| 3 * tv[k / 3] as usize + k % 3;
-            self.gt.clear();
-            self.gt.resize(t * t, 0.0);
-            let mut gt = std::mem::take(&mut self.gt);
-            self.evaluate(
-                &self.delta,
-                dx,
-                forces,
-                Some(Block {
-                    h: &mut gt,
-                    springs_only,
-                    slot: &self.tslot,
-                    size: t,
-                }),
-            );
-            self.gt = gt;
-            // y = (I + G_T W_TT)^-1 G_T z_T.
-            self.m.clear();
-            self.y.clear();
-            for k in 0..t {
-                let row = &self.gt[k * t..(k + 1) * t];
-                self.y.push(
-                    row.iter()
-                        .enumerate()
-                        .map(|(l, g)| g * self.z[dof(l, &self.tverts)])
-                        .sum(),
-                );
-                for mcol in 0..t {
-                    let dm = dof(mcol, &self.tverts);
-                    let x: f64 = row
-                        .iter()
-                        .enumerate()
-                        .map(|(l, g)| g * self.w[dof(l, &self.tverts) * n + dm])
-                        .sum();
-                    self.m.push(x + if k == mcol { 1.0 } else { 0.0 });
-                }
-            }
-            if !lu_solve(&mut self.m, &mut self.y, t) {
-                return false;
-            }
-            for k in 0..t {
-                self.sstep[dof(k, &self.tverts)] += self.y[k];
-            }
-            // step = -z + W_:T y.
-            for (r, out) in self.step.iter_mut().enumerate() {
-                let row = &self.w[r * n..(r + 1) * n];
-                *out += (0..t)
-                    .map(|k| row[dof(k, &self.tverts)] * self.y[k])
-                    .sum::<f64>();
-            }
-        }
-        let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
-        slope < 0.0 && self.step.iter().all(|x| x.is_finite())
-    }
-
-    /// Scales the step so that no vertex moves more than the trust
-    /// region: a long step could carry surface points through the capsule
-    /// to its far side (where the penalty pushes them on: another, wrong,
-    /// equilibrium).
-    fn trust_region(&mut self) {
-        let longest = self
-            .step
-            .chunks_exact(3)
-            .map(|s| norm([s[0], s[1], s[2]]))
-            .fold(0.0f64, f64::max);
-        if longest > self.max_move_m {
-            let k = self.max_move_m / longest;
-            self.step.iter_mut().for_each(|s| *s *= k);
-            self.sstep.iter_mut().for_each(|s| *s *= k);
-        }
-    }
-
-    /// Pi at `delta` (with `sd` = S delta) with the tool moved by `dx`;
-    /// the forces on V into `forces`.
-    fn energy(&self, delta: &[f64], sd: &[f64], dx: V3, forces: &mut [f64]) -> f64 {
-        let (e_contact, _, _) = self.evaluate(delta, dx, forces, None);
-        delta
-            .iter()
-            .zip(sd)
-            .zip(&self.f0)
-            .fold(e_contact, |e, ((d, s), f)| e + d * (0.5 * s + f))
-    }
-
-    /// The points' energy (J), force on the tool (N) and whether any
-    /// touches it, with the vertices moved by `delta` and the tool by
-    /// `dx`; their forces on V into `forces`; with `hess`, their Hessian
-    /// added to it (the springs' part alone if asked).
-    fn evaluate(
-        &self,
-        delta: &[f64],
-        dx: V3,
-        forces: &mut [f64],
-        mut hess: Option<Block<'_>>,
-    ) -> (f64, V3, bool) {
-        let mut touching = false;
-        forces.iter_mut().for_each(|f| *f = 0.0);
-        let mut energy = 0.0;
-        let mut tool = ZERO;
-        for &i in &self.active {
-            let p = &self.points[i as usize];
-            let y = self.point_position(p, delta);
-            let c = &self.parts[p.part as usize];
-            let (a, b) = (add(c.a_m, dx), add(c.b_m, dx));
-            let (closest, interior) = closest_on_segment(a, b, y);
-            let gap = sub(y, closest);
-            let dist = norm(gap);
-            let depth = c.radius_m - dist;
-            if depth <= 0.0 || dist <= 1e-12 * c.radius_m {
-                continue;
-            }
-            touching = true;
-            let normal = scale(gap, 1.0 / dist);
-            let (e, f, slope) = spring(p.stiffness_n_per_m, depth, c.onset_m);
-            energy += e;
-            tool = sub(tool, scale(normal, f));
-            for k in 0..3 {
-                let v = p.slots[k] as usize;
-                for r in 0..3 {
-                    forces[3 * v + r] += p.weights[k] * f * normal[r];
-                }
-            }
-            let Some(block) = hess.as_mut() else {
-                continue;
-            };
-            // The point's Hessian: slope n n^T - f/dist (I - n n^T - a a^T).
-            let axis = {
-                let d = sub(b, a);
-                let l = norm(d);
-                if interior && l > 0.0 {
-                    scale(d, 1.0 / l)
-                } else {
-                    ZERO
-                }
-            };
-            let mut g = [[0.0; 3]; 3];
-            for (r, row) in g.iter_mut().enumerate() {
-                for (col, x) in row.iter_mut().enumerate() {
-                    let nn = normal[r] * normal[col];
-                    *x = slope * nn;
-                    if !block.springs_only {
-                        let id = if r == col { 1.0 } else { 0.0 };
-                        *x -= f / dist * (id - nn - axis[r] * axis[col]);
-                    }
-                }
-            }
-            let size = block.size;
-            for (i, &vi) in p.slots.iter().enumerate() {
-                for (j, &vj) in p.slots.iter().enumerate() {
-                    let w = p.weights[i] * p.weights[j];
-                    let (si, sj) = (
-                        3 * block.slot[vi as usize] as usize,
-                        3 * block.slot[vj as usize] as usize,
-                    );
-                    for (r, row) in g.iter().enumerate() {
-                        for (col, x) in row.iter().enumerate() {
-                            block.h[(si + r) * size + sj + col] += w * x;
-                        }
-                    }
-                }
-            }
-        }
-        (energy, tool, touching)
-    }
-}
-
-/// The point of segment a-b closest to `y`, and whether it lies strictly
-/// inside.
-fn closest_on_segment(a: V3, b: V3, y: V3) -> (V3, bool) {
-    let d = sub(b, a);
-    let l2 = dot(d, d);
-    if l2 <= 0.0 {
-        return (a, false);
-    }
-    let t = dot(sub(y, a), d) / l2;
-    if t <= 0.0 {
-        (a, false)
-    } else if t >= 1.0 {
-        (b, false)
-    } else {
-        (add(a, scale(d, t)), true)
-    }
-}
-
-/// A point's spring at penetration `d` (m): energy (J), force (N) and
-/// slope (N/m), with the quadratic onset over `d0` (the law of the
-/// simulation's contact field, `tissue::contact::field::spring`).
-fn spring(k: f64, d: f64, d0: f64) -> (f64, f64, f64) {
-    if d < d0 {
-        (
-            k * d * d * d / (6.0 * d0),
-            k * d * d / (2.0 * d0),
-            k * d / d0,
-        )
-    } else {
-        (
-            k * (d0 * d0 / 6.0 + 0.5 * (d * d - d0 * d0) - 0.5 * d0 * (d - d0)),
-            k * (d - 0.5 * d0),
-            k,
-        )
-    }
-}
-
-/// Cholesky factor L (lower, in place, row-major n x n) of a symmetric
-/// matrix; false if it is not positive definite. Hand-written: it runs on
-/// the RT thread on fixed buffers, for n of a few tens.
-fn cholesky(a: &mut [f64], n: usize) -> bool {
-    for j in 0..n {
-        let mut d = a[j * n + j];
-        for k in 0..j {
-            d -= a[j * n + k] * a[j * n + k];
-        }
-        if d.is_nan() || d <= 0.0 || !d.is_finite() {
-            return false;
-        }
-        let d = d.sqrt();
-        a[j * n + j] = d;
-        for i in j + 1..n {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = s / d;
-        }
-    }
-    true
-}
-
-/// Solves A x = b in place (A n x n row-major, destroyed) by Gaussian
-/// elimination with partial pivoting; false if A is singular.
-fn lu_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
-    for col in 0..n {
-        let mut pivot = col;
-        for r in col + 1..n {
-            if a[r * n + col].abs() > a[pivot * n + col].abs() {
-                pivot = r;
-            }
-        }
-        let d = a[pivot * n + col];
-        if d.abs() <= 1e-300 || d.is_nan() {
-            return false;
-        }
-        if pivot != col {
-            for j in 0..n {
-                a.swap(col * n + j, pivot * n + j);
-            }
-            b.swap(col, pivot);
-        }
-        for r in col + 1..n {
-            let f = a[r * n + col] / d;
-            if f != 0.0 {
-                for j in col..n {
-                    a[r * n + j] -= f * a[col * n + j];
-                }
-                b[r] -= f * b[col];
-            }
-        }
-    }
-    for r in (0..n).rev() {
-        let x = (r + 1..n).fold(b[r], |x, j| x - a[r * n + j] * b[j]);
-        b[r] = x / a[r * n + r];
-    }
-    b.iter().all(|x| x.is_finite())
-}
-
-/// Solves L L^T x = b in place with the factor of [`cholesky`].
-fn cholesky_solve(l: &[f64], b: &mut [f64], n: usize) {
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[i * n + k] * b[k];
-        }
-        b[i] = s / l[i * n + i];
-    }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= l[k * n + i] * b[k];
-        }
-        b[i] = s / l[i * n + i];
-    }
 }
 
 #[cfg(test)]
-#[path = "local_problem_tests.rs"]
 mod tests;
