@@ -192,6 +192,8 @@ impl Clone for LocalProblem {
         copy(&mut self.w, &o.w);
         self.tslot.clear();
         self.tslot.extend_from_slice(&o.tslot);
+        self.tverts.clear();
+        self.tverts.extend_from_slice(&o.tverts);
         copy(&mut self.f0, &o.f0);
         self.tool_force0_n = o.tool_force0_n;
         copy(&mut self.delta, &o.delta);
@@ -436,6 +438,7 @@ impl LocalProblem {
         self.w.extend_from_slice(w);
         self.tslot.clear();
         self.tslot.resize(nv, u16::MAX);
+        self.tverts.clear();
         self.w_factor.clear();
         self.w_factor.extend_from_slice(w);
         if !cholesky(&mut self.w_factor, n) {

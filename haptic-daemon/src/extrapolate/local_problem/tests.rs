@@ -264,3 +264,56 @@ fn in_contact_the_change_is_held_to_the_contacts_own_stiffness() {
     let onset = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
     assert!((norm(onset) - norm(free)).abs() < 1e-12);
 }
+
+#[test]
+fn a_smaller_problem_after_a_larger_one_solves() {
+    // The touched-vertex scratch of a 6-vertex problem must not leak
+    // into a 3-vertex one set up in the same buffers.
+    let (mut small, centre) = press(0.001);
+    let x: Vec<V3> = (0..6)
+        .map(|i| [0.004 * (i % 3) as f64, 0.004 * (i / 3) as f64, 0.0])
+        .collect();
+    let point = |slots: [u16; 3]| Point {
+        slots,
+        weights: [1.0 / 3.0; 3],
+        part: 0,
+        stiffness_n_per_m: K_P,
+    };
+    let ball = Capsule {
+        a_m: [0.004, 0.002, R - 0.001],
+        b_m: [0.004, 0.002, R - 0.001],
+        radius_m: R,
+        onset_m: 0.02 * R,
+    };
+    let mut w = vec![0.0; 18 * 18];
+    for i in 0..18 {
+        w[i * 18 + i] = C;
+    }
+    let mut p = LocalProblem::new();
+    p.set(
+        ball.a_m,
+        &[ball],
+        &x,
+        &[point([0, 1, 3]), point([1, 4, 5]), point([1, 2, 5])],
+        &w,
+    )
+    .unwrap();
+    assert!(p.solve([0.004, 0.002, R - 0.0012]).unwrap().1);
+    // A clone made now, and the same buffers set up again with the
+    // 3-vertex problem (as the triple buffer reuses them).
+    let mut copy = LocalProblem::new();
+    copy.clone_from(&p);
+    let down = [centre[0], centre[1], centre[2] - 1e-4];
+    for q in [&mut p, &mut copy] {
+        q.set(
+            small.tool_m,
+            &small.parts[..1],
+            &small.x,
+            &small.points,
+            &small.w,
+        )
+        .unwrap();
+        assert!(q.solve(down).unwrap().1);
+    }
+    assert_eq!(p.solve(down), small.solve(down));
+}
