@@ -95,7 +95,7 @@ proptest! {
     ) {
         let mut lp = LocalProblem::new();
         let mut msg = Box::<LocalContactMsg>::default();
-        assert!(MAX_POINTS >= 64);
+        const { assert!(MAX_POINTS >= 64) };
         for (k, p) in problems.iter().enumerate() {
             to_wire(p, k as u64 + 1, &mut msg);
             prop_assert!(lp.set_from_wire(&msg).is_ok());
