@@ -40,6 +40,10 @@ pub fn run_local_setup(
             std::thread::sleep(POLL);
             continue;
         };
+        // The device drives tool 0: a problem of another tool is not ours.
+        if msg.tool != 0 {
+            continue;
+        }
         let ok =
             msg.version == PROTOCOL_VERSION && input.input_buffer_mut().set_from_wire(&msg).is_ok();
         drop(msg);
