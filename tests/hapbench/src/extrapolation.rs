@@ -45,6 +45,8 @@ struct LocalRender<'a> {
     rendered: Vec<[f64; 3]>,
     /// Wall time of each tick's render (ns), what the RT thread pays.
     render_ns: Vec<u64>,
+    /// With `--local-inertia`: the same problems with the tissue's inertia.
+    inertia: Option<(LocalProblem, Vec<[f64; 3]>)>,
 }
 
 impl<'a> LocalRender<'a> {
@@ -59,6 +61,7 @@ impl<'a> LocalRender<'a> {
             sim_s,
             rendered: Vec::with_capacity(ticks),
             render_ns: Vec::with_capacity(ticks),
+            inertia: None,
         }
     }
 
@@ -82,14 +85,49 @@ impl<'a> LocalRender<'a> {
             if self.lp.set_from_wire(&self.msg).is_err() {
                 self.lp.clear();
             }
+            if let Some((lp, _)) = &mut self.inertia {
+                // The same problem with the tissue's inertia; its first
+                // step spans the sample's age at the first tick it serves.
+                let first_tick =
+                    (((j + 1) as f64 * self.sim_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
+                let age_s = (first_tick - j as f64 * self.sim_s).max(self.haptic_s);
+                let ok = lp.set_from_wire(&self.msg).is_ok()
+                    && lp.is_ready()
+                    && tools.local_inertia(sim, &mut self.lc)
+                    && {
+                        let v: Vec<[f64; 3]> = self
+                            .lc
+                            .velocities_m_per_s
+                            .iter()
+                            .map(|v| v.to_array())
+                            .collect();
+                        lp.set_inertia(
+                            &self.lc.column_mass,
+                            self.lc.damping_per_s,
+                            &v,
+                            age_s,
+                            self.haptic_s,
+                        )
+                        .is_ok()
+                    };
+                if !ok {
+                    lp.clear();
+                }
+            }
         } else {
             self.lp.clear();
+            if let Some((lp, _)) = &mut self.inertia {
+                lp.clear();
+            }
         }
         // Ticks before the first delivery render nothing.
         while self.rendered.len() < self.hand.len()
             && (self.rendered.len() as f64) * self.haptic_s < (j + 1) as f64 * self.sim_s - 1e-12
         {
             self.rendered.push([0.0; 3]);
+            if let Some((_, out)) = &mut self.inertia {
+                out.push([0.0; 3]);
+            }
         }
         self.fallback.push(&delivered);
         let end = (j + 2) as f64 * self.sim_s - 1e-12;
@@ -105,6 +143,12 @@ impl<'a> LocalRender<'a> {
                 .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
             self.render_ns.push(t0.elapsed().as_nanos() as u64);
             self.rendered.push(f);
+            if let Some((lp, out)) = &mut self.inertia {
+                let f = lp
+                    .render(&delivered, p, f64::INFINITY)
+                    .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
+                out.push(f);
+            }
         }
     }
 }
@@ -148,6 +192,13 @@ pub struct Args {
     /// `--series`'s truth.
     #[arg(long)]
     pub samples: Option<PathBuf>,
+    /// Also render `local-problem` with the tissue's inertia (the problem's
+    /// vertices given the tissue's mass condensed on them, Guyan, and their
+    /// velocities; each tick an implicit Euler step): reported as
+    /// `local-problem-inertia`. Offline only: the daemon does not render it
+    /// yet.
+    #[arg(long)]
+    pub local_inertia: bool,
 }
 
 /// One method's figures.
@@ -414,6 +465,9 @@ pub fn run(args: &Args) -> Result<()> {
     b.finish();
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let mut local = LocalRender::new(&hand[..ticks], h, s, ticks);
+    if args.local_inertia {
+        local.inertia = Some((LocalProblem::new(), Vec::with_capacity(ticks)));
+    }
     let b = bar(sim_steps, "simulation");
     let (samples, _) = simulate(
         &src,
@@ -450,6 +504,14 @@ pub fn run(args: &Args) -> Result<()> {
         [q(0.5), q(0.99), q(1.0)]
     };
     let mut local_rendered = Some(std::mem::take(&mut local.rendered));
+    if let Some((_, mut rendered)) = local.inertia.take() {
+        rendered.resize(ticks, [0.0; 3]);
+        methods.insert(
+            "local-problem-inertia",
+            figures(&rendered, &truth_f, &hand, &phases, &snaps),
+        );
+        rendered_all.push(("local-problem-inertia", rendered));
+    }
     for method in Method::ALL {
         if method == Method::LocalProblem
             && let Some(rendered) = local_rendered.take()

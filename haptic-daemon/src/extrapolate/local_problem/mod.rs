@@ -133,6 +133,23 @@ pub struct LocalProblem {
     f0: Vec<f64>,
     /// The points' force on the tool at the sample (N).
     tool_force0_n: V3,
+    /// f0 less this tick's inertial term (f0 itself without inertia).
+    f0_eff: Vec<f64>,
+    /// With inertia ([`LocalProblem::set_inertia`]): the condensed mass
+    /// M = S G S (empty: quasi-static), S + A(h) and its inverse for the
+    /// haptic tick h (`s` and `w` hold those of the step under way: the
+    /// first step's, which spans the sample's age, then these), the
+    /// damping (1/s), the step under way (s), the vertices' velocity and
+    /// delta before the step.
+    m_red: Vec<f64>,
+    s_tick: Vec<f64>,
+    w_tick: Vec<f64>,
+    damping_per_s: f64,
+    step_s: f64,
+    first_step: bool,
+    tick_s: f64,
+    vel: Vec<f64>,
+    delta_prev: Vec<f64>,
     /// The previous solution (warm start), 3V.
     delta: Vec<f64>,
     // Scratch, 3V or (3V)^2.
@@ -195,6 +212,16 @@ impl Clone for LocalProblem {
         self.tverts.clear();
         self.tverts.extend_from_slice(&o.tverts);
         copy(&mut self.f0, &o.f0);
+        copy(&mut self.f0_eff, &o.f0_eff);
+        copy(&mut self.m_red, &o.m_red);
+        copy(&mut self.s_tick, &o.s_tick);
+        copy(&mut self.w_tick, &o.w_tick);
+        self.damping_per_s = o.damping_per_s;
+        self.step_s = o.step_s;
+        self.first_step = o.first_step;
+        self.tick_s = o.tick_s;
+        copy(&mut self.vel, &o.vel);
+        copy(&mut self.delta_prev, &o.delta_prev);
         self.tool_force0_n = o.tool_force0_n;
         copy(&mut self.delta, &o.delta);
         copy(&mut self.grad, &o.grad);
@@ -247,6 +274,16 @@ impl LocalProblem {
             y: Vec::with_capacity(n),
             f0: Vec::with_capacity(n),
             tool_force0_n: ZERO,
+            f0_eff: Vec::with_capacity(n),
+            m_red: Vec::with_capacity(n * n),
+            s_tick: Vec::with_capacity(n * n),
+            w_tick: Vec::with_capacity(n * n),
+            damping_per_s: 0.0,
+            step_s: 0.0,
+            first_step: false,
+            tick_s: 0.0,
+            vel: Vec::with_capacity(n),
+            delta_prev: Vec::with_capacity(n),
             delta: Vec::with_capacity(n),
             grad: Vec::with_capacity(n),
             w_factor: Vec::with_capacity(n * n),
@@ -277,6 +314,120 @@ impl LocalProblem {
     /// Forgets the problem.
     pub fn clear(&mut self) {
         self.ready = false;
+    }
+
+    /// Gives the problem the tissue's inertia (after [`LocalProblem::set`]):
+    /// `column_mass` G = C_V^T M C_V (the lumped masses seen through W's
+    /// columns, row-major 3V square), mass-proportional `damping_per_s`,
+    /// the vertices' velocities at the sample. Each solve is then one
+    /// implicit Euler step of the condensed tissue (Guyan: mass S G S,
+    /// stiffness S), the first spanning `first_step_s` (the sample's age
+    /// when it is first rendered), each later one `tick_s`. The render then
+    /// needs the sample the problem was taken with (a later one: `None`).
+    pub fn set_inertia(
+        &mut self,
+        column_mass: &[f64],
+        damping_per_s: f64,
+        velocities_m_per_s: &[V3],
+        first_step_s: f64,
+        tick_s: f64,
+    ) -> Result<(), LocalProblemError> {
+        let n = self.delta.len();
+        if column_mass.len() != n * n || velocities_m_per_s.len() * 3 != n {
+            return Err(LocalProblemError::Malformed("inertia size"));
+        }
+        let valid = first_step_s > 0.0
+            && tick_s > 0.0
+            && damping_per_s >= 0.0
+            && column_mass.iter().all(|x| x.is_finite())
+            && velocities_m_per_s.iter().flatten().all(|x| x.is_finite());
+        if !valid {
+            return Err(LocalProblemError::Malformed("inertia value"));
+        }
+        // M = S G S (two dense products; on the set-up side).
+        self.trial_sd.clear();
+        self.trial_sd.resize(n * n, 0.0);
+        for i in 0..n {
+            for k in 0..n {
+                let a = self.s[i * n + k];
+                for j in 0..n {
+                    self.trial_sd[i * n + j] += a * column_mass[k * n + j];
+                }
+            }
+        }
+        self.m_red.clear();
+        self.m_red.resize(n * n, 0.0);
+        for i in 0..n {
+            for k in 0..n {
+                let a = self.trial_sd[i * n + k];
+                for j in 0..n {
+                    self.m_red[i * n + j] += a * self.s[k * n + j];
+                }
+            }
+        }
+        self.damping_per_s = damping_per_s;
+        // The tick's S + A and inverse, then the first step's in s and w.
+        let static_s = std::mem::take(&mut self.s);
+        self.s_tick.clear();
+        self.s_tick.extend_from_slice(&static_s);
+        let mut s_tick = std::mem::take(&mut self.s_tick);
+        let mut w_tick = std::mem::take(&mut self.w_tick);
+        let ok = self.stepped(&mut s_tick, &mut w_tick, tick_s);
+        (self.s_tick, self.w_tick) = (s_tick, w_tick);
+        self.s = static_s;
+        let mut s = std::mem::take(&mut self.s);
+        let mut w = std::mem::take(&mut self.w);
+        let ok = ok && self.stepped(&mut s, &mut w, first_step_s);
+        (self.s, self.w) = (s, w);
+        if !ok {
+            self.ready = false;
+            self.m_red.clear();
+            return Err(LocalProblemError::NotDefinite);
+        }
+        self.step_s = first_step_s;
+        self.first_step = true;
+        self.tick_s = tick_s;
+        self.vel.clear();
+        self.vel.extend(velocities_m_per_s.iter().flatten());
+        Ok(())
+    }
+
+    /// After the first step (which spans the sample's age): a haptic tick
+    /// per step from now on.
+    fn end_first_step(&mut self) {
+        if self.first_step {
+            self.first_step = false;
+            self.step_s = self.tick_s;
+            std::mem::swap(&mut self.s, &mut self.s_tick);
+            std::mem::swap(&mut self.w, &mut self.w_tick);
+        }
+    }
+
+    /// `s` (S on entry) becomes S + (1/h^2 + c/h) M for a step `h_s`, `w`
+    /// its inverse; false if not positive definite.
+    fn stepped(&mut self, s: &mut [f64], w: &mut Vec<f64>, h_s: f64) -> bool {
+        let n = self.delta.len();
+        let a = 1.0 / (h_s * h_s) + self.damping_per_s / h_s;
+        for (x, m) in s.iter_mut().zip(&self.m_red) {
+            *x += a * m;
+        }
+        self.w_factor.clear();
+        self.w_factor.extend_from_slice(s);
+        if !cholesky(&mut self.w_factor, n) {
+            return false;
+        }
+        w.clear();
+        w.resize(n * n, 0.0);
+        for c in 0..n {
+            self.step.clear();
+            self.step.resize(n, 0.0);
+            self.step[c] = 1.0;
+            cholesky_solve(&self.w_factor, &mut self.step, n);
+            for r in 0..n {
+                w[r * n + c] = self.step[r];
+            }
+        }
+        true
     }
 
     /// The force message `seq` of the step the problem was taken at.
@@ -333,6 +484,7 @@ impl LocalProblem {
         if !self.ready
             || latest.seq < self.seq
             || latest.t_ns.saturating_sub(self.t_ns) > MAX_AGE_NS
+            || (!self.m_red.is_empty() && latest.seq != self.seq)
         {
             return None;
         }
@@ -473,6 +625,10 @@ impl LocalProblem {
         let mut f0 = std::mem::take(&mut self.f0);
         self.tool_force0_n = self.evaluate(&self.delta, ZERO, &mut f0, None).1;
         self.f0 = f0;
+        self.f0_eff.clear();
+        self.f0_eff.extend_from_slice(&self.f0);
+        // Quasi-static until set_inertia.
+        self.m_red.clear();
         // No surface near the tool: nothing to solve (the caller's
         // fallback renders the sample).
         self.ready = n > 0 && !points.is_empty();
@@ -495,6 +651,23 @@ impl LocalProblem {
         }
         let n = self.delta.len();
         let dx = sub(tool_m, self.tool_m);
+        let inertia = !self.m_red.is_empty();
+        if inertia {
+            // This step's inertial load: M (a delta_k + v_k / h), a = 1/h^2
+            // + c/h, moved to f0.
+            let h = self.step_s;
+            let a = 1.0 / (h * h) + self.damping_per_s / h;
+            for (r, row) in self.m_red.chunks_exact(n).enumerate() {
+                let b: f64 = row
+                    .iter()
+                    .zip(self.delta.iter().zip(&self.vel))
+                    .map(|(m, (d, v))| m * (a * d + v / h))
+                    .sum();
+                self.f0_eff[r] = self.f0[r] - b;
+            }
+            self.delta_prev.clear();
+            self.delta_prev.extend_from_slice(&self.delta);
+        }
         let mut forces = std::mem::take(&mut self.forces);
         forces.resize(n, 0.0);
         // Newton over the points near the tool; then a check over all that
@@ -521,6 +694,9 @@ impl LocalProblem {
             }
             if !self.newton(dx, &mut forces) {
                 self.forces = forces;
+                if inertia {
+                    self.end_first_step();
+                }
                 return None;
             }
             if !self.others_touch(dx) {
@@ -532,12 +708,22 @@ impl LocalProblem {
                 // falls back), the next starts where this one did.
                 self.delta.copy_from_slice(&self.start);
                 self.forces = forces;
+                if inertia {
+                    self.end_first_step();
+                }
                 return None;
             }
             slack_m *= 4.0;
         }
         // No point outside the active ones touches: they are the force.
         let (_, tool, touching) = self.evaluate(&self.delta, dx, &mut forces, None);
+        if inertia {
+            let h = self.step_s;
+            for ((v, d), p) in self.vel.iter_mut().zip(&self.delta).zip(&self.delta_prev) {
+                *v = (d - p) / h;
+            }
+            self.end_first_step();
+        }
         let change = sub(tool, self.tool_force0_n);
         let out = change
             .iter()

@@ -75,7 +75,7 @@ impl LocalProblem {
             self.grad.extend(
                 self.sd
                     .iter()
-                    .zip(&self.f0)
+                    .zip(&self.f0_eff)
                     .zip(forces.iter())
                     .map(|((s, f0), f)| s + f0 - f),
             );
@@ -247,7 +247,7 @@ impl LocalProblem {
         delta
             .iter()
             .zip(sd)
-            .zip(&self.f0)
+            .zip(&self.f0_eff)
             .fold(e_contact, |e, ((d, s), f)| e + d * (0.5 * s + f))
     }
 

@@ -317,3 +317,78 @@ fn a_smaller_problem_after_a_larger_one_solves() {
     }
     assert_eq!(p.solve(down), small.solve(down));
 }
+
+/// The press problem with inertia: G such that the condensed mass is
+/// `m` kg per dof (M = S G S with S = I / C: G = m C^2 I), damping `c`.
+fn with_inertia(m: f64, c: f64, first_s: f64) -> (LocalProblem, V3) {
+    let (mut p, centre) = press(0.001);
+    let mut g = vec![0.0; 81];
+    for i in 0..9 {
+        g[i * 9 + i] = m * C * C;
+    }
+    p.set_inertia(&g, c, &[[0.0; 3]; 3], first_s, 1e-3).unwrap();
+    (p, centre)
+}
+
+#[test]
+fn with_a_vanishing_mass_the_inertia_changes_nothing() {
+    let (mut quasi, centre) = press(0.001);
+    let (mut light, _) = with_inertia(1e-12, 0.0, 0.03);
+    let down = [centre[0], centre[1], centre[2] - 2e-4];
+    for _ in 0..3 {
+        let (a, b) = (quasi.solve(down).unwrap(), light.solve(down).unwrap());
+        assert!(norm(sub(a.0, b.0)) < 1e-9, "{a:?} {b:?}");
+    }
+}
+
+#[test]
+fn inertia_stiffens_a_sudden_press_then_settles_to_the_static_force() {
+    // 10 g per dof, damped at 50 /s: pressed 0.2 mm deeper at once, the
+    // tissue cannot give way in the first millisecond (more force than the
+    // quasi-static answer), then it settles to it.
+    let (mut quasi, centre) = press(0.001);
+    let (mut heavy, _) = with_inertia(0.01, 50.0, 1e-3);
+    let down = [centre[0], centre[1], centre[2] - 2e-4];
+    let settled = quasi.solve(down).unwrap().0;
+    let first = heavy.solve(down).unwrap().0;
+    assert!(first[2] > settled[2] * 1.2, "{first:?} vs {settled:?}");
+    let mut last = first;
+    for _ in 0..3000 {
+        last = heavy.solve(down).unwrap().0;
+    }
+    // Settled to the solver's tolerance (1e-4 N of imbalance per vertex
+    // stops the iterations).
+    assert!(norm(sub(last, settled)) < 5e-4, "{last:?} vs {settled:?}");
+    // The first step may span the sample's age: a long first step is
+    // nearer the settled force than a 1 ms one.
+    let (mut aged, _) = with_inertia(0.01, 50.0, 0.05);
+    let long = aged.solve(down).unwrap().0;
+    assert!((long[2] - settled[2]).abs() < (first[2] - settled[2]).abs());
+}
+
+#[test]
+fn inertia_needs_its_own_sample_and_checks_its_input() {
+    let (mut p, centre) = with_inertia(0.01, 10.0, 0.03);
+    p.seq = 4;
+    let own = sample_at(4, 0, centre, [0.0, 0.0, 0.5]);
+    assert!(p.render(&own, centre, f64::INFINITY).is_some());
+    let later = sample_at(5, 1_000_000, centre, [0.0, 0.0, 0.5]);
+    assert!(p.render(&later, centre, f64::INFINITY).is_none());
+    let (mut q, _) = press(0.001);
+    assert!(
+        q.set_inertia(&[0.0; 80], 0.0, &[[0.0; 3]; 3], 0.03, 1e-3)
+            .is_err()
+    );
+    assert!(
+        q.set_inertia(&[0.0; 81], 0.0, &[[0.0; 3]; 2], 0.03, 1e-3)
+            .is_err()
+    );
+    assert!(
+        q.set_inertia(&[0.0; 81], 0.0, &[[0.0; 3]; 3], 0.0, 1e-3)
+            .is_err()
+    );
+    assert!(
+        q.set_inertia(&[f64::NAN; 81], 0.0, &[[0.0; 3]; 3], 0.03, 1e-3)
+            .is_err()
+    );
+}

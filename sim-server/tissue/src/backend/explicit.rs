@@ -24,6 +24,9 @@ impl<S: Storage> Backend for Explicit<S> {
     fn displacements(&self) -> &[[Real; 3]] {
         Explicit::displacements(self)
     }
+    fn velocity(&self, v: VertexId) -> Vec3 {
+        Explicit::velocity(self, v)
+    }
     fn position(&self, v: VertexId) -> Vec3 {
         Explicit::position(self, v)
     }

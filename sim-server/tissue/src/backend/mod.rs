@@ -49,6 +49,12 @@ pub trait Backend {
     fn displacement(&self, v: VertexId) -> Vec3;
     /// All displacements (m).
     fn displacements(&self) -> &[[Real; 3]];
+    /// Velocity of `v` (m/s) at the end of the last step where the backend
+    /// integrates in time (zero where it does not).
+    fn velocity(&self, v: VertexId) -> Vec3 {
+        let _ = v;
+        Vec3::ZERO
+    }
     /// Current position of `v` (m).
     fn position(&self, v: VertexId) -> Vec3 {
         self.model().mesh().positions_m()[v.idx()] + self.displacement(v)

@@ -66,6 +66,16 @@ pub struct LocalContact {
     /// W = (K^-1)_VV (m/N), row-major, 3|V| x 3|V|, in the order of
     /// `vertices` (x, y, z of each).
     pub compliance_m_per_n: Vec<Real>,
+    /// With [`super::Tools::local_inertia`]: G = C_V^T M C_V, the lumped
+    /// masses seen through the compliance's columns (row-major, the size of
+    /// `compliance_m_per_n`; the tissue's mass condensed on V, Guyan, is
+    /// W^-1 G W^-1); empty otherwise.
+    pub column_mass: Vec<Real>,
+    /// With [`super::Tools::local_inertia`]: the vertices' velocities (m/s).
+    pub velocities_m_per_s: Vec<Vec3>,
+    /// With [`super::Tools::local_inertia`]: the mass-proportional damping
+    /// (1/s).
+    pub damping_per_s: Real,
 }
 
 impl LocalContact {
@@ -76,6 +86,9 @@ impl LocalContact {
         self.positions_m.clear();
         self.points.clear();
         self.compliance_m_per_n.clear();
+        self.column_mass.clear();
+        self.velocities_m_per_s.clear();
+        self.damping_per_s = 0.0;
     }
 
     /// Fills the points, parts and vertices from `field`, a field holding

@@ -231,6 +231,40 @@ impl Solver {
         true
     }
 
+    /// G = C_V^T M C_V (m^2/N^2 kg, row-major 3|V| square): the lumped
+    /// masses seen through the static response columns C_V = K^-1 P_V^T of
+    /// `verts` (the Guyan reduction of the tissue's mass onto V is
+    /// W^-1 G W^-1); false without a factor.
+    pub(super) fn column_mass(
+        &mut self,
+        model: &ElasticModel,
+        verts: &[u32],
+        out: &mut Vec<Real>,
+    ) -> bool {
+        // The columns for `verts` (solved for new vertices).
+        if !self.compliance(model, verts, &mut Vec::new()) {
+            return false;
+        }
+        let n = model.vertex_count();
+        let m = model.masses_kg();
+        let nv = 3 * verts.len();
+        out.clear();
+        out.resize(nv * nv, 0.0);
+        for (i, vi) in verts.iter().enumerate() {
+            for a in 0..3 {
+                let ci = &self.columns[vi][a * n..(a + 1) * n];
+                for (j, vj) in verts.iter().enumerate() {
+                    for b in 0..3 {
+                        let cj = &self.columns[vj][b * n..(b + 1) * n];
+                        let g: Real = (0..n).map(|k| m[k] * ci[k].dot(cj[k])).sum();
+                        out[(3 * i + a) * nv + 3 * j + b] = g;
+                    }
+                }
+            }
+        }
+        true
+    }
+
     /// K_eff with each point's Hessian `hessian(p)`.
     fn effective(
         &mut self,

@@ -270,6 +270,21 @@ impl ContactStiffness {
         }
     }
 
+    /// The tissue's mass seen through the static response at `verts`
+    /// (see [`super::local::LocalContact::column_mass`]) into `out`; false
+    /// as [`ContactStiffness::compliance`].
+    pub fn column_mass(
+        &mut self,
+        model: &ElasticModel,
+        verts: &[u32],
+        out: &mut Vec<Real>,
+    ) -> bool {
+        match (&self.link, &mut self.solver) {
+            (None, Some(solver)) => solver.column_mass(model, verts, out),
+            _ => false,
+        }
+    }
+
     /// The newest contact problem with its compliance (see
     /// [`ContactStiffness::update`]), once; give its buffers back with
     /// [`ContactStiffness::recycle_local`].

@@ -685,6 +685,12 @@ impl<S: Storage> Explicit<S> {
         self.steps
     }
 
+    /// Velocity of `v` (m/s): the last sub-step's backward difference.
+    pub fn velocity(&self, v: VertexId) -> Vec3 {
+        let h = self.dt_s / self.substeps as Real;
+        (Vec3::from_array(self.u[v.idx()]) - Vec3::from_array(self.next[v.idx()])) / h
+    }
+
     /// Kinetic plus elastic energy (J), velocities by the centred difference
     /// of the last two states (for tests and diagnostics; allocates).
     pub fn energy_j(&self) -> Real {
