@@ -344,14 +344,15 @@ impl LocalProblem {
         if !valid {
             return Err(LocalProblemError::Malformed("inertia value"));
         }
-        // M = S G S (two dense products; on the set-up side).
-        self.trial_sd.clear();
-        self.trial_sd.resize(n * n, 0.0);
+        // M = S G S (two dense products; on the set-up side). S G goes in
+        // the factor's scratch (n^2, overwritten by `stepped` below).
+        self.w_factor.clear();
+        self.w_factor.resize(n * n, 0.0);
         for i in 0..n {
             for k in 0..n {
                 let a = self.s[i * n + k];
                 for j in 0..n {
-                    self.trial_sd[i * n + j] += a * column_mass[k * n + j];
+                    self.w_factor[i * n + j] += a * column_mass[k * n + j];
                 }
             }
         }
@@ -359,7 +360,7 @@ impl LocalProblem {
         self.m_red.resize(n * n, 0.0);
         for i in 0..n {
             for k in 0..n {
-                let a = self.trial_sd[i * n + k];
+                let a = self.w_factor[i * n + k];
                 for j in 0..n {
                     self.m_red[i * n + j] += a * self.s[k * n + j];
                 }

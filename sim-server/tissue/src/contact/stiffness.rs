@@ -241,25 +241,30 @@ impl Solver {
         verts: &[u32],
         out: &mut Vec<Real>,
     ) -> bool {
-        // The columns for `verts` (solved for new vertices).
-        if !self.compliance(model, verts, &mut Vec::new()) {
+        self.refresh(model);
+        if self.factor.is_none() {
             return false;
         }
+        self.verts.clear();
+        self.verts.extend_from_slice(verts);
+        self.ensure_columns(model);
         let n = model.vertex_count();
         let m = model.masses_kg();
         let nv = 3 * verts.len();
         out.clear();
         out.resize(nv * nv, 0.0);
-        for (i, vi) in verts.iter().enumerate() {
-            for a in 0..3 {
-                let ci = &self.columns[vi][a * n..(a + 1) * n];
-                for (j, vj) in verts.iter().enumerate() {
-                    for b in 0..3 {
-                        let cj = &self.columns[vj][b * n..(b + 1) * n];
-                        let g: Real = (0..n).map(|k| m[k] * ci[k].dot(cj[k])).sum();
-                        out[(3 * i + a) * nv + 3 * j + b] = g;
-                    }
-                }
+        let column = |d: usize| {
+            let (v, axis) = (verts[d / 3], d % 3);
+            &self.columns[&v][axis * n..(axis + 1) * n]
+        };
+        // Symmetric: the upper triangle, mirrored.
+        for r in 0..nv {
+            let cr = column(r);
+            for c in r..nv {
+                let cc = column(c);
+                let g: Real = (0..n).map(|k| m[k] * cr[k].dot(cc[k])).sum();
+                out[r * nv + c] = g;
+                out[c * nv + r] = g;
             }
         }
         true
@@ -353,23 +358,10 @@ impl Solver {
         (k + k.transpose()) * 0.5
     }
 
-    /// S = (K^-1)_VV from the cached columns (solved for new vertices), or
-    /// blockdiag(K_ii)^-1 without a factor.
-    fn fill_s(&mut self, model: &ElasticModel, nv: usize) {
-        self.s.clear();
-        self.s.resize(nv * nv, 0.0);
+    /// Solves and caches the K^-1 columns of the vertices in `verts` not
+    /// cached yet (nothing without a factor).
+    fn ensure_columns(&mut self, model: &ElasticModel) {
         let Some(factor) = &self.factor else {
-            for (slot, &v) in self.verts.iter().enumerate() {
-                let kinv = model.vertex_tensors()[v as usize].inverse();
-                if !kinv.is_finite() {
-                    continue;
-                }
-                for r in 0..3 {
-                    for c in 0..3 {
-                        self.s[(3 * slot + r) * nv + 3 * slot + c] = kinv.col(c)[r];
-                    }
-                }
-            }
             return;
         };
         let n = model.vertex_count();
@@ -390,6 +382,29 @@ impl Solver {
             }
             self.columns.insert(v, cols);
         }
+    }
+
+    /// S = (K^-1)_VV from the cached columns (solved for new vertices), or
+    /// blockdiag(K_ii)^-1 without a factor.
+    fn fill_s(&mut self, model: &ElasticModel, nv: usize) {
+        self.s.clear();
+        self.s.resize(nv * nv, 0.0);
+        if self.factor.is_none() {
+            for (slot, &v) in self.verts.iter().enumerate() {
+                let kinv = model.vertex_tensors()[v as usize].inverse();
+                if !kinv.is_finite() {
+                    continue;
+                }
+                for r in 0..3 {
+                    for c in 0..3 {
+                        self.s[(3 * slot + r) * nv + 3 * slot + c] = kinv.col(c)[r];
+                    }
+                }
+            }
+            return;
+        }
+        self.ensure_columns(model);
+        let n = model.vertex_count();
         for (sj, vj) in self.verts.iter().enumerate() {
             let cols = &self.columns[vj];
             for c in 0..3 {

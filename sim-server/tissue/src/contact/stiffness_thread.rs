@@ -185,7 +185,7 @@ impl ContactStiffness {
                         solver.compliance(model, vertices, compliance_m_per_n)
                     };
                     if solved {
-                        self.keep_local(lc);
+                        keep_local(&mut self.local_ready, &mut self.local_spare, lc);
                     } else {
                         self.local_spare = Some(lc);
                     }
@@ -204,8 +204,8 @@ impl ContactStiffness {
                 if let Some(lc) = done.local {
                     if lc.compliance_m_per_n.is_empty() {
                         self.local_spare = Some(lc);
-                    } else if let Some(old) = self.local_ready.replace(lc) {
-                        self.local_spare = Some(old);
+                    } else {
+                        keep_local(&mut self.local_ready, &mut self.local_spare, lc);
                     }
                 }
             }
@@ -297,14 +297,6 @@ impl ContactStiffness {
         self.local_spare = Some(lc);
     }
 
-    /// Keeps `lc` as the newest problem (an older one not taken becomes
-    /// the spare).
-    fn keep_local(&mut self, lc: Box<LocalContact>) {
-        if let Some(old) = self.local_ready.replace(lc) {
-            self.local_spare = Some(old);
-        }
-    }
-
     /// The newest stiffness of tool `tool` (N/m).
     pub fn stiffness(&self, tool: usize) -> Mat3 {
         self.newest.get(tool).copied().unwrap_or(Mat3::ZERO)
@@ -374,6 +366,18 @@ impl ContactStiffness {
                 self.solver = Some(Solver::new(model, &self.held));
             }
         }
+    }
+}
+
+/// Keeps `lc` as the newest problem in `ready` (an older one not taken
+/// becomes the `spare`).
+fn keep_local(
+    ready: &mut Option<Box<LocalContact>>,
+    spare: &mut Option<Box<LocalContact>>,
+    lc: Box<LocalContact>,
+) {
+    if let Some(old) = ready.replace(lc) {
+        *spare = Some(old);
     }
 }
 
