@@ -66,6 +66,8 @@ pub struct Shared {
     pub samples_not_live: AtomicU64,
     /// Contact problems set up for `local-problem`.
     pub local_problems: AtomicU64,
+    /// Of those, set up with the tissue's inertia.
+    pub local_problems_inertial: AtomicU64,
     /// Contact problems refused (another protocol version, malformed).
     pub local_problems_refused: AtomicU64,
     /// Ticks on which the passivity controller added damping.
@@ -89,6 +91,7 @@ impl Shared {
             pose_rereferences: AtomicU64::new(0),
             samples_not_live: AtomicU64::new(0),
             local_problems: AtomicU64::new(0),
+            local_problems_inertial: AtomicU64::new(0),
             local_problems_refused: AtomicU64::new(0),
             passivity_ticks: AtomicU64::new(0),
             passivity_dissipated_j_bits: AtomicU64::new(0f64.to_bits()),
@@ -261,6 +264,7 @@ impl<D: Device> RtLoop<D> {
             out.update();
             if let Some(f) = out.output_buffer_mut().render(
                 &latest,
+                now_ns,
                 position,
                 self.extrapolator.max_stiffness_n_per_m(),
             ) && is_finite(f)

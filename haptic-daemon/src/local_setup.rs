@@ -1,15 +1,19 @@
 //! The thread that sets contact problems up for `local-problem`: it takes
 //! the newest `local-contact` message, inverts its compliance
 //! ([`LocalProblem::set_from_wire`], a dense factorisation of up to 72 x 72)
-//! and hands the problem to the RT thread through a triple buffer. Its own
-//! thread, at normal priority, so that neither the RT thread nor the I/O
-//! thread (which carries the poses to the simulation) waits for it.
+//! and, when the message carries the tissue's inertia, condenses the mass
+//! and inverts the two implicit-step matrices (the first step's, which
+//! spans the problem's age when the RT thread first renders it, and a
+//! tick's: [`LocalProblem::set_inertia_from_wire`]), then hands the problem
+//! to the RT thread through a triple buffer. Its own thread, at normal
+//! priority, so that neither the RT thread nor the I/O thread (which
+//! carries the poses to the simulation) waits for it.
 
 use crate::daemon::Shared;
 use crate::extrapolate::local_problem::LocalProblem;
-use shared::SessionName;
 use shared::protocol::PROTOCOL_VERSION;
 use shared::services::{self, ServiceError};
+use shared::{SessionName, monotonic_ns};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -18,12 +22,31 @@ use std::time::Duration;
 /// one about every 4 ms).
 const POLL: Duration = Duration::from_millis(1);
 
+/// How the set-up thread treats the problems.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalSetup {
+    /// The RT thread's period (ns): a step of a problem with inertia.
+    pub tick_ns: u64,
+    /// Use the tissue's inertia when a problem carries it (false: every
+    /// problem quasi-static).
+    pub inertia: bool,
+}
+
+/// The first implicit step of a problem with inertia (s): from its step's
+/// time `taken_ns` to the RT thread's first render of it, expected half a
+/// tick after `now_ns` (the RT thread takes a new problem at its next
+/// tick); at least a tick.
+pub fn first_step_s(taken_ns: u64, now_ns: u64, tick_ns: u64) -> f64 {
+    (now_ns.saturating_sub(taken_ns) + tick_ns / 2).max(tick_ns) as f64 * 1e-9
+}
+
 /// Runs until the RT thread is done: each new problem in `session` set up
-/// into `input` and published (counted in `shared`; one of another
-/// protocol version or malformed is refused and counted).
+/// into `input` as `setup` says and published (counted in `shared`; one of
+/// another protocol version or malformed is refused and counted).
 pub fn run_local_setup(
     shared: Arc<Shared>,
     session: SessionName,
+    setup: LocalSetup,
     mut input: triple_buffer::Input<LocalProblem>,
 ) -> Result<(), ServiceError> {
     let node = services::node("haptic-daemon-local")?;
@@ -44,12 +67,26 @@ pub fn run_local_setup(
         if msg.tool != 0 {
             continue;
         }
-        let ok =
-            msg.version == PROTOCOL_VERSION && input.input_buffer_mut().set_from_wire(&msg).is_ok();
+        let problem = input.input_buffer_mut();
+        let mut ok = msg.version == PROTOCOL_VERSION && problem.set_from_wire(&msg).is_ok();
+        let mut inertial = false;
+        if ok && setup.inertia {
+            let tick_s = setup.tick_ns as f64 * 1e-9;
+            let first_s = first_step_s(msg.t_ns, monotonic_ns(), setup.tick_ns);
+            match problem.set_inertia_from_wire(&msg, first_s, tick_s) {
+                Ok(with) => inertial = with,
+                Err(_) => ok = false,
+            }
+        }
         drop(msg);
         if ok {
             input.publish();
             shared.local_problems.fetch_add(1, Ordering::Relaxed);
+            if inertial {
+                shared
+                    .local_problems_inertial
+                    .fetch_add(1, Ordering::Relaxed);
+            }
         } else {
             shared
                 .local_problems_refused

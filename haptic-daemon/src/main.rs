@@ -10,7 +10,7 @@ use haptic_daemon::device::{
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoSpin, Stats, run_io};
-use haptic_daemon::local_setup::run_local_setup;
+use haptic_daemon::local_setup::{LocalSetup, run_local_setup};
 use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
 use record_cmd::{RecordArgs, record_main};
@@ -80,6 +80,10 @@ struct RunArgs {
     /// run in the README).
     #[arg(long, value_enum, default_value_t = Method::LocalNormal)]
     extrapolation: Method,
+    /// `local-problem`: solve the contact problems quasi-statically, without
+    /// the tissue's inertia the simulation sends with them.
+    #[arg(long)]
+    quasi_static: bool,
     /// Force limit (N); at most the device's own.
     #[arg(long)]
     max_force: Option<f64>,
@@ -143,8 +147,10 @@ struct Summary {
     max_stiffness_n_per_m: f64,
     samples_received: u64,
     samples_not_live: u64,
-    /// `local-problem`: contact problems set up, and refused.
+    /// `local-problem`: contact problems set up, of those with the tissue's
+    /// inertia, and refused.
     local_problems: u64,
+    local_problems_inertial: u64,
     local_problems_refused: u64,
     poses_rejected: u64,
     pose_rereferences: u64,
@@ -292,10 +298,14 @@ fn main() -> Result<()> {
     let local_setup = match local_in {
         Some(input) => {
             let (shared, session) = (shared.clone(), session.clone());
+            let setup = LocalSetup {
+                tick_ns: period_ns,
+                inertia: !args.quasi_static,
+            };
             Some(
                 std::thread::Builder::new()
                     .name("haptic-local".into())
-                    .spawn(move || run_local_setup(shared, session, input))?,
+                    .spawn(move || run_local_setup(shared, session, setup, input))?,
             )
         }
         None => None,
@@ -459,6 +469,7 @@ fn main() -> Result<()> {
         samples_received: shared.samples.load(Ordering::Relaxed),
         samples_not_live: shared.samples_not_live.load(Ordering::Relaxed),
         local_problems: shared.local_problems.load(Ordering::Relaxed),
+        local_problems_inertial: shared.local_problems_inertial.load(Ordering::Relaxed),
         local_problems_refused: shared.local_problems_refused.load(Ordering::Relaxed),
         poses_rejected: shared.poses_rejected.load(Ordering::Relaxed),
         pose_rereferences: shared.pose_rereferences.load(Ordering::Relaxed),
@@ -489,8 +500,9 @@ fn main() -> Result<()> {
     );
     if method == Method::LocalProblem {
         out!(
-            "local-problem: {} contact problems set up, {} refused",
+            "local-problem: {} contact problems set up ({} with the tissue's inertia), {} refused",
             summary.local_problems,
+            summary.local_problems_inertial,
             summary.local_problems_refused
         );
     }

@@ -83,6 +83,20 @@ fn to_wire(p: &Problem, seq: u64, msg: &mut LocalContactMsg) {
             msg.compliance_m_per_n[i * n + j] = 1e-3 * (d + 0.3 * c[i] * c[j] / c2);
         }
     }
+    // Every other problem with inertia: G = m W W (a mass m at each
+    // coordinate once condensed), the vertices moving.
+    msg.inertia = (seq % 2) as u32;
+    let w = msg.compliance_m_per_n;
+    for i in 0..n {
+        for j in 0..n {
+            msg.column_mass[i * n + j] =
+                0.01 * (0..n).map(|k| w[i * n + k] * w[k * n + j]).sum::<f64>();
+        }
+    }
+    for (v, x) in msg.velocities_m_per_s[..nv].iter_mut().zip(c.chunks(3)) {
+        *v = [0.01 * x[0], 0.01 * x[1], 0.01 * x[2]];
+    }
+    msg.damping_per_s = 5.0;
 }
 
 proptest! {
@@ -99,6 +113,8 @@ proptest! {
         for (k, p) in problems.iter().enumerate() {
             to_wire(p, k as u64 + 1, &mut msg);
             prop_assert!(lp.set_from_wire(&msg).is_ok());
+            let inertial = lp.set_inertia_from_wire(&msg, 0.03, 1e-3);
+            prop_assert_eq!(inertial, Ok(msg.inertia == 1 && lp.is_ready()));
             let latest = ForceSample {
                 t_ns: msg.t_ns,
                 seq: msg.seq,
@@ -107,13 +123,13 @@ proptest! {
                 stiffness_n_per_m: [[100.0, 0.0, 0.0], [0.0, 100.0, 0.0], [0.0, 0.0, 100.0]],
                 in_contact: k % 2 == 0,
             };
-            for m in &moves {
+            for (i, m) in moves.iter().enumerate() {
                 let tool = [
                     msg.tool_position_m[0] + m[0],
                     msg.tool_position_m[1] + m[1],
                     msg.tool_position_m[2] + m[2],
                 ];
-                if let Some(f) = lp.render(&latest, tool, 3000.0) {
+                if let Some(f) = lp.render(&latest, msg.t_ns + (i as u64 + 1) * 1_000_000, tool, 3000.0) {
                     prop_assert!(f.iter().all(|x| x.is_finite()), "{f:?}");
                 }
             }

@@ -119,7 +119,12 @@ fn ten_thousand_ticks_allocate_nothing() {
                 publisher.send_copy(msg).unwrap();
                 if k % 12 == 0 {
                     surface_under(&mut problem, msg.tools[0].position_m, k, now);
-                    local_in.input_buffer_mut().set_from_wire(&problem).unwrap();
+                    // Every other one with the tissue's inertia (the
+                    // samples after it re-base on its history).
+                    problem.inertia = ((k / 12) % 2) as u32;
+                    let lp = local_in.input_buffer_mut();
+                    lp.set_from_wire(&problem).unwrap();
+                    lp.set_inertia_from_wire(&problem, 3e-3, 1e-3).unwrap();
                     local_in.publish();
                 }
             }
@@ -180,4 +185,11 @@ fn surface_under(msg: &mut LocalContactMsg, tool_m: [f64; 3], seq: u64, t_ns: u6
     for d in 0..9 {
         msg.compliance_m_per_n[d * 9 + d] = 0.002;
     }
+    // With `inertia`: 10 g at each coordinate once condensed (G = m W W).
+    msg.column_mass[..81].fill(0.0);
+    for d in 0..9 {
+        msg.column_mass[d * 9 + d] = 0.01 * 0.002 * 0.002;
+    }
+    msg.velocities_m_per_s[..3].fill([0.0, 0.0, -0.01]);
+    msg.damping_per_s = 10.0;
 }

@@ -183,7 +183,7 @@ pub struct LocalPoint {
 /// every tick (the `local-problem` extrapolator).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("hapsim.LocalContactMsg.v1")]
+#[type_name("hapsim.LocalContactMsg.v2")]
 pub struct LocalContactMsg {
     /// [`PROTOCOL_VERSION`].
     pub version: u32,
@@ -191,7 +191,8 @@ pub struct LocalContactMsg {
     pub tool: u32,
     /// `seq` of the force message of the step it was taken at.
     pub seq: u64,
-    /// `CLOCK_MONOTONIC` (ns) when it was taken.
+    /// `t_ns` of that force message: when that step finished
+    /// (`CLOCK_MONOTONIC`, ns).
     pub t_ns: u64,
     /// The tool position the step used (m).
     pub tool_position_m: [f64; 3],
@@ -201,8 +202,8 @@ pub struct LocalContactMsg {
     pub vertex_count: u32,
     /// Points used.
     pub point_count: u32,
-    /// Padding.
-    pub reserved: u32,
+    /// 1: the tissue's inertia below is given; 0: none (quasi-static).
+    pub inertia: u32,
     /// The tool's capsules.
     pub parts: [LocalPart; LOCAL_MAX_PARTS],
     /// The vertices' positions (m).
@@ -212,6 +213,16 @@ pub struct LocalContactMsg {
     /// The tissue's compliance at the vertices, (K^-1)_VV (m/N), row-major
     /// `3 vertex_count` square (the first `(3 vertex_count)^2` entries).
     pub compliance_m_per_n: [f64; LOCAL_COMPLIANCE_LEN],
+    /// With `inertia`: G = C^T M C (m^2 kg / N^2), the tissue's lumped
+    /// masses M seen through the static response columns C = K^-1 P_V^T
+    /// of the vertices; its mass condensed on them (Guyan) is W^-1 G W^-1.
+    /// Laid out as the compliance.
+    pub column_mass: [f64; LOCAL_COMPLIANCE_LEN],
+    /// With `inertia`: the vertices' velocities at the end of that step
+    /// (m/s).
+    pub velocities_m_per_s: [[f64; 3]; LOCAL_MAX_VERTICES],
+    /// With `inertia`: the tissue's mass-proportional damping (1/s).
+    pub damping_per_s: f64,
 }
 
 impl Default for LocalContactMsg {
@@ -225,11 +236,14 @@ impl Default for LocalContactMsg {
             part_count: 0,
             vertex_count: 0,
             point_count: 0,
-            reserved: 0,
+            inertia: 0,
             parts: [LocalPart::default(); LOCAL_MAX_PARTS],
             positions_m: [[0.0; 3]; LOCAL_MAX_VERTICES],
             points: [LocalPoint::default(); LOCAL_MAX_POINTS],
             compliance_m_per_n: [0.0; LOCAL_COMPLIANCE_LEN],
+            column_mass: [0.0; LOCAL_COMPLIANCE_LEN],
+            velocities_m_per_s: [[0.0; 3]; LOCAL_MAX_VERTICES],
+            damping_per_s: 0.0,
         }
     }
 }
@@ -487,19 +501,30 @@ mod tests {
         assert_eq!(std::mem::size_of::<LocalPart>(), 64);
         assert_eq!(std::mem::size_of::<LocalPoint>(), 40);
         // docs/protocol.md gives this size and the offsets.
-        assert_eq!(std::mem::size_of::<LocalContactMsg>(), 83_200);
+        assert_eq!(std::mem::size_of::<LocalContactMsg>(), 125_256);
         assert_eq!(std::mem::offset_of!(LocalContactMsg, parts), 64);
         assert_eq!(std::mem::offset_of!(LocalContactMsg, points), 768);
         assert_eq!(
             std::mem::offset_of!(LocalContactMsg, compliance_m_per_n),
             41_728
         );
+        assert_eq!(std::mem::offset_of!(LocalContactMsg, column_mass), 83_200);
+        assert_eq!(
+            std::mem::offset_of!(LocalContactMsg, velocities_m_per_s),
+            124_672
+        );
+        assert_eq!(
+            std::mem::offset_of!(LocalContactMsg, damping_per_s),
+            125_248
+        );
         assert_eq!(
             std::mem::size_of::<LocalContactMsg>(),
             64 + 64 * LOCAL_MAX_PARTS
                 + 24 * LOCAL_MAX_VERTICES
                 + 40 * LOCAL_MAX_POINTS
-                + 8 * LOCAL_COMPLIANCE_LEN
+                + 2 * 8 * LOCAL_COMPLIANCE_LEN
+                + 24 * LOCAL_MAX_VERTICES
+                + 8
         );
         assert_eq!(
             std::mem::size_of::<TelemetryBatch>(),

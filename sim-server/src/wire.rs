@@ -111,6 +111,21 @@ pub fn local_contact_msg(
         out.vertex_count = 0;
         out.point_count = 0;
     }
+    let inertia = lc.column_mass.len() == n * n && lc.velocities_m_per_s.len() == nv && nv > 0;
+    out.inertia = u32::from(inertia);
+    if inertia {
+        out.column_mass[..n * n].copy_from_slice(&lc.column_mass);
+        for (o, v) in out
+            .velocities_m_per_s
+            .iter_mut()
+            .zip(&lc.velocities_m_per_s)
+        {
+            *o = v.to_array();
+        }
+        out.damping_per_s = lc.damping_per_s;
+    } else {
+        out.damping_per_s = 0.0;
+    }
 }
 
 /// How far beyond a step's reach the contact problem sent to the haptic
@@ -122,19 +137,20 @@ pub const LOCAL_MARGIN_M: f64 = 3e-3;
 
 /// The contact problem of tool `tool` the wire can carry: points
 /// [`LOCAL_MARGIN_M`] beyond the step's reach, within the message's
-/// capacity.
+/// capacity, with the tissue's inertia.
 pub fn local_spec(tool: usize) -> LocalSpec {
     LocalSpec {
         tool,
         margin_m: LOCAL_MARGIN_M,
         max_vertices: LOCAL_MAX_VERTICES,
         max_points: LOCAL_MAX_POINTS,
+        inertia: true,
     }
 }
 
 /// Tool `tool`'s contact problem after the last step into `lc`, now, as
-/// the wire can carry it; false when there is none (see
-/// [`Tools::local_contact`]).
+/// the wire can carry it (with the inertia); false when there is none
+/// (see [`Tools::local_contact`]).
 pub fn local_contact_into<B: Backend>(
     tools: &mut Tools,
     sim: &B,

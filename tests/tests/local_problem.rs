@@ -125,6 +125,41 @@ fn the_compliance_is_the_tissues_static_response_at_its_vertices() {
             assert!((w[i * n + j] - w[j * n + i]).abs() <= 1e-12 * w[i * n + i].abs());
         }
     }
+    // The column mass G = C^T M C: for loads f and g on V, f^T G g is the
+    // kinetic-energy product of their static responses, u_f^T M u_g.
+    let g_load: Vec<f64> = (0..n)
+        .map(|i| ((i * 104_729) % 11) as f64 * 0.01 - 0.05)
+        .collect();
+    for (k, &v) in lc.vertices.iter().enumerate() {
+        loads[v as usize] = Vec3::new(g_load[3 * k], g_load[3 * k + 1], g_load[3 * k + 2]);
+    }
+    let ug = solve_static(model, &fixed, &loads).unwrap().displacement_m;
+    let m = model.masses_kg();
+    let direct: f64 = (0..model.vertex_count())
+        .map(|i| m[i] * u[i].dot(ug[i]))
+        .sum();
+    let gm = &lc.column_mass;
+    assert_eq!(gm.len(), n * n, "the inertia is carried");
+    let via_g: f64 = (0..n)
+        .map(|i| f[i] * (0..n).map(|j| gm[i * n + j] * g_load[j]).sum::<f64>())
+        .sum();
+    assert!(direct.abs() > 0.0);
+    assert!(
+        (via_g - direct).abs() <= 1e-9 * direct.abs(),
+        "f^T G g {via_g} vs u_f^T M u_g {direct}"
+    );
+    // The velocities are the vertices' own, the damping the scene's.
+    for (k, &v) in lc.vertices.iter().enumerate() {
+        assert_eq!(
+            lc.velocities_m_per_s[k],
+            p.sim.velocity(VertexId::from(v as usize))
+        );
+    }
+    assert!(
+        (lc.damping_per_s - 40.0).abs() < 1e-9,
+        "{}",
+        lc.damping_per_s
+    );
 }
 
 #[test]
@@ -140,7 +175,7 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
     assert!(sample.in_contact && sample.force_n[2] > 0.05, "{sample:?}");
     // At the sample's own pose the problem renders the sample.
     let same = lp
-        .render(&sample, sample.position_m, f64::INFINITY)
+        .render(&sample, sample.t_ns, sample.position_m, f64::INFINITY)
         .unwrap();
     assert!((0..3).all(|i| (same[i] - sample.force_n[i]).abs() < 1e-12));
     // 0.6 mm deeper and 1 mm aside, slowly, then settled.
@@ -149,7 +184,9 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
         hold(&mut p, at.lerp(b, k as f64 / 200.0), 1);
     }
     let settled = ForceSample::from_wire(&hold(&mut p, b, 600), 0).unwrap();
-    let predicted = lp.render(&sample, b.to_array(), f64::INFINITY).unwrap();
+    let predicted = lp
+        .render(&sample, sample.t_ns, b.to_array(), f64::INFINITY)
+        .unwrap();
     let err: f64 = (0..3)
         .map(|i| (predicted[i] - settled.force_n[i]).powi(2))
         .sum::<f64>()
@@ -166,7 +203,12 @@ fn solved_for_a_moved_tool_the_problem_predicts_the_settled_force() {
     assert!(err < 0.1 * change, "error {err} N of a {change} N change");
     // Withdrawn above the surface: nothing.
     let free = lp
-        .render(&sample, (at + Vec3::Z * 0.01).to_array(), f64::INFINITY)
+        .render(
+            &sample,
+            sample.t_ns,
+            (at + Vec3::Z * 0.01).to_array(),
+            f64::INFINITY,
+        )
         .unwrap();
     assert_eq!(free, [0.0; 3]);
 }
@@ -230,6 +272,8 @@ fn the_daemon_renders_the_problems_the_simulation_sends() {
     // test suite in parallel) gets far fewer (42 seen).
     assert!(num("local_problems") >= 5.0, "{d}");
     assert_eq!(num("local_problems_refused"), 0.0, "{d}");
+    // By default with the tissue's inertia the simulation sends.
+    assert_eq!(num("local_problems_inertial"), num("local_problems"), "{d}");
     // The palpation's force (about 0.5 N at 6 mm), within the limit.
     let max = num("max_force_n");
     assert!(max > 0.1 && max <= num("force_limit_n"), "{d}");

@@ -14,6 +14,9 @@ use sim_server::wire::{local_contact_msg, local_spec};
 
 /// How often the subscribers are counted (ns).
 const CHECK_EVERY_NS: u64 = 1_000_000_000;
+/// The finish times of this many recent steps are kept, to stamp a
+/// problem with its own step's (the worker hands it over a few steps on).
+const STEP_TIMES: usize = 64;
 
 /// The stream's publisher and whether problems are being made.
 pub struct LocalOut {
@@ -21,6 +24,10 @@ pub struct LocalOut {
     publisher: LocalContactPublisher,
     wanted: bool,
     checked_ns: u64,
+    /// `t_ns` of the force messages, by `seq` modulo [`STEP_TIMES`].
+    step_times_ns: [u64; STEP_TIMES],
+    /// `seq` of the newest force message.
+    last_seq: u64,
     /// Problems published.
     pub published: u64,
     /// Problems that could not be published.
@@ -37,17 +44,24 @@ impl LocalOut {
             publisher,
             wanted: false,
             checked_ns: 0,
+            step_times_ns: [0; STEP_TIMES],
+            last_seq: 0,
             published: 0,
             dropped: 0,
         })
     }
 
-    /// After a step whose force message had `seq`, at `now_ns`: asks the
-    /// tools for problems while someone listens, and publishes a finished
-    /// one (stamped with the `seq` of the step it was taken at). A problem
-    /// that cannot be published is dropped and counted (the daemon falls
-    /// back to `local-normal` without it); it never stops the simulation.
-    pub fn publish(&mut self, tools: &mut Tools, seq: u64, now_ns: u64) {
+    /// Whether problems are being made (someone listens).
+    pub fn wanted(&self) -> bool {
+        self.wanted
+    }
+
+    /// After a step whose force message had `seq` and `now_ns` (its `t_ns`):
+    /// asks the tools for problems while someone listens, and publishes a
+    /// finished one ([`LocalOut::publish_ready`]).
+    pub fn after_sample(&mut self, tools: &mut Tools, seq: u64, now_ns: u64) {
+        self.step_times_ns[seq as usize % STEP_TIMES] = now_ns;
+        self.last_seq = seq;
         if now_ns.saturating_sub(self.checked_ns) >= CHECK_EVERY_NS {
             self.checked_ns = now_ns;
             let wanted = !tools.is_empty() && services::subscriber_count(&self.factory) > 0;
@@ -56,16 +70,35 @@ impl LocalOut {
                 tools.set_local_contact(wanted.then(|| local_spec(0)));
             }
         }
+        self.publish_ready(tools);
+    }
+
+    /// Publishes the newest finished problem, if any (after a step, and
+    /// between steps as soon as the stiffness worker has it: the run loop
+    /// looks while it waits), stamped with the `seq` and `t_ns` of the step
+    /// it was taken at (its state is that step's). A problem that cannot be
+    /// published is dropped and counted (the daemon falls back to
+    /// `local-normal` without it); it never stops the simulation.
+    pub fn publish_ready(&mut self, tools: &mut Tools) {
         let Some(lc) = tools.take_local_contact() else {
             return;
         };
         // Steps and messages advance together: the step it was taken at
         // is this many messages back.
-        let taken_seq = seq.saturating_sub(tools.steps().saturating_sub(lc.step));
+        let seq = self.last_seq;
+        let back = tools.steps().saturating_sub(lc.step);
+        let taken_seq = seq.saturating_sub(back);
+        // Older than the times kept (a stalled worker): the last step's,
+        // which the daemon's age limit then judges.
+        let taken_ns = if (back as usize) < STEP_TIMES && back <= seq {
+            self.step_times_ns[taken_seq as usize % STEP_TIMES]
+        } else {
+            self.step_times_ns[seq as usize % STEP_TIMES]
+        };
         let sent = match self.publisher.loan() {
             Ok(mut sample) => {
                 let msg: &mut LocalContactMsg = sample.payload_mut();
-                local_contact_msg(&lc, 0, taken_seq, now_ns, msg);
+                local_contact_msg(&lc, 0, taken_seq, taken_ns, msg);
                 sample.send().is_ok()
             }
             Err(_) => false,

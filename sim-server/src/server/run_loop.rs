@@ -24,6 +24,10 @@ use sim_server::step_time::StepHistogram;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// How often the wait between steps looks for a finished contact problem
+/// while one is wanted (ns).
+const LOCAL_POLL_NS: u64 = 500_000;
+
 /// What one step's tools did, for publishing and the status line.
 pub struct StepOutcome {
     flags: [u32; MAX_TOOLS],
@@ -267,7 +271,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         // After the force sample: the problem reaches the daemon later
         // than the force it explains, never before.
         self.local_out
-            .publish(&mut self.contacts, s.samples_published - 1, now);
+            .after_sample(&mut self.contacts, s.samples_published - 1, now);
         self.poses.check_publishers(&self.node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if s.steps.is_multiple_of(self.frame_every) {
@@ -334,8 +338,24 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             self.last_stall_told = now;
         }
         let (earliest, due) = (self.pacing.earliest(steps), self.pacing.due(steps));
-        if let WaitEnd::Pose = self.poses.wait(earliest, due, &self.stop) {
-            self.summary.steps_on_pose += 1;
+        loop {
+            // While a daemon takes contact problems: a look every
+            // LOCAL_POLL_NS for one the stiffness worker finished, so that
+            // it goes out at once rather than after the next step (a
+            // whole sample late at 30 Hz).
+            let until = if self.local_out.wanted() {
+                due.min(monotonic_ns() + LOCAL_POLL_NS)
+            } else {
+                due
+            };
+            match self.poses.wait(earliest, until, &self.stop) {
+                WaitEnd::Pose => {
+                    self.summary.steps_on_pose += 1;
+                    break;
+                }
+                WaitEnd::Due if until < due => self.local_out.publish_ready(&mut self.contacts),
+                WaitEnd::Due | WaitEnd::Stop => break,
+            }
         }
     }
 

@@ -33,9 +33,12 @@ use sim_server::wire::{local_contact_into, local_contact_msg};
 
 /// `local-problem` rendered while the simulation runs (its problems are
 /// too large to keep for the whole path): after step j, the ticks in the
-/// window in which sample j is the newest delivered one.
+/// window in which sample j is the newest delivered one. Twice: as the
+/// daemon renders it by default (with the tissue's inertia the problem
+/// carries) and with `--quasi-static` (`local-problem-quasi-static`).
 struct LocalRender<'a> {
     lp: LocalProblem,
+    quasi: LocalProblem,
     lc: LocalContact,
     msg: Box<LocalContactMsg>,
     fallback: Extrapolator,
@@ -43,16 +46,17 @@ struct LocalRender<'a> {
     haptic_s: f64,
     sim_s: f64,
     rendered: Vec<[f64; 3]>,
-    /// Wall time of each tick's render (ns), what the RT thread pays.
+    quasi_rendered: Vec<[f64; 3]>,
+    /// Wall time of each tick's render with inertia (ns), what the RT
+    /// thread pays.
     render_ns: Vec<u64>,
-    /// With `--local-inertia`: the same problems with the tissue's inertia.
-    inertia: Option<(LocalProblem, Vec<[f64; 3]>)>,
 }
 
 impl<'a> LocalRender<'a> {
     fn new(hand: &'a [[f64; 3]], haptic_s: f64, sim_s: f64, ticks: usize) -> Self {
         Self {
             lp: LocalProblem::new(),
+            quasi: LocalProblem::new(),
             lc: LocalContact::default(),
             msg: Box::default(),
             fallback: Extrapolator::new(Method::LocalProblem),
@@ -60,13 +64,14 @@ impl<'a> LocalRender<'a> {
             haptic_s,
             sim_s,
             rendered: Vec::with_capacity(ticks),
+            quasi_rendered: Vec::with_capacity(ticks),
             render_ns: Vec::with_capacity(ticks),
-            inertia: None,
         }
     }
 
     /// After step `j` (its sample `sample`): the problem through the wire
-    /// as the server sends it, then the ticks until the next delivery.
+    /// as the server sends it, set up as the daemon's set-up thread does,
+    /// then the ticks until the next delivery.
     fn after_step<B: sim_server::backend::Backend>(
         &mut self,
         j: usize,
@@ -82,52 +87,35 @@ impl<'a> LocalRender<'a> {
         };
         if local_contact_into(tools, sim, 0, &mut self.lc) {
             local_contact_msg(&self.lc, 0, j as u64, delivered.t_ns, &mut self.msg);
-            if self.lp.set_from_wire(&self.msg).is_err() {
-                self.lp.clear();
+            if self.quasi.set_from_wire(&self.msg).is_err() {
+                self.quasi.clear();
             }
-            if let Some((lp, _)) = &mut self.inertia {
-                // The same problem with the tissue's inertia; its first
-                // step spans the sample's age at the first tick it serves.
-                let first_tick =
-                    (((j + 1) as f64 * self.sim_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
-                let age_s = (first_tick - j as f64 * self.sim_s).max(self.haptic_s);
-                let ok = lp.set_from_wire(&self.msg).is_ok()
-                    && lp.is_ready()
-                    && tools.local_inertia(sim, &mut self.lc)
-                    && {
-                        let v: Vec<[f64; 3]> = self
-                            .lc
-                            .velocities_m_per_s
-                            .iter()
-                            .map(|v| v.to_array())
-                            .collect();
-                        lp.set_inertia(
-                            &self.lc.column_mass,
-                            self.lc.damping_per_s,
-                            &v,
-                            age_s,
-                            self.haptic_s,
-                        )
-                        .is_ok()
-                    };
-                if !ok {
-                    lp.clear();
-                }
+            // The first implicit step spans the sample's age at the first
+            // tick it serves: here the simulation takes a whole period to
+            // step (pose at j s, sample out at j + 1), so from the pose's
+            // time (the daemon, whose simulation publishes a step within
+            // its cost, counts from the sample's `t_ns`).
+            let first_tick =
+                (((j + 1) as f64 * self.sim_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
+            let age_s = (first_tick - j as f64 * self.sim_s).max(self.haptic_s);
+            let ok = self.lp.set_from_wire(&self.msg).is_ok()
+                && self
+                    .lp
+                    .set_inertia_from_wire(&self.msg, age_s, self.haptic_s)
+                    .is_ok();
+            if !ok {
+                self.lp.clear();
             }
         } else {
             self.lp.clear();
-            if let Some((lp, _)) = &mut self.inertia {
-                lp.clear();
-            }
+            self.quasi.clear();
         }
         // Ticks before the first delivery render nothing.
         while self.rendered.len() < self.hand.len()
             && (self.rendered.len() as f64) * self.haptic_s < (j + 1) as f64 * self.sim_s - 1e-12
         {
             self.rendered.push([0.0; 3]);
-            if let Some((_, out)) = &mut self.inertia {
-                out.push([0.0; 3]);
-            }
+            self.quasi_rendered.push([0.0; 3]);
         }
         self.fallback.push(&delivered);
         let end = (j + 2) as f64 * self.sim_s - 1e-12;
@@ -135,20 +123,19 @@ impl<'a> LocalRender<'a> {
             && (self.rendered.len() as f64) * self.haptic_s < end
         {
             let k = self.rendered.len();
-            let p = self.hand[k];
+            let (p, now) = (self.hand[k], ns(k as f64 * self.haptic_s));
             let t0 = std::time::Instant::now();
             let f = self
                 .lp
-                .render(&delivered, p, f64::INFINITY)
-                .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
+                .render(&delivered, now, p, f64::INFINITY)
+                .unwrap_or_else(|| self.fallback.force(now, p));
             self.render_ns.push(t0.elapsed().as_nanos() as u64);
             self.rendered.push(f);
-            if let Some((lp, out)) = &mut self.inertia {
-                let f = lp
-                    .render(&delivered, p, f64::INFINITY)
-                    .unwrap_or_else(|| self.fallback.force(ns(k as f64 * self.haptic_s), p));
-                out.push(f);
-            }
+            let f = self
+                .quasi
+                .render(&delivered, now, p, f64::INFINITY)
+                .unwrap_or_else(|| self.fallback.force(now, p));
+            self.quasi_rendered.push(f);
         }
     }
 }
@@ -192,13 +179,6 @@ pub struct Args {
     /// `--series`'s truth.
     #[arg(long)]
     pub samples: Option<PathBuf>,
-    /// Also render `local-problem` with the tissue's inertia (the problem's
-    /// vertices given the tissue's mass condensed on them, Guyan, and their
-    /// velocities; each tick an implicit Euler step): reported as
-    /// `local-problem-inertia`. Offline only: the daemon does not render it
-    /// yet.
-    #[arg(long)]
-    pub local_inertia: bool,
 }
 
 /// One method's figures.
@@ -465,9 +445,6 @@ pub fn run(args: &Args) -> Result<()> {
     b.finish();
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let mut local = LocalRender::new(&hand[..ticks], h, s, ticks);
-    if args.local_inertia {
-        local.inertia = Some((LocalProblem::new(), Vec::with_capacity(ticks)));
-    }
     let b = bar(sim_steps, "simulation");
     let (samples, _) = simulate(
         &src,
@@ -504,13 +481,14 @@ pub fn run(args: &Args) -> Result<()> {
         [q(0.5), q(0.99), q(1.0)]
     };
     let mut local_rendered = Some(std::mem::take(&mut local.rendered));
-    if let Some((_, mut rendered)) = local.inertia.take() {
+    {
+        let mut rendered = std::mem::take(&mut local.quasi_rendered);
         rendered.resize(ticks, [0.0; 3]);
         methods.insert(
-            "local-problem-inertia",
+            "local-problem-quasi-static",
             figures(&rendered, &truth_f, &hand, &phases, &snaps),
         );
-        rendered_all.push(("local-problem-inertia", rendered));
+        rendered_all.push(("local-problem-quasi-static", rendered));
     }
     for method in Method::ALL {
         if method == Method::LocalProblem

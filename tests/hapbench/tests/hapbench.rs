@@ -201,12 +201,26 @@ fn box_truth_holds(scene: &str) {
         // presses the samples cannot (a tenth of the constant hold's error
         // there; measured 0.02-0.04x), and takes energy from the hand.
         let phase = |m: &str, p: &str| num(&methods[m]["rms_error_by_phase_n"][p], p);
-        for p in ["onset", "press"] {
-            let (lp, c) = (phase("local-problem", p), phase("constant", p));
-            assert!(lp < 0.1 * c, "local-problem {p}: {lp} N against {c} N\n{v}");
+        for m in ["local-problem", "local-problem-quasi-static"] {
+            for p in ["onset", "press"] {
+                let (lp, c) = (phase(m, p), phase("constant", p));
+                assert!(lp < 0.1 * c, "{m} {p}: {lp} N against {c} N\n{v}");
+            }
+            let e = num(&methods[m]["net_energy_j"], "net_energy_j");
+            assert!(e <= 0.0, "{m} puts {e} J into the hand\n{v}");
         }
-        let e = num(&methods["local-problem"]["net_energy_j"], "net_energy_j");
-        assert!(e <= 0.0, "local-problem puts {e} J into the hand\n{v}");
+        // With the tissue's inertia it also follows the snaps the
+        // quasi-static problem takes at once (measured at 60 Hz: 0.65x the
+        // constant hold's RMS error, quasi-static 0.91x).
+        let rms = |m: &str| num(&methods[m]["rms_error_n"], m);
+        assert!(
+            rms("local-problem") < 0.8 * rms("constant")
+                && rms("local-problem") < 0.85 * rms("local-problem-quasi-static"),
+            "local-problem {} N, quasi-static {} N, constant {} N\n{v}",
+            rms("local-problem"),
+            rms("local-problem-quasi-static"),
+            rms("constant")
+        );
     }
     for (m, r) in methods {
         for key in ["rms_error_n", "max_error_n", "p99_jump_n", "net_energy_j"] {

@@ -39,6 +39,7 @@
 //! [`LocalProblem::solve`] allocates.
 
 mod dense;
+mod inertia;
 mod newton;
 
 use super::ForceSample;
@@ -57,6 +58,10 @@ pub use shared::protocol::{
 pub const CHANGE_OF_STIFFNESS: f64 = 1.5;
 /// A problem taken this long before the newest sample is not used (ns).
 pub const MAX_AGE_NS: u64 = 100_000_000;
+/// With inertia: the problem's force change is kept for this many ticks,
+/// to re-base it on a newer sample (256 ms at 1 kHz, beyond
+/// [`MAX_AGE_NS`]).
+const HISTORY: usize = 256;
 /// Newton iterations per solve at most, over its rounds: bounds the RT
 /// thread's time (an unfinished solve goes on from where it stopped at
 /// the next tick).
@@ -184,6 +189,12 @@ pub struct LocalProblem {
     /// The latest sample rendered from: its `seq`, and the points' force
     /// on the tool at its position less that at the problem's own.
     base: Option<(u64, V3)>,
+    /// With inertia: each tick's time (ns) and force change, oldest first
+    /// from `hist_next` on (a ring of [`HISTORY`]), `hist_len` filled.
+    hist_t_ns: [u64; HISTORY],
+    hist_change: [V3; HISTORY],
+    hist_len: usize,
+    hist_next: usize,
 }
 
 impl Clone for LocalProblem {
@@ -239,6 +250,10 @@ impl Clone for LocalProblem {
         self.seq = o.seq;
         self.t_ns = o.t_ns;
         self.base = o.base;
+        self.hist_t_ns = o.hist_t_ns;
+        self.hist_change = o.hist_change;
+        self.hist_len = o.hist_len;
+        self.hist_next = o.hist_next;
     }
 }
 
@@ -303,6 +318,10 @@ impl LocalProblem {
             seq: 0,
             t_ns: 0,
             base: None,
+            hist_t_ns: [0; HISTORY],
+            hist_change: [ZERO; HISTORY],
+            hist_len: 0,
+            hist_next: 0,
         }
     }
 
@@ -314,121 +333,6 @@ impl LocalProblem {
     /// Forgets the problem.
     pub fn clear(&mut self) {
         self.ready = false;
-    }
-
-    /// Gives the problem the tissue's inertia (after [`LocalProblem::set`]):
-    /// `column_mass` G = C_V^T M C_V (the lumped masses seen through W's
-    /// columns, row-major 3V square), mass-proportional `damping_per_s`,
-    /// the vertices' velocities at the sample. Each solve is then one
-    /// implicit Euler step of the condensed tissue (Guyan: mass S G S,
-    /// stiffness S), the first spanning `first_step_s` (the sample's age
-    /// when it is first rendered), each later one `tick_s`. The render then
-    /// needs the sample the problem was taken with (a later one: `None`).
-    pub fn set_inertia(
-        &mut self,
-        column_mass: &[f64],
-        damping_per_s: f64,
-        velocities_m_per_s: &[V3],
-        first_step_s: f64,
-        tick_s: f64,
-    ) -> Result<(), LocalProblemError> {
-        let n = self.delta.len();
-        if column_mass.len() != n * n || velocities_m_per_s.len() * 3 != n {
-            return Err(LocalProblemError::Malformed("inertia size"));
-        }
-        let valid = first_step_s > 0.0
-            && tick_s > 0.0
-            && damping_per_s >= 0.0
-            && column_mass.iter().all(|x| x.is_finite())
-            && velocities_m_per_s.iter().flatten().all(|x| x.is_finite());
-        if !valid {
-            return Err(LocalProblemError::Malformed("inertia value"));
-        }
-        // M = S G S (two dense products; on the set-up side). S G goes in
-        // the factor's scratch (n^2, overwritten by `stepped` below).
-        self.w_factor.clear();
-        self.w_factor.resize(n * n, 0.0);
-        for i in 0..n {
-            for k in 0..n {
-                let a = self.s[i * n + k];
-                for j in 0..n {
-                    self.w_factor[i * n + j] += a * column_mass[k * n + j];
-                }
-            }
-        }
-        self.m_red.clear();
-        self.m_red.resize(n * n, 0.0);
-        for i in 0..n {
-            for k in 0..n {
-                let a = self.w_factor[i * n + k];
-                for j in 0..n {
-                    self.m_red[i * n + j] += a * self.s[k * n + j];
-                }
-            }
-        }
-        self.damping_per_s = damping_per_s;
-        // The tick's S + A and inverse, then the first step's in s and w.
-        let static_s = std::mem::take(&mut self.s);
-        self.s_tick.clear();
-        self.s_tick.extend_from_slice(&static_s);
-        let mut s_tick = std::mem::take(&mut self.s_tick);
-        let mut w_tick = std::mem::take(&mut self.w_tick);
-        let ok = self.stepped(&mut s_tick, &mut w_tick, tick_s);
-        (self.s_tick, self.w_tick) = (s_tick, w_tick);
-        self.s = static_s;
-        let mut s = std::mem::take(&mut self.s);
-        let mut w = std::mem::take(&mut self.w);
-        let ok = ok && self.stepped(&mut s, &mut w, first_step_s);
-        (self.s, self.w) = (s, w);
-        if !ok {
-            self.ready = false;
-            self.m_red.clear();
-            return Err(LocalProblemError::NotDefinite);
-        }
-        self.step_s = first_step_s;
-        self.first_step = true;
-        self.tick_s = tick_s;
-        self.vel.clear();
-        self.vel.extend(velocities_m_per_s.iter().flatten());
-        Ok(())
-    }
-
-    /// After the first step (which spans the sample's age): a haptic tick
-    /// per step from now on.
-    fn end_first_step(&mut self) {
-        if self.first_step {
-            self.first_step = false;
-            self.step_s = self.tick_s;
-            std::mem::swap(&mut self.s, &mut self.s_tick);
-            std::mem::swap(&mut self.w, &mut self.w_tick);
-        }
-    }
-
-    /// `s` (S on entry) becomes S + (1/h^2 + c/h) M for a step `h_s`, `w`
-    /// its inverse; false if not positive definite.
-    fn stepped(&mut self, s: &mut [f64], w: &mut Vec<f64>, h_s: f64) -> bool {
-        let n = self.delta.len();
-        let a = 1.0 / (h_s * h_s) + self.damping_per_s / h_s;
-        for (x, m) in s.iter_mut().zip(&self.m_red) {
-            *x += a * m;
-        }
-        self.w_factor.clear();
-        self.w_factor.extend_from_slice(s);
-        if !cholesky(&mut self.w_factor, n) {
-            return false;
-        }
-        w.clear();
-        w.resize(n * n, 0.0);
-        for c in 0..n {
-            self.step.clear();
-            self.step.resize(n, 0.0);
-            self.step[c] = 1.0;
-            cholesky_solve(&self.w_factor, &mut self.step, n);
-            for r in 0..n {
-                w[r * n + c] = self.step[r];
-            }
-        }
-        true
     }
 
     /// The force message `seq` of the step the problem was taken at.
@@ -463,19 +367,25 @@ impl LocalProblem {
         Ok(())
     }
 
-    /// The force to render (N) with the tool at `tool_m`, `latest` being
-    /// the newest force sample (taken at the problem's step or after it):
-    /// the sample's force plus the change of the points' force on the tool
-    /// from the sample's position to `tool_m`; zero when no point touches
-    /// the tool there. The change is capped at `max_stiffness_n_per_m`
-    /// times the tool's distance from the sample's position (the secant
-    /// stiffness a device renders stably; infinite: no cap), and in
-    /// contact at [`CHANGE_OF_STIFFNESS`] times the sample's contact
-    /// stiffness, direction kept. `None` without a problem or when a solve fails (the caller
-    /// falls back to another method).
+    /// The force to render (N) at `now_ns` with the tool at `tool_m`,
+    /// `latest` being the newest force sample (taken at the problem's step
+    /// or after it): the sample's force plus the change of the points'
+    /// force on the tool from the sample to `tool_m`; zero when no point
+    /// touches the tool there. Quasi-static, the change is from the
+    /// sample's position; with inertia ([`LocalProblem::set_inertia`]) each
+    /// call is a time step of the problem from its own step on, and the
+    /// change is from where the problem was at the sample's `t_ns` (its
+    /// ticks' history, interpolated). The change is capped at
+    /// `max_stiffness_n_per_m` times the tool's distance from the sample's
+    /// position (the secant stiffness a device renders stably; infinite:
+    /// no cap), and in contact at [`CHANGE_OF_STIFFNESS`] times the
+    /// sample's contact stiffness, direction kept. `None` without a
+    /// problem or when a solve fails (the caller falls back to another
+    /// method).
     pub fn render(
         &mut self,
         latest: &ForceSample,
+        now_ns: u64,
         tool_m: V3,
         max_stiffness_n_per_m: f64,
     ) -> Option<V3> {
@@ -485,26 +395,44 @@ impl LocalProblem {
         if !self.ready
             || latest.seq < self.seq
             || latest.t_ns.saturating_sub(self.t_ns) > MAX_AGE_NS
-            || (!self.m_red.is_empty() && latest.seq != self.seq)
         {
             return None;
         }
         // One budget for the whole tick.
         self.budget = RENDER_ITERATIONS;
-        let base = match self.base {
-            Some((seq, base)) if seq == latest.seq => base,
-            _ => {
-                // Once per sample: where the problem puts the sample.
-                let base = if latest.seq == self.seq {
-                    ZERO
-                } else {
-                    self.solve_within_budget(latest.position_m)?.0
-                };
-                self.base = Some((latest.seq, base));
-                base
-            }
+        let (change, touching, base) = if self.m_red.is_empty() {
+            let base = match self.base {
+                Some((seq, base)) if seq == latest.seq => base,
+                _ => {
+                    // Once per sample: where the problem puts the sample.
+                    let base = if latest.seq == self.seq {
+                        ZERO
+                    } else {
+                        self.solve_within_budget(latest.position_m)?.0
+                    };
+                    self.base = Some((latest.seq, base));
+                    base
+                }
+            };
+            let (change, touching) = self.solve_within_budget(tool_m)?;
+            (change, touching, base)
+        } else {
+            let (change, touching) = self.solve_within_budget(tool_m)?;
+            self.remember(now_ns, change);
+            let base = match self.base {
+                Some((seq, base)) if seq == latest.seq => base,
+                _ => {
+                    let base = if latest.seq == self.seq {
+                        ZERO
+                    } else {
+                        self.change_at(latest.t_ns)?
+                    };
+                    self.base = Some((latest.seq, base));
+                    base
+                }
+            };
+            (change, touching, base)
         };
-        let (change, touching) = self.solve_within_budget(tool_m)?;
         if !touching {
             return Some(ZERO);
         }
@@ -580,6 +508,8 @@ impl LocalProblem {
             .fold(f64::INFINITY, f64::min)
             * TRUST_OF_RADIUS;
         self.base = None;
+        self.hist_len = 0;
+        self.hist_next = 0;
         self.seq = 0;
         self.t_ns = 0;
         self.x.clear();

@@ -204,28 +204,39 @@ fn render_uses_a_problem_only_with_the_samples_it_describes() {
     let f = [0.0, 0.0, 0.5];
     // The sample it was taken with: the sample's force at its pose.
     let own = sample_at(10, p.t_ns, centre, f);
-    let at = p.render(&own, centre, f64::INFINITY).unwrap();
+    let at = p.render(&own, own.t_ns, centre, f64::INFINITY).unwrap();
     assert!(norm(sub(at, f)) < 1e-12, "{at:?}");
     // A later sample 1 mm deeper: its force, plus the change from there.
     let deeper = [centre[0], centre[1], centre[2] - 0.001];
     let later = sample_at(12, p.t_ns + 2_000_000, deeper, [0.0, 0.0, 0.7]);
-    let same = p.render(&later, deeper, f64::INFINITY).unwrap();
+    let same = p.render(&later, later.t_ns, deeper, f64::INFINITY).unwrap();
     assert!(norm(sub(same, later.force_n)) < 1e-9, "{same:?}");
     // An older problem than the sample (a restarted simulation), or one
     // from long before it: none.
     assert!(
-        p.render(&sample_at(9, p.t_ns, centre, f), centre, f64::INFINITY)
-            .is_none()
+        p.render(
+            &sample_at(9, p.t_ns, centre, f),
+            p.t_ns,
+            centre,
+            f64::INFINITY
+        )
+        .is_none()
     );
     let stale = sample_at(500, p.t_ns + MAX_AGE_NS + 1, centre, f);
-    assert!(p.render(&stale, centre, f64::INFINITY).is_none());
+    assert!(
+        p.render(&stale, stale.t_ns, centre, f64::INFINITY)
+            .is_none()
+    );
     // Withdrawn: zero, not the sample's force.
     let up = [centre[0], centre[1], centre[2] + 0.01];
-    assert_eq!(p.render(&own, up, f64::INFINITY).unwrap(), [0.0; 3]);
+    assert_eq!(
+        p.render(&own, own.t_ns, up, f64::INFINITY).unwrap(),
+        [0.0; 3]
+    );
     // Capped: 1 mm deeper changes the force by at most cap x 1 mm, along
     // the uncapped change.
-    let free = p.render(&own, deeper, f64::INFINITY).unwrap();
-    let capped = p.render(&own, deeper, 50.0).unwrap();
+    let free = p.render(&own, own.t_ns, deeper, f64::INFINITY).unwrap();
+    let capped = p.render(&own, own.t_ns, deeper, 50.0).unwrap();
     let (df, dc) = (sub(free, f), sub(capped, f));
     assert!(norm(df) > 0.05 + 1e-6, "{df:?}");
     assert!((norm(dc) - 0.05).abs() < 1e-12, "{dc:?}");
@@ -250,18 +261,27 @@ fn in_contact_the_change_is_held_to_the_contacts_own_stiffness() {
     let mut own = sample_at(0, 0, centre, [0.0, 0.0, 0.5]);
     // No stiffness published: the problem's own change (stiffer than
     // 15 N/m over this millimetre).
-    let free = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
+    let free = sub(
+        p.render(&own, own.t_ns, deeper, f64::INFINITY).unwrap(),
+        own.force_n,
+    );
     assert!(norm(free) > 0.02, "{free:?}");
     // A contact stiffness of 10 N/m: at most 1.5 x 10 N/m x 1 mm.
     own.stiffness_n_per_m = [[10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]];
-    let held = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
+    let held = sub(
+        p.render(&own, own.t_ns, deeper, f64::INFINITY).unwrap(),
+        own.force_n,
+    );
     assert!(
         (norm(held) - CHANGE_OF_STIFFNESS * 10.0 * 0.001).abs() < 1e-12,
         "{held:?}"
     );
     // Not in contact (an onset): not held.
     own.in_contact = false;
-    let onset = sub(p.render(&own, deeper, f64::INFINITY).unwrap(), own.force_n);
+    let onset = sub(
+        p.render(&own, own.t_ns, deeper, f64::INFINITY).unwrap(),
+        own.force_n,
+    );
     assert!((norm(onset) - norm(free)).abs() < 1e-12);
 }
 
@@ -367,13 +387,49 @@ fn inertia_stiffens_a_sudden_press_then_settles_to_the_static_force() {
 }
 
 #[test]
-fn inertia_needs_its_own_sample_and_checks_its_input() {
-    let (mut p, centre) = with_inertia(0.01, 10.0, 0.03);
+fn inertia_re_bases_a_newer_sample_on_the_problems_own_history() {
+    // Pressed 0.2 mm deeper and held: the problem's force changes over its
+    // ticks (the tissue gives way). A newer sample at 2.5 ms whose force is where the problem was
+    // then continues the same rendering; one 0.1 N stronger renders 0.1 N
+    // more; one older than the ticks kept says nothing.
+    let (mut p, centre) = with_inertia(0.01, 10.0, 1e-3);
+    let down = [centre[0], centre[1], centre[2] - 2e-4];
+    let f = [0.0, 0.0, 0.5];
     p.seq = 4;
-    let own = sample_at(4, 0, centre, [0.0, 0.0, 0.5]);
-    assert!(p.render(&own, centre, f64::INFINITY).is_some());
-    let later = sample_at(5, 1_000_000, centre, [0.0, 0.0, 0.5]);
-    assert!(p.render(&later, centre, f64::INFINITY).is_none());
+    let ms = 1_000_000;
+    let own = sample_at(4, 0, centre, f);
+    let mut twin = p.clone();
+    let mut rendered = Vec::new();
+    for k in 1..=3 {
+        rendered.push(p.render(&own, k * ms, down, f64::INFINITY).unwrap());
+        twin.render(&own, k * ms, down, f64::INFINITY).unwrap();
+    }
+    assert!(
+        (rendered[2][2] - rendered[0][2]).abs() > 1e-3,
+        "{rendered:?}"
+    );
+    let mid = add(scale(rendered[1], 0.5), scale(rendered[2], 0.5));
+    let newer = sample_at(5, 5 * ms / 2, centre, mid);
+    let going_on = p.render(&own, 4 * ms, down, f64::INFINITY).unwrap();
+    let re_based = twin.render(&newer, 4 * ms, down, f64::INFINITY).unwrap();
+    assert!(
+        norm(sub(going_on, re_based)) < 1e-9,
+        "{going_on:?} {re_based:?}"
+    );
+    let stronger = sample_at(6, 5 * ms / 2, centre, add(mid, [0.0, 0.0, 0.1]));
+    let more = twin.render(&stronger, 5 * ms, down, f64::INFINITY).unwrap();
+    let same = p.render(&own, 5 * ms, down, f64::INFINITY).unwrap();
+    assert!(norm(sub(more, add(same, [0.0, 0.0, 0.1]))) < 1e-9);
+    // Before every tick kept (the ring is full): nothing.
+    for k in 6..6 + super::HISTORY as u64 {
+        p.render(&own, k * ms, down, f64::INFINITY).unwrap();
+    }
+    let ancient = sample_at(7, 3 * ms, centre, f);
+    assert!(p.render(&ancient, 300 * ms, down, f64::INFINITY).is_none());
+}
+
+#[test]
+fn inertia_checks_its_input() {
     let (mut q, _) = press(0.001);
     assert!(
         q.set_inertia(&[0.0; 80], 0.0, &[[0.0; 3]; 3], 0.03, 1e-3)

@@ -24,6 +24,8 @@
 
 use super::field::{ContactField, PartSweep};
 use super::geometry::Segment;
+use crate::backend::Backend;
+use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 
 /// One contact point of a [`LocalContact`].
@@ -66,14 +68,15 @@ pub struct LocalContact {
     /// W = (K^-1)_VV (m/N), row-major, 3|V| x 3|V|, in the order of
     /// `vertices` (x, y, z of each).
     pub compliance_m_per_n: Vec<Real>,
-    /// With [`super::Tools::local_inertia`]: G = C_V^T M C_V, the lumped
+    /// With [`super::LocalSpec::inertia`]: G = C_V^T M C_V, the lumped
     /// masses seen through the compliance's columns (row-major, the size of
     /// `compliance_m_per_n`; the tissue's mass condensed on V, Guyan, is
     /// W^-1 G W^-1); empty otherwise.
     pub column_mass: Vec<Real>,
-    /// With [`super::Tools::local_inertia`]: the vertices' velocities (m/s).
+    /// With [`super::LocalSpec::inertia`]: the vertices' velocities at the
+    /// end of the step (m/s), taken with their positions.
     pub velocities_m_per_s: Vec<Vec3>,
-    /// With [`super::Tools::local_inertia`]: the mass-proportional damping
+    /// With [`super::LocalSpec::inertia`]: the mass-proportional damping
     /// (1/s).
     pub damping_per_s: Real,
 }
@@ -89,6 +92,24 @@ impl LocalContact {
         self.column_mass.clear();
         self.velocities_m_per_s.clear();
         self.damping_per_s = 0.0;
+    }
+
+    /// Takes the vertices' velocities and the tissue's mass-proportional
+    /// damping from `sim` (with the positions: the same instant).
+    pub(super) fn take_motion<B: Backend + ?Sized>(&mut self, sim: &B) {
+        self.velocities_m_per_s.clear();
+        self.velocities_m_per_s
+            .extend(self.vertices.iter().map(|&v| sim.velocity(VertexId(v))));
+        // As the tensor-mass integrator applies it: a scene's damping per
+        // second, the same ratio at every vertex (the first one's taken).
+        self.damping_per_s = self.vertices.first().map_or(0.0, |&v| {
+            let m = sim.model().masses_kg()[v as usize];
+            if m > 0.0 {
+                sim.model().damping_kg_s()[v as usize] / m
+            } else {
+                0.0
+            }
+        });
     }
 
     /// Fills the points, parts and vertices from `field`, a field holding

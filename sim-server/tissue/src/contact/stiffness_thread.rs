@@ -167,7 +167,7 @@ impl ContactStiffness {
         if self.mode == StiffnessSolves::Worker && self.link.is_none() {
             self.start(model);
         }
-        let Some(link) = &mut self.link else {
+        if self.link.is_none() {
             // Inline (or no worker could be started).
             if let Some(solver) = &mut self.solver {
                 self.snap.fill(field);
@@ -176,14 +176,7 @@ impl ContactStiffness {
                 }
                 if let Some(make) = local {
                     let mut lc = self.local_spare.take().unwrap_or_default();
-                    let solved = make(&mut lc) && {
-                        let LocalContact {
-                            vertices,
-                            compliance_m_per_n,
-                            ..
-                        } = &mut *lc;
-                        solver.compliance(model, vertices, compliance_m_per_n)
-                    };
+                    let solved = make(&mut lc) && solver.solve_local(model, &mut lc);
                     if solved {
                         keep_local(&mut self.local_ready, &mut self.local_spare, lc);
                     } else {
@@ -192,34 +185,19 @@ impl ContactStiffness {
                 }
             }
             return;
-        };
-        match link.done.try_recv() {
-            Ok(done) => {
-                self.snap = done.snap;
-                self.alive = done.alive;
-                for (k, d) in self.newest.iter_mut().zip(done.stiffness) {
-                    *k = d;
-                }
-                link.busy = false;
-                if let Some(lc) = done.local {
-                    if lc.compliance_m_per_n.is_empty() {
-                        self.local_spare = Some(lc);
-                    } else {
-                        keep_local(&mut self.local_ready, &mut self.local_spare, lc);
-                    }
-                }
-            }
-            Err(TryRecvError::Empty) => {}
-            Err(TryRecvError::Disconnected) => {
-                // The worker died (a panic in the solver): keep the last
-                // stiffness rather than take the step down; later ones
-                // in the step.
-                self.link = None;
-                self.mode = StiffnessSolves::Inline;
-                self.solver = Some(Solver::new(model, &self.held));
-                return;
-            }
         }
+        if self.receive().is_err() {
+            // The worker died (a panic in the solver): keep the last
+            // stiffness rather than take the step down; later ones in the
+            // step.
+            self.link = None;
+            self.mode = StiffnessSolves::Inline;
+            self.solver = Some(Solver::new(model, &self.held));
+            return;
+        }
+        let Some(link) = &mut self.link else {
+            return;
+        };
         link.waited_s += dt_s;
         let touching = field.penetrations_m().iter().any(|d| *d > 0.0);
         if !touching {
@@ -259,36 +237,52 @@ impl ContactStiffness {
         }
     }
 
-    /// The tissue's compliance at `verts` into `out` (see
-    /// [`super::local::LocalContact::compliance_m_per_n`]); false when
-    /// there is none to give: the solver runs on the worker thread, or the
-    /// mesh is too large for a factor.
-    pub fn compliance(&mut self, model: &ElasticModel, verts: &[u32], out: &mut Vec<Real>) -> bool {
+    /// Adds the tissue's compliance at the problem's vertices to `lc`
+    /// (and, with its velocities taken, the column mass: see
+    /// [`LocalContact`]) now; false when there is none to give: the solver
+    /// runs on the worker thread, or the mesh is too large for a factor.
+    pub fn solve_local(&mut self, model: &ElasticModel, lc: &mut LocalContact) -> bool {
         match (&self.link, &mut self.solver) {
-            (None, Some(solver)) => solver.compliance(model, verts, out),
+            (None, Some(solver)) => solver.solve_local(model, lc),
             _ => false,
         }
     }
 
-    /// The tissue's mass seen through the static response at `verts`
-    /// (see [`super::local::LocalContact::column_mass`]) into `out`; false
-    /// as [`ContactStiffness::compliance`].
-    pub fn column_mass(
-        &mut self,
-        model: &ElasticModel,
-        verts: &[u32],
-        out: &mut Vec<Real>,
-    ) -> bool {
-        match (&self.link, &mut self.solver) {
-            (None, Some(solver)) => solver.column_mass(model, verts, out),
-            _ => false,
+    /// Takes in the worker's finished job, if any; an error when the
+    /// worker died.
+    fn receive(&mut self) -> Result<(), TryRecvError> {
+        let Some(link) = &mut self.link else {
+            return Ok(());
+        };
+        match link.done.try_recv() {
+            Ok(done) => {
+                self.snap = done.snap;
+                self.alive = done.alive;
+                for (k, d) in self.newest.iter_mut().zip(done.stiffness) {
+                    *k = d;
+                }
+                link.busy = false;
+                if let Some(lc) = done.local {
+                    if lc.compliance_m_per_n.is_empty() {
+                        self.local_spare = Some(lc);
+                    } else {
+                        keep_local(&mut self.local_ready, &mut self.local_spare, lc);
+                    }
+                }
+                Ok(())
+            }
+            Err(TryRecvError::Empty) => Ok(()),
+            Err(e) => Err(e),
         }
     }
 
     /// The newest contact problem with its compliance (see
     /// [`ContactStiffness::update`]), once; give its buffers back with
     /// [`ContactStiffness::recycle_local`].
+    /// Between steps too: a job the worker finished since the step is
+    /// taken in (a dead worker is seen by the next step).
     pub fn take_local(&mut self) -> Option<Box<LocalContact>> {
+        let _ = self.receive();
         self.local_ready.take()
     }
 
@@ -325,15 +319,10 @@ impl ContactStiffness {
                         results.push(solver.stiffness(&own, &job.snap, t));
                     }
                     let mut local = job.local;
-                    if let Some(lc) = local.as_deref_mut() {
-                        let LocalContact {
-                            vertices,
-                            compliance_m_per_n,
-                            ..
-                        } = lc;
-                        if !solver.compliance(&own, vertices, compliance_m_per_n) {
-                            compliance_m_per_n.clear();
-                        }
+                    if let Some(lc) = local.as_deref_mut()
+                        && !solver.solve_local(&own, lc)
+                    {
+                        lc.compliance_m_per_n.clear();
                     }
                     let reply = Done {
                         snap: job.snap,

@@ -106,6 +106,10 @@ pub struct LocalSpec {
     pub max_vertices: usize,
     /// At most this many points.
     pub max_points: usize,
+    /// With the tissue's inertia at the vertices (see
+    /// [`LocalContact::column_mass`]): the velocities and damping taken
+    /// with the points, the column mass solved with the compliance.
+    pub inertia: bool,
 }
 
 /// The contact problems' request and scratch, kept across calls.
@@ -176,6 +180,9 @@ impl LocalSampling<'_> {
         );
         out.tool_position_m = pose.end_m;
         out.step = self.step;
+        if spec.inertia {
+            out.take_motion(sim);
+        }
         !out.points.is_empty()
     }
 }
@@ -576,38 +583,6 @@ impl Tools {
             .and_then(ContactStiffness::take_local)
     }
 
-    /// Adds the tissue's inertia at a contact problem's vertices to `lc`
-    /// (now, in the step: offline use): [`LocalContact::column_mass`], the
-    /// vertices' velocities and the mass-proportional damping. False when
-    /// it cannot (no exact compliance here, see [`Tools::local_contact`]).
-    pub fn local_inertia<B: Backend + ?Sized>(&mut self, sim: &B, lc: &mut LocalContact) -> bool {
-        let Some(k) = &mut self.stiffness else {
-            return false;
-        };
-        let LocalContact {
-            vertices,
-            column_mass,
-            velocities_m_per_s,
-            damping_per_s,
-            ..
-        } = lc;
-        if vertices.is_empty() || !k.column_mass(sim.model(), vertices, column_mass) {
-            return false;
-        }
-        velocities_m_per_s.clear();
-        velocities_m_per_s.extend(vertices.iter().map(|&v| sim.velocity(VertexId(v))));
-        // Mass-proportional damping, as the tensor-mass integrator applies
-        // it (a scene's damping per second; the first vertex's ratio).
-        let v = vertices[0] as usize;
-        let m = sim.model().masses_kg()[v];
-        *damping_per_s = if m > 0.0 {
-            sim.model().damping_kg_s()[v] / m
-        } else {
-            0.0
-        };
-        true
-    }
-
     /// Steps taken (what [`LocalContact::step`] counts).
     pub fn steps(&self) -> u64 {
         self.steps
@@ -645,9 +620,7 @@ impl Tools {
             tools: &self.tools,
             step: self.steps,
         };
-        if !ctx.sample(sim, spec, out)
-            || !stiffness.compliance(sim.model(), &out.vertices, &mut out.compliance_m_per_n)
-        {
+        if !ctx.sample(sim, spec, out) || !stiffness.solve_local(sim.model(), out) {
             out.clear();
             return false;
         }

@@ -1,0 +1,201 @@
+//! The tissue's inertia in a [`LocalProblem`]: the lumped masses the
+//! simulation sends condensed on the problem's vertices (Guyan's
+//! reduction, M = S G S with G = C^T M C and S = W^-1), each solve an
+//! implicit Euler step of the condensed tissue from the vertices'
+//! velocities at the sample (the first spanning the sample's age), and
+//! the history of the problem's force that re-bases it on a newer sample.
+
+use super::dense::{cholesky, cholesky_solve};
+use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError};
+use crate::math::{V3, ZERO, add, scale, sub};
+
+impl LocalProblem {
+    /// [`LocalProblem::set_inertia`] from the message the problem was set
+    /// from ([`LocalProblem::set_from_wire`]); `Ok(false)` when it carries
+    /// none (the problem stays quasi-static).
+    pub fn set_inertia_from_wire(
+        &mut self,
+        msg: &LocalContactMsg,
+        first_step_s: f64,
+        tick_s: f64,
+    ) -> Result<bool, LocalProblemError> {
+        if msg.inertia == 0 || !self.is_ready() {
+            return Ok(false);
+        }
+        let nv = (msg.vertex_count as usize).min(msg.velocities_m_per_s.len());
+        self.set_inertia(
+            &msg.column_mass[..9 * nv * nv],
+            msg.damping_per_s,
+            &msg.velocities_m_per_s[..nv],
+            first_step_s,
+            tick_s,
+        )?;
+        Ok(true)
+    }
+
+    /// Whether the problem carries the tissue's inertia.
+    pub fn has_inertia(&self) -> bool {
+        self.ready && !self.m_red.is_empty()
+    }
+
+    /// Gives the problem the tissue's inertia (after [`LocalProblem::set`]):
+    /// `column_mass` G = C_V^T M C_V (the lumped masses seen through W's
+    /// columns, row-major 3V square), mass-proportional `damping_per_s`,
+    /// the vertices' velocities at the sample. Each solve is then one
+    /// implicit Euler step of the condensed tissue (Guyan: mass S G S,
+    /// stiffness S), the first spanning `first_step_s` (the sample's age
+    /// when it is first rendered), each later one `tick_s`. The render then
+    /// needs the sample the problem was taken with (a later one: `None`).
+    pub fn set_inertia(
+        &mut self,
+        column_mass: &[f64],
+        damping_per_s: f64,
+        velocities_m_per_s: &[V3],
+        first_step_s: f64,
+        tick_s: f64,
+    ) -> Result<(), LocalProblemError> {
+        let n = self.delta.len();
+        if column_mass.len() != n * n || velocities_m_per_s.len() * 3 != n {
+            return Err(LocalProblemError::Malformed("inertia size"));
+        }
+        let valid = first_step_s > 0.0
+            && tick_s > 0.0
+            && damping_per_s >= 0.0
+            && column_mass.iter().all(|x| x.is_finite())
+            && velocities_m_per_s.iter().flatten().all(|x| x.is_finite());
+        if !valid {
+            return Err(LocalProblemError::Malformed("inertia value"));
+        }
+        // M = S G S (two dense products; on the set-up side). S G goes in
+        // the factor's scratch (n^2, overwritten by `stepped` below).
+        self.w_factor.clear();
+        self.w_factor.resize(n * n, 0.0);
+        for i in 0..n {
+            for k in 0..n {
+                let a = self.s[i * n + k];
+                for j in 0..n {
+                    self.w_factor[i * n + j] += a * column_mass[k * n + j];
+                }
+            }
+        }
+        self.m_red.clear();
+        self.m_red.resize(n * n, 0.0);
+        for i in 0..n {
+            for k in 0..n {
+                let a = self.w_factor[i * n + k];
+                for j in 0..n {
+                    self.m_red[i * n + j] += a * self.s[k * n + j];
+                }
+            }
+        }
+        self.damping_per_s = damping_per_s;
+        // The tick's S + A and inverse, then the first step's in s and w.
+        let static_s = std::mem::take(&mut self.s);
+        self.s_tick.clear();
+        self.s_tick.extend_from_slice(&static_s);
+        let mut s_tick = std::mem::take(&mut self.s_tick);
+        let mut w_tick = std::mem::take(&mut self.w_tick);
+        let ok = self.stepped(&mut s_tick, &mut w_tick, tick_s);
+        (self.s_tick, self.w_tick) = (s_tick, w_tick);
+        self.s = static_s;
+        let mut s = std::mem::take(&mut self.s);
+        let mut w = std::mem::take(&mut self.w);
+        let ok = ok && self.stepped(&mut s, &mut w, first_step_s);
+        (self.s, self.w) = (s, w);
+        if !ok {
+            self.ready = false;
+            self.m_red.clear();
+            return Err(LocalProblemError::NotDefinite);
+        }
+        self.step_s = first_step_s;
+        self.first_step = true;
+        self.tick_s = tick_s;
+        self.vel.clear();
+        self.vel.extend(velocities_m_per_s.iter().flatten());
+        Ok(())
+    }
+
+    /// After the first step (which spans the sample's age): a haptic tick
+    /// per step from now on.
+    pub(super) fn end_first_step(&mut self) {
+        if self.first_step {
+            self.first_step = false;
+            self.step_s = self.tick_s;
+            std::mem::swap(&mut self.s, &mut self.s_tick);
+            std::mem::swap(&mut self.w, &mut self.w_tick);
+        }
+    }
+
+    /// `s` (S on entry) becomes S + (1/h^2 + c/h) M for a step `h_s`, `w`
+    /// its inverse; false if not positive definite.
+    fn stepped(&mut self, s: &mut [f64], w: &mut Vec<f64>, h_s: f64) -> bool {
+        let n = self.delta.len();
+        let a = 1.0 / (h_s * h_s) + self.damping_per_s / h_s;
+        for (x, m) in s.iter_mut().zip(&self.m_red) {
+            *x += a * m;
+        }
+        self.w_factor.clear();
+        self.w_factor.extend_from_slice(s);
+        if !cholesky(&mut self.w_factor, n) {
+            return false;
+        }
+        w.clear();
+        w.resize(n * n, 0.0);
+        for c in 0..n {
+            self.step.clear();
+            self.step.resize(n, 0.0);
+            self.step[c] = 1.0;
+            cholesky_solve(&self.w_factor, &mut self.step, n);
+            for r in 0..n {
+                w[r * n + c] = self.step[r];
+            }
+        }
+        true
+    }
+
+    /// Keeps a tick's force change (with inertia).
+    pub(super) fn remember(&mut self, now_ns: u64, change: V3) {
+        self.hist_t_ns[self.hist_next] = now_ns;
+        self.hist_change[self.hist_next] = change;
+        self.hist_next = (self.hist_next + 1) % HISTORY;
+        self.hist_len = (self.hist_len + 1).min(HISTORY);
+    }
+
+    /// The problem's force change at `t_ns` (with inertia): zero at its own
+    /// step's time, each tick's after, linear in between, the newest past
+    /// it; `None` when the ticks kept no longer reach back to it.
+    pub(super) fn change_at(&self, t_ns: u64) -> Option<V3> {
+        let mut after: Option<(u64, V3)> = None;
+        for k in 0..self.hist_len {
+            let i = (self.hist_next + HISTORY - 1 - k) % HISTORY;
+            let (t, c) = (self.hist_t_ns[i], self.hist_change[i]);
+            if t <= t_ns {
+                return Some(match after {
+                    None => c,
+                    Some((ta, ca)) => lerp(t, c, ta, ca, t_ns),
+                });
+            }
+            after = Some((t, c));
+        }
+        // Before every tick kept: from the problem's own step (change
+        // zero), if the ring still holds its first tick.
+        if self.hist_len == HISTORY {
+            return None;
+        }
+        Some(match after {
+            None => ZERO,
+            Some((ta, ca)) if t_ns > self.t_ns => lerp(self.t_ns, ZERO, ta, ca, t_ns),
+            Some(_) => ZERO,
+        })
+    }
+}
+
+/// The value at `t` on the line through (`t0`, `c0`) and (`t1`, `c1`),
+/// `t0 <= t <= t1`.
+fn lerp(t0: u64, c0: V3, t1: u64, c1: V3, t: u64) -> V3 {
+    if t1 <= t0 {
+        return c1;
+    }
+    let w = (t - t0) as f64 / (t1 - t0) as f64;
+    add(c0, scale(sub(c1, c0), w))
+}
