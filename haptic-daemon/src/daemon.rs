@@ -35,10 +35,12 @@ use crate::extrapolate::{Extrapolator, ForceSample, Method};
 use crate::live::{Live, LiveConfig, LiveError, LiveGuard};
 use crate::math::is_finite;
 use crate::plausible::{Plausible, PlausibleConfig, PlausibleError, Verdict};
+use crate::rt::LatenessHistogram;
 use crate::safety::{PassivityConfig, PassivityError, Safety, SafetyConfig, SafetyState};
 use crate::slots::{Flags, PoseSlot};
 use crossbeam_queue::ArrayQueue;
 use iceoryx2::port::subscriber::Subscriber;
+use shared::monotonic_ns;
 use shared::protocol::{ForceMsg, PROTOCOL_VERSION, TelemetryTick};
 use shared::services::Ipc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -192,6 +194,9 @@ pub struct RtLoop<D: Device> {
     tick: u64,
     /// `local-problem`: the newest contact problem, set up off this thread.
     local: Option<triple_buffer::Output<LocalProblem>>,
+    /// `local-problem`: the time each tick's render took (1 us buckets,
+    /// allocated with the loop).
+    render_times: Option<LatenessHistogram>,
 }
 
 impl<D: Device> RtLoop<D> {
@@ -241,6 +246,7 @@ impl<D: Device> RtLoop<D> {
             last_force_n: [0.0; 3],
             tick: 0,
             local: None,
+            render_times: None,
         }
     }
 
@@ -249,7 +255,14 @@ impl<D: Device> RtLoop<D> {
     /// or while none fits the newest sample, it renders as `local-normal`.
     pub fn with_local_problems(mut self, output: triple_buffer::Output<LocalProblem>) -> Self {
         self.local = Some(output);
+        self.render_times = Some(LatenessHistogram::default());
         self
+    }
+
+    /// `local-problem`: how long each tick's render took, the update of the
+    /// triple buffer included (`None` for other methods).
+    pub fn render_times(&self) -> Option<&LatenessHistogram> {
+        self.render_times.as_ref()
     }
 
     /// The extrapolated force at `now_ns` for the current device position:
@@ -261,13 +274,19 @@ impl<D: Device> RtLoop<D> {
             && let (Some(out), Some(latest)) = (self.local.as_mut(), self.extrapolator.latest())
         {
             let latest = *latest;
+            let t0 = monotonic_ns();
             out.update();
-            if let Some(f) = out.output_buffer_mut().render(
+            let rendered = out.output_buffer_mut().render(
                 &latest,
                 now_ns,
                 position,
                 self.extrapolator.max_stiffness_n_per_m(),
-            ) && is_finite(f)
+            );
+            if let Some(h) = &mut self.render_times {
+                h.record(monotonic_ns().saturating_sub(t0) as i64);
+            }
+            if let Some(f) = rendered
+                && is_finite(f)
             {
                 return f;
             }

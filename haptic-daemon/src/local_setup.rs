@@ -5,9 +5,12 @@
 //! and inverts the two implicit-step matrices (the first step's, which
 //! spans the problem's age when the RT thread first renders it, and a
 //! tick's: [`LocalProblem::set_inertia_from_wire`]), then hands the problem
-//! to the RT thread through a triple buffer. Its own thread, at normal
-//! priority, so that neither the RT thread nor the I/O thread (which
-//! carries the poses to the simulation) waits for it.
+//! to the RT thread through a triple buffer. Its own thread, at the lowest
+//! normal priority, so that neither the RT thread nor the I/O thread
+//! (which carries the poses to the simulation) waits for it: a few
+//! milliseconds of dense algebra a problem, which at normal priority
+//! shared a core with an RT thread without SCHED_FIFO and made its ticks
+//! late (measured with `hapbench latency`, README).
 
 use crate::daemon::Shared;
 use crate::extrapolate::local_problem::LocalProblem;
@@ -49,6 +52,8 @@ pub fn run_local_setup(
     setup: LocalSetup,
     mut input: triple_buffer::Input<LocalProblem>,
 ) -> Result<(), ServiceError> {
+    // Best effort: without it the set-up only competes more.
+    let _ = crate::rt::lowest_priority();
     let node = services::node("haptic-daemon-local")?;
     let sub = services::subscriber_with_buffer(
         &services::local_contact_service(&node, &session)?,

@@ -11,7 +11,7 @@ use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoSpin, Stats, run_io};
 use haptic_daemon::local_setup::{LocalSetup, run_local_setup};
-use haptic_daemon::rt::{Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
+use haptic_daemon::rt::{LatenessHistogram, Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
 use record_cmd::{RecordArgs, record_main};
 use serde::Serialize;
@@ -75,10 +75,11 @@ struct RunArgs {
     /// Loop rate (Hz), 100 to 10000.
     #[arg(long, default_value_t = 1000.0)]
     rate: f64,
-    /// The force extrapolator (default local-normal: the lowest mean error
-    /// of the methods that stayed passive on every `hapbench extrapolation`
-    /// run in the README).
-    #[arg(long, value_enum, default_value_t = Method::LocalNormal)]
+    /// The force extrapolator (default local-problem: the lowest error on
+    /// every `hapbench extrapolation` run in the README, passive on all;
+    /// without contact problems from the simulation it renders as
+    /// local-normal, the next best).
+    #[arg(long, value_enum, default_value_t = Method::LocalProblem)]
     extrapolation: Method,
     /// `local-problem`: solve the contact problems quasi-statically, without
     /// the tissue's inertia the simulation sends with them.
@@ -133,6 +134,25 @@ struct Lateness {
     max: f64,
 }
 
+impl Lateness {
+    fn of(h: &LatenessHistogram) -> Self {
+        Self {
+            p50: h.quantile_us(0.5),
+            p99: h.quantile_us(0.99),
+            p999: h.quantile_us(0.999),
+            max: h.max_us(),
+        }
+    }
+}
+
+/// What the RT thread reports at its end.
+struct RtEnd {
+    ticks: u64,
+    overruns: u64,
+    /// `local-problem`: each tick's render time.
+    render_us: Option<Lateness>,
+}
+
 #[derive(Serialize)]
 struct Summary {
     ticks: u64,
@@ -152,6 +172,8 @@ struct Summary {
     local_problems: u64,
     local_problems_inertial: u64,
     local_problems_refused: u64,
+    /// `local-problem`: each tick's render on the RT thread (us).
+    local_problem_render_us: Option<Lateness>,
     poses_rejected: u64,
     pose_rereferences: u64,
     passivity: bool,
@@ -316,8 +338,9 @@ fn main() -> Result<()> {
         let shared = shared.clone();
         let session = session.clone();
         let (priority, cpu) = (args.rt_priority, args.cpu);
-        std::thread::Builder::new().name("haptic-rt".into()).spawn(
-            move || -> Result<(u64, u64)> {
+        std::thread::Builder::new()
+            .name("haptic-rt".into())
+            .spawn(move || -> Result<RtEnd> {
                 let _ = haptic_daemon::rt::minimal_timer_slack();
                 let mut report = RtReport {
                     mlockall: Some(lock_memory()),
@@ -383,8 +406,7 @@ fn main() -> Result<()> {
                 };
                 shared.flags.rt_done.store(true, Ordering::Release);
                 result
-            },
-        )?
+            })?
     };
     let warnings: Vec<String> = report_rx.recv().map(|r| r.warnings()).unwrap_or_default();
     for w in &warnings {
@@ -436,7 +458,11 @@ fn main() -> Result<()> {
     let io_result = io
         .join()
         .map_err(|_| anyhow::anyhow!("the I/O thread panicked"))?;
-    let (ticks, overruns) = rt_result?;
+    let RtEnd {
+        ticks,
+        overruns,
+        render_us,
+    } = rt_result?;
     io_result?;
     if let Some(t) = local_setup {
         t.join()
@@ -454,12 +480,7 @@ fn main() -> Result<()> {
         ticks,
         rate_hz: s.rate_hz(),
         target_rate_hz: args.rate,
-        lateness_us: Lateness {
-            p50: s.lateness.quantile_us(0.5),
-            p99: s.lateness.quantile_us(0.99),
-            p999: s.lateness.quantile_us(0.999),
-            max: s.lateness.max_us(),
-        },
+        lateness_us: Lateness::of(&s.lateness),
         max_force_n: s.max_force_n,
         device_max_force_n: device_max,
         force_limit_n: limit,
@@ -471,6 +492,7 @@ fn main() -> Result<()> {
         local_problems: shared.local_problems.load(Ordering::Relaxed),
         local_problems_inertial: shared.local_problems_inertial.load(Ordering::Relaxed),
         local_problems_refused: shared.local_problems_refused.load(Ordering::Relaxed),
+        local_problem_render_us: render_us,
         poses_rejected: shared.poses_rejected.load(Ordering::Relaxed),
         pose_rereferences: shared.pose_rereferences.load(Ordering::Relaxed),
         passivity: chain.passivity.enabled,
@@ -500,10 +522,22 @@ fn main() -> Result<()> {
     );
     if method == Method::LocalProblem {
         out!(
-            "local-problem: {} contact problems set up ({} with the tissue's inertia), {} refused",
+            "local-problem: {} contact problems set up ({} with the tissue's inertia), {} refused; a tick's render p50 {:.0} us, p99 {:.0} us, max {:.0} us",
             summary.local_problems,
             summary.local_problems_inertial,
-            summary.local_problems_refused
+            summary.local_problems_refused,
+            summary
+                .local_problem_render_us
+                .as_ref()
+                .map_or(0.0, |l| l.p50),
+            summary
+                .local_problem_render_us
+                .as_ref()
+                .map_or(0.0, |l| l.p99),
+            summary
+                .local_problem_render_us
+                .as_ref()
+                .map_or(0.0, |l| l.max)
         );
     }
     for w in &summary.warnings {
@@ -518,7 +552,7 @@ fn main() -> Result<()> {
 
 /// The loop on the RT thread: ticks until stop, then ramps the force to zero
 /// and disables the device. A panic inside is caught so the device is still
-/// zeroed and disabled. Returns (ticks, overruns).
+/// zeroed and disabled. Returns the ticks, overruns and render times.
 #[allow(clippy::too_many_arguments)] // the loop's whole configuration, passed once
 fn run_loop<D: Device>(
     device: D,
@@ -530,7 +564,7 @@ fn run_loop<D: Device>(
     shared: Arc<Shared>,
     period_ns: u64,
     spin_ns: u64,
-) -> Result<(u64, u64)> {
+) -> Result<RtEnd> {
     let mut rt = RtLoop::with_chain(device, method, safety, chain, Some(sub), shared.clone());
     if let Some(local) = local {
         rt = rt.with_local_problems(local);
@@ -556,5 +590,9 @@ fn run_loop<D: Device>(
     if outcome.is_err() {
         bail!("the real-time loop panicked; the device was zeroed and disabled");
     }
-    Ok((rt.ticks(), pacer.overruns()))
+    Ok(RtEnd {
+        ticks: rt.ticks(),
+        overruns: pacer.overruns(),
+        render_us: rt.render_times().map(Lateness::of),
+    })
 }

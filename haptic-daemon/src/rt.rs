@@ -149,6 +149,19 @@ pub fn set_fifo(priority: i32) -> Result<i32, String> {
     }
 }
 
+/// Gives the calling thread the lowest normal priority (nice 19): it runs
+/// on the time the RT and I/O threads leave, never taking a core from them
+/// when the RT thread has no SCHED_FIFO (an unprivileged container).
+pub fn lowest_priority() -> Result<(), String> {
+    // SAFETY: plain system calls with integer arguments; the thread id is
+    // the caller's own.
+    let rc = unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 19)
+    };
+    if rc == 0 { Ok(()) } else { Err(errno_string()) }
+}
+
 /// Pins the calling thread to `cpu`.
 pub fn pin_to_cpu(cpu: usize) -> Result<usize, String> {
     // SAFETY: cpu_set_t is plain data; CPU_SET writes inside it for cpu <

@@ -135,9 +135,19 @@ pub fn local_contact_msg(
 /// surface in slides, 3 and 4 mm give the same errors.
 pub const LOCAL_MARGIN_M: f64 = 3e-3;
 
+/// At least this much simulated time between two contact problems (s):
+/// each 30-60 Hz sample gets its own, a faster simulation one every few
+/// samples (the daemon re-bases each newer sample on the problem it has).
+/// Sampling, the compliance, the column mass and the daemon's set-up cost
+/// some milliseconds of CPU a problem, which at the stiffness solver's
+/// ~4 ms pace took a 2-core machine's spare time and the daemon's tick
+/// deadlines with it (measured: `hapbench latency`, README).
+pub const LOCAL_EVERY_S: f64 = 0.008;
+
 /// The contact problem of tool `tool` the wire can carry: points
 /// [`LOCAL_MARGIN_M`] beyond the step's reach, within the message's
-/// capacity, with the tissue's inertia.
+/// capacity, with the tissue's inertia, at most one every
+/// [`LOCAL_EVERY_S`].
 pub fn local_spec(tool: usize) -> LocalSpec {
     LocalSpec {
         tool,
@@ -145,6 +155,7 @@ pub fn local_spec(tool: usize) -> LocalSpec {
         max_vertices: LOCAL_MAX_VERTICES,
         max_points: LOCAL_MAX_POINTS,
         inertia: true,
+        every_s: LOCAL_EVERY_S,
     }
 }
 

@@ -44,6 +44,11 @@ pub struct DemoArgs {
     /// The step (s) instead of the scene's (as `sim-server run --dt-s`).
     #[arg(long)]
     pub dt_s: Option<f64>,
+    /// The haptic daemon's force extrapolator (`haptic-daemon run
+    /// --extrapolation`: constant, linear-time, linear-position,
+    /// linear-position-signed, local-model, local-normal, local-problem).
+    #[arg(long, default_value = "local-problem")]
+    pub extrapolation: String,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -230,7 +235,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             "--session",
             &session,
             "--extrapolation",
-            "local-normal",
+            &args.extrapolation,
         ])
         .arg("--device")
         .arg(format!("simulated:/dev/fd/{TRAJ_FD}"))

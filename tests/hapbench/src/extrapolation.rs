@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 
 use haptic_daemon::extrapolate::local_problem::{LocalContactMsg, LocalProblem};
 use sim_server::contact::LocalContact;
-use sim_server::wire::{local_contact_into, local_contact_msg};
+use sim_server::wire::{LOCAL_EVERY_S, local_contact_into, local_contact_msg};
 
 /// `local-problem` rendered while the simulation runs (its problems are
 /// too large to keep for the whole path): after step j, the ticks in the
@@ -50,6 +50,8 @@ struct LocalRender<'a> {
     /// Wall time of each tick's render with inertia (ns), what the RT
     /// thread pays.
     render_ns: Vec<u64>,
+    /// Simulated time of the last problem taken (s).
+    last_problem_s: Option<f64>,
 }
 
 impl<'a> LocalRender<'a> {
@@ -66,6 +68,7 @@ impl<'a> LocalRender<'a> {
             rendered: Vec::with_capacity(ticks),
             quasi_rendered: Vec::with_capacity(ticks),
             render_ns: Vec::with_capacity(ticks),
+            last_problem_s: None,
         }
     }
 
@@ -85,16 +88,30 @@ impl<'a> LocalRender<'a> {
             seq: j as u64,
             ..*sample
         };
-        if local_contact_into(tools, sim, 0, &mut self.lc) {
-            local_contact_msg(&self.lc, 0, j as u64, delivered.t_ns, &mut self.msg);
+        // The problems and the samples they render from are stamped with
+        // the time of their state, as live (where a step publishes within
+        // its cost): here the pose's time, a period before delivery.
+        let stated = ForceSample {
+            t_ns: ns(j as f64 * self.sim_s),
+            ..delivered
+        };
+        // At the server's pace: a problem at most every LOCAL_EVERY_S (a
+        // newer sample is rendered from the last one), none when the
+        // server would have none.
+        let t_s = j as f64 * self.sim_s;
+        if self
+            .last_problem_s
+            .is_some_and(|last| t_s - last < LOCAL_EVERY_S - 1e-9)
+        {
+        } else if local_contact_into(tools, sim, 0, &mut self.lc) {
+            self.last_problem_s = Some(t_s);
+            local_contact_msg(&self.lc, 0, j as u64, stated.t_ns, &mut self.msg);
             if self.quasi.set_from_wire(&self.msg).is_err() {
                 self.quasi.clear();
             }
-            // The first implicit step spans the sample's age at the first
-            // tick it serves: here the simulation takes a whole period to
-            // step (pose at j s, sample out at j + 1), so from the pose's
-            // time (the daemon, whose simulation publishes a step within
-            // its cost, counts from the sample's `t_ns`).
+            // The first implicit step spans the problem's age at the first
+            // tick it serves (from its state's time, as the daemon's
+            // set-up thread counts it).
             let first_tick =
                 (((j + 1) as f64 * self.sim_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
             let age_s = (first_tick - j as f64 * self.sim_s).max(self.haptic_s);
@@ -127,13 +144,13 @@ impl<'a> LocalRender<'a> {
             let t0 = std::time::Instant::now();
             let f = self
                 .lp
-                .render(&delivered, now, p, f64::INFINITY)
+                .render(&stated, now, p, f64::INFINITY)
                 .unwrap_or_else(|| self.fallback.force(now, p));
             self.render_ns.push(t0.elapsed().as_nanos() as u64);
             self.rendered.push(f);
             let f = self
                 .quasi
-                .render(&delivered, now, p, f64::INFINITY)
+                .render(&stated, now, p, f64::INFINITY)
                 .unwrap_or_else(|| self.fallback.force(now, p));
             self.quasi_rendered.push(f);
         }

@@ -59,8 +59,12 @@ pub struct Args {
     pub io_spin_us: u64,
     /// The daemon's extrapolator (`haptic-daemon run --extrapolation`;
     /// `local-problem` also has the simulation publish contact problems).
-    #[arg(long, value_enum, default_value_t = haptic_daemon::extrapolate::Method::LocalNormal)]
+    #[arg(long, value_enum, default_value_t = haptic_daemon::extrapolate::Method::LocalProblem)]
     pub extrapolation: haptic_daemon::extrapolate::Method,
+    /// `local-problem` without the tissue's inertia (`haptic-daemon run
+    /// --quasi-static`).
+    #[arg(long)]
+    pub quasi_static: bool,
 }
 
 /// Flags of the hidden probe publisher (the baseline's other process).
@@ -273,7 +277,10 @@ pub fn run(args: &Args) -> Result<()> {
             &io_spin_us,
             "--extrapolation",
             args.extrapolation.name(),
-        ],
+        ]
+        .into_iter()
+        .chain(args.quasi_static.then_some("--quasi-static"))
+        .collect::<Vec<_>>(),
         sibling("haptic-daemon")?,
     )?;
     // What queued while the processes started is not latency: drop it.

@@ -132,6 +132,8 @@ pub struct LocalProblem {
     /// solve.
     gt: Vec<f64>,
     m: Vec<f64>,
+    /// Scratch: W_TT gathered.
+    wtt: Vec<f64>,
     z: Vec<f64>,
     y: Vec<f64>,
     /// Forces on V at the sample (N), 3V.
@@ -285,6 +287,7 @@ impl LocalProblem {
             tverts: Vec::with_capacity(MAX_VERTICES),
             gt: Vec::with_capacity(n * n),
             m: Vec::with_capacity(n * n),
+            wtt: Vec::with_capacity(n * n),
             z: Vec::with_capacity(n),
             y: Vec::with_capacity(n),
             f0: Vec::with_capacity(n),

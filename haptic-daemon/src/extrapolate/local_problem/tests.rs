@@ -448,3 +448,77 @@ fn inertia_checks_its_input() {
             .is_err()
     );
 }
+
+#[test]
+fn the_push_through_and_the_full_factorisation_take_the_same_step() {
+    // Two triangles side by side (4 vertices), a coupled compliance; the
+    // ball pressed into the first: T = its 3 vertices of V's 4.
+    let x = [
+        [0.0, 0.0, 0.0],
+        [0.01, 0.0, 0.0],
+        [0.0, 0.01, 0.0],
+        [0.01, 0.01, 0.0],
+    ];
+    let c = [0.01 / 3.0, 0.01 / 3.0, 0.0];
+    let centre = [c[0], c[1], R - 0.001];
+    let ball = Capsule {
+        a_m: centre,
+        b_m: centre,
+        radius_m: R,
+        onset_m: 0.02 * R,
+    };
+    let points = [
+        Point {
+            slots: [0, 1, 2],
+            weights: [1.0 / 3.0; 3],
+            part: 0,
+            stiffness_n_per_m: K_P,
+        },
+        Point {
+            slots: [1, 3, 2],
+            weights: [1.0 / 3.0; 3],
+            part: 0,
+            stiffness_n_per_m: K_P,
+        },
+    ];
+    let n = 12;
+    let mut w = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..n {
+            let coupling = 0.2 * ((i * 7 + j * 7) % 5) as f64 / 5.0;
+            w[i * n + j] = C * (if i == j { 1.0 } else { 0.0 } + 0.1 * coupling);
+        }
+    }
+    let mut p = LocalProblem::new();
+    p.set(centre, &[ball], &x, &points, &w).unwrap();
+    // The tool 0.3 mm deeper and aside: only the first point touches.
+    let dx = [2e-4, 0.0, -3e-4];
+    p.select(dx, 1.0);
+    let mut forces = vec![0.0; n];
+    let delta = p.delta.clone();
+    p.evaluate(&delta, dx, &mut forces, None);
+    p.grad = (0..n).map(|i| p.f0_eff[i] - forces[i]).collect();
+    for springs_only in [false, true] {
+        let t = p.prepare_step(dx, &mut forces, springs_only);
+        assert_eq!(t, 9, "the first triangle's vertices");
+        assert!(p.pushed_through_step(t));
+        let (step, sstep) = (p.step.clone(), p.sstep.clone());
+        p.prepare_step(dx, &mut forces, springs_only);
+        assert!(p.full_step(t));
+        let size = step.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(size > 1e-6, "{step:?}");
+        for i in 0..n {
+            assert!(
+                (step[i] - p.step[i]).abs() < 1e-9 * size,
+                "{step:?} {:?}",
+                p.step
+            );
+            let ss = sstep.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(
+                (sstep[i] - p.sstep[i]).abs() < 1e-9 * ss,
+                "{sstep:?} {:?}",
+                p.sstep
+            );
+        }
+    }
+}

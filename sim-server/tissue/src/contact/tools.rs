@@ -110,12 +110,17 @@ pub struct LocalSpec {
     /// [`LocalContact::column_mass`]): the velocities and damping taken
     /// with the points, the column mass solved with the compliance.
     pub inertia: bool,
+    /// At least this much simulated time between two problems (s; 0: one
+    /// at every snapshot of the stiffness solver).
+    pub every_s: Real,
 }
 
 /// The contact problems' request and scratch, kept across calls.
 #[derive(Default)]
 struct LocalScratch {
     spec: Option<LocalSpec>,
+    /// Simulated time since the last problem was made (s).
+    since_s: Real,
     field: ContactField,
     slot: Vec<u32>,
     order: Vec<(Real, usize)>,
@@ -144,9 +149,13 @@ impl LocalSampling<'_> {
         let Some(t) = self.tools.get(spec.tool) else {
             return false;
         };
-        // The problem is frictionless: with friction it would let the
-        // tissue slide where the simulation holds it.
-        let Some(pose) = t.pose().filter(|_| !t.decl().friction.is_active()) else {
+        // The problem is frictionless and knows no grip: with friction it
+        // would let the tissue slide where the simulation holds it, and a
+        // gripping tool's force is the grip's.
+        let Some(pose) = t
+            .pose()
+            .filter(|_| !t.decl().friction.is_active() && !t.gripping())
+        else {
             return false;
         };
         let local = &mut *self.scratch;
@@ -396,6 +405,9 @@ impl Tools {
         self.steps += 1;
         if let Some(k) = &mut self.stiffness {
             let spec = self.local.spec;
+            self.local.since_s += sim.dt_s();
+            let due = spec.is_some_and(|s| self.local.since_s >= s.every_s);
+            let mut made = false;
             let mut ctx = self.sampler.as_mut().map(|sampler| LocalSampling {
                 sampler,
                 index: &mut self.index,
@@ -404,11 +416,15 @@ impl Tools {
                 tools: &self.tools,
                 step: self.steps,
             });
-            let mut make = |lc: &mut LocalContact| match (&mut ctx, spec) {
-                (Some(ctx), Some(spec)) => ctx.sample(&*sim, spec, lc),
-                _ => false,
+            let mut make = |lc: &mut LocalContact| {
+                let ok = match (&mut ctx, spec) {
+                    (Some(ctx), Some(spec)) => ctx.sample(&*sim, spec, lc),
+                    _ => false,
+                };
+                made |= ok;
+                ok
             };
-            let wanted = spec.is_some() && self.law == ContactLaw::Penalty;
+            let wanted = due && self.law == ContactLaw::Penalty;
             k.update(
                 sim.model(),
                 &self.field,
@@ -416,6 +432,9 @@ impl Tools {
                 sim.dt_s(),
                 wanted.then_some(&mut make as &mut dyn FnMut(&mut LocalContact) -> bool),
             );
+            if made {
+                self.local.since_s = 0.0;
+            }
             for (i, out) in self.stiffness_n_per_m.iter_mut().enumerate() {
                 *out = k.stiffness(i);
             }
