@@ -35,6 +35,11 @@ pub struct LocalSetup {
     pub inertia: bool,
 }
 
+/// The share of a tick the RT thread's render of a problem may take before
+/// it stops iterating (the solve goes on at the next tick): the rest of the
+/// tick is the device's I/O and the safety filter, tens of microseconds.
+pub const RENDER_SHARE_OF_TICK: f64 = 0.3;
+
 /// The first implicit step of a problem with inertia (s): from its step's
 /// time `taken_ns` to the RT thread's first render of it, expected half a
 /// tick after `now_ns` (the RT thread takes a new problem at its next
@@ -73,6 +78,9 @@ pub fn run_local_setup(
             continue;
         }
         let problem = input.input_buffer_mut();
+        problem.set_time_budget(Some(Duration::from_nanos(
+            (setup.tick_ns as f64 * RENDER_SHARE_OF_TICK) as u64,
+        )));
         let mut ok = msg.version == PROTOCOL_VERSION && problem.set_from_wire(&msg).is_ok();
         let mut inertial = false;
         if ok && setup.inertia {

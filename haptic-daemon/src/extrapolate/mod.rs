@@ -118,11 +118,12 @@ pub enum Method {
     /// force while the dimple travels with the tool), pressing and
     /// withdrawing follow the contact's true normal stiffness.
     LocalNormal,
-    /// The simulation's contact problem around the tool, solved again for
-    /// each tool position ([`local_problem`]: the surface near the tool,
-    /// its contact springs and the tissue's compliance, sent with each
-    /// step on the `local-contact` stream). Without a problem (none
-    /// received yet, a backend or mesh that cannot give one) it renders as
+    /// The simulation's contact problem around the tool, stepped again at
+    /// each tick ([`local_problem`]: the surface near the tool, its contact
+    /// springs, the tissue's compliance and inertia, sent at most every
+    /// 8 ms on the `local-contact` stream); the daemon's default. Without a
+    /// problem (none received yet, a tool with friction or gripping, a
+    /// backend or mesh that cannot give one) it renders as
     /// [`Method::LocalNormal`].
     LocalProblem,
 }

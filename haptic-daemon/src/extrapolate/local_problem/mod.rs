@@ -30,9 +30,12 @@
 //! or curved surface, the contact points, their normals and which of them
 //! touch change with the tool, and the coupling between them through the
 //! tissue is W's; a vertex slipping around the probe (a snap) is in the
-//! problem. What it leaves out: the tissue's inertia and damping
-//! (quasi-static), friction, points beyond the margin the simulation
-//! sampled, other tools' contacts (held as they were).
+//! problem. With the tissue's inertia the simulation sends along
+//! ([`LocalProblem::set_inertia`], `inertia.rs`) each solve is instead an
+//! implicit Euler step of the tissue condensed on V (Guyan), so the
+//! problem follows the damped, massive tissue between samples. What it
+//! leaves out: friction, points beyond the margin the simulation sampled,
+//! other tools' contacts (held as they were).
 //!
 //! Fixed capacity ([`MAX_VERTICES`], [`MAX_POINTS`]): after
 //! [`LocalProblem::new`] neither [`LocalProblem::set`] nor
@@ -179,6 +182,10 @@ pub struct LocalProblem {
     trial_sd: Vec<f64>,
     /// Newton iterations left in this render (bounds the RT thread's time).
     budget: usize,
+    /// With a time budget ([`LocalProblem::set_time_budget`]): the most a
+    /// render may take, and when this one started.
+    time_budget: Option<std::time::Duration>,
+    render_started: Option<std::time::Instant>,
     /// Whether `active` is a selection with the normal slack, and the tool
     /// motion it was made for.
     selected: bool,
@@ -243,6 +250,7 @@ impl Clone for LocalProblem {
         copy(&mut self.trial, &o.trial);
         copy(&mut self.forces, &o.forces);
         self.max_move_m = o.max_move_m;
+        self.time_budget = o.time_budget;
         self.active.clear();
         self.active.extend_from_slice(&o.active);
         self.selected = o.selected;
@@ -315,6 +323,8 @@ impl LocalProblem {
             sstep: Vec::with_capacity(n),
             trial_sd: Vec::with_capacity(n),
             budget: 0,
+            time_budget: None,
+            render_started: None,
             selected: false,
             selected_dx: ZERO,
             ready: false,
@@ -336,6 +346,22 @@ impl LocalProblem {
     /// Forgets the problem.
     pub fn clear(&mut self) {
         self.ready = false;
+    }
+
+    /// Bounds each render's time as well as its iterations: no Newton
+    /// iteration starts once `budget` has passed since the render began (the
+    /// solve goes on from there at the next tick, as when the iterations
+    /// run out). `None` (the default): iterations only, deterministic.
+    pub fn set_time_budget(&mut self, budget: Option<std::time::Duration>) {
+        self.time_budget = budget;
+    }
+
+    /// Whether this render's time budget is spent.
+    pub(super) fn out_of_time(&self) -> bool {
+        match (self.time_budget, self.render_started) {
+            (Some(b), Some(t0)) => t0.elapsed() >= b,
+            _ => false,
+        }
     }
 
     /// The force message `seq` of the step the problem was taken at.
@@ -403,6 +429,7 @@ impl LocalProblem {
         }
         // One budget for the whole tick.
         self.budget = RENDER_ITERATIONS;
+        self.render_started = self.time_budget.map(|_| std::time::Instant::now());
         let (change, touching, base) = if self.m_red.is_empty() {
             let base = match self.base {
                 Some((seq, base)) if seq == latest.seq => base,
@@ -575,6 +602,7 @@ impl LocalProblem {
     /// says whether any point touches the tool there.
     pub fn solve(&mut self, tool_m: V3) -> Option<(V3, bool)> {
         self.budget = RENDER_ITERATIONS;
+        self.render_started = self.time_budget.map(|_| std::time::Instant::now());
         self.solve_within_budget(tool_m)
     }
 

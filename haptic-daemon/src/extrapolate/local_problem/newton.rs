@@ -69,6 +69,10 @@ impl LocalProblem {
         }
         let mut energy = self.energy(&self.delta, &self.sd, dx, forces);
         while self.budget > 0 {
+            if self.out_of_time() {
+                self.budget = 0;
+                break;
+            }
             self.budget -= 1;
             // Gradient S delta + f0 - f(delta).
             self.grad.clear();

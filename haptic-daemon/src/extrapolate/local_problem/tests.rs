@@ -522,3 +522,26 @@ fn the_push_through_and_the_full_factorisation_take_the_same_step() {
         }
     }
 }
+
+#[test]
+fn a_spent_time_budget_stops_the_iterations_and_a_generous_one_changes_nothing() {
+    let (mut free, centre) = press(0.001);
+    let (mut spent, _) = press(0.001);
+    let (mut generous, _) = press(0.001);
+    spent.set_time_budget(Some(std::time::Duration::ZERO));
+    generous.set_time_budget(Some(std::time::Duration::from_secs(10)));
+    let down = [centre[0], centre[1], centre[2] - 2e-4];
+    let solved = free.solve(down).unwrap().0;
+    assert_eq!(generous.solve(down).unwrap().0, solved);
+    // No iteration: the vertices where they were, the point's spring
+    // alone pressed further (stiffer than in series with the tissue).
+    let unsolved = spent.solve(down).unwrap().0;
+    assert!(unsolved[2] > solved[2] * 1.5, "{unsolved:?} vs {solved:?}");
+    // Given time again, it goes on from there to the same answer.
+    spent.set_time_budget(None);
+    let resumed = spent.solve(down).unwrap().0;
+    assert!(
+        norm(sub(resumed, solved)) < 1e-9,
+        "{resumed:?} vs {solved:?}"
+    );
+}
