@@ -5,7 +5,7 @@
 //! velocities at the sample (the first spanning the sample's age), and
 //! the history of the problem's force that re-bases it on a newer sample.
 
-use super::dense::{cholesky, cholesky_solve};
+use super::dense::{cholesky, cholesky_inverse};
 use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError};
 use crate::math::{V3, ZERO, add, scale, sub};
 
@@ -68,26 +68,8 @@ impl LocalProblem {
         }
         // M = S G S (two dense products; on the set-up side). S G goes in
         // the factor's scratch (n^2, overwritten by `stepped` below).
-        self.w_factor.clear();
-        self.w_factor.resize(n * n, 0.0);
-        for i in 0..n {
-            for k in 0..n {
-                let a = self.s[i * n + k];
-                for j in 0..n {
-                    self.w_factor[i * n + j] += a * column_mass[k * n + j];
-                }
-            }
-        }
-        self.m_red.clear();
-        self.m_red.resize(n * n, 0.0);
-        for i in 0..n {
-            for k in 0..n {
-                let a = self.w_factor[i * n + k];
-                for j in 0..n {
-                    self.m_red[i * n + j] += a * self.s[k * n + j];
-                }
-            }
-        }
+        matmul_into(&self.s, column_mass, &mut self.w_factor, n);
+        matmul_into(&self.w_factor, &self.s, &mut self.m_red, n);
         self.damping_per_s = damping_per_s;
         // The tick's S + A and inverse, then the first step's in s and w.
         let static_s = std::mem::take(&mut self.s);
@@ -139,17 +121,7 @@ impl LocalProblem {
         if !cholesky(&mut self.w_factor, n) {
             return false;
         }
-        w.clear();
-        w.resize(n * n, 0.0);
-        for c in 0..n {
-            self.step.clear();
-            self.step.resize(n, 0.0);
-            self.step[c] = 1.0;
-            cholesky_solve(&self.w_factor, &mut self.step, n);
-            for r in 0..n {
-                w[r * n + c] = self.step[r];
-            }
-        }
+        cholesky_inverse(&self.w_factor, &mut self.m, w, n);
         true
     }
 
@@ -198,4 +170,20 @@ fn lerp(t0: u64, c0: V3, t1: u64, c1: V3, t: u64) -> V3 {
     }
     let w = (t - t0) as f64 / (t1 - t0) as f64;
     add(c0, scale(sub(c1, c0), w))
+}
+
+/// `out` = `a` `b` (row-major n x n), by row axpys over slices (they
+/// vectorise; indexed loops did not).
+fn matmul_into(a: &[f64], b: &[f64], out: &mut Vec<f64>, n: usize) {
+    out.clear();
+    out.resize(n * n, 0.0);
+    for (a_row, out_row) in a.chunks_exact(n).zip(out.chunks_exact_mut(n)) {
+        for (&x, b_row) in a_row.iter().zip(b.chunks_exact(n)) {
+            if x != 0.0 {
+                for (o, y) in out_row.iter_mut().zip(b_row) {
+                    *o += x * y;
+                }
+            }
+        }
+    }
 }

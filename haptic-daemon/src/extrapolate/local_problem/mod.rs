@@ -47,7 +47,7 @@ mod newton;
 
 use super::ForceSample;
 use crate::math::{V3, ZERO, add, norm, scale, spectral_norm, sub};
-use dense::{cholesky, cholesky_solve};
+use dense::{cholesky, cholesky_inverse};
 pub use shared::protocol::{
     LOCAL_MAX_PARTS as MAX_PARTS, LOCAL_MAX_POINTS as MAX_POINTS,
     LOCAL_MAX_VERTICES as MAX_VERTICES, LocalContactMsg, LocalPart as Capsule, LocalPoint as Point,
@@ -546,7 +546,7 @@ impl LocalProblem {
         self.x.extend_from_slice(positions_m);
         self.points.clear();
         self.points.extend_from_slice(points);
-        // S = W^-1: Cholesky of W, then its solve on the unit columns.
+        // S = W^-1 from W's Cholesky factor.
         self.w.clear();
         self.w.extend_from_slice(w);
         self.tslot.clear();
@@ -557,25 +557,7 @@ impl LocalProblem {
         if !cholesky(&mut self.w_factor, n) {
             return Err(LocalProblemError::NotDefinite);
         }
-        self.s.clear();
-        self.s.resize(n * n, 0.0);
-        for c in 0..n {
-            self.step.clear();
-            self.step.resize(n, 0.0);
-            self.step[c] = 1.0;
-            cholesky_solve(&self.w_factor, &mut self.step, n);
-            for r in 0..n {
-                self.s[r * n + c] = self.step[r];
-            }
-        }
-        // Symmetric in exact arithmetic.
-        for r in 0..n {
-            for c in 0..r {
-                let m = 0.5 * (self.s[r * n + c] + self.s[c * n + r]);
-                self.s[r * n + c] = m;
-                self.s[c * n + r] = m;
-            }
-        }
+        cholesky_inverse(&self.w_factor, &mut self.m, &mut self.s, n);
         self.delta.clear();
         self.delta.resize(n, 0.0);
         self.f0.clear();
