@@ -44,9 +44,9 @@
 mod dense;
 mod inertia;
 mod newton;
+mod render;
 
-use super::ForceSample;
-use crate::math::{V3, ZERO, add, norm, scale, spectral_norm, sub};
+use crate::math::{V3, ZERO, norm, sub};
 use dense::{cholesky, cholesky_inverse};
 pub use shared::protocol::{
     LOCAL_MAX_PARTS as MAX_PARTS, LOCAL_MAX_POINTS as MAX_POINTS,
@@ -394,96 +394,6 @@ impl LocalProblem {
         self.seq = msg.seq;
         self.t_ns = msg.t_ns;
         Ok(())
-    }
-
-    /// The force to render (N) at `now_ns` with the tool at `tool_m`,
-    /// `latest` being the newest force sample (taken at the problem's step
-    /// or after it): the sample's force plus the change of the points'
-    /// force on the tool from the sample to `tool_m`; zero when no point
-    /// touches the tool there. Quasi-static, the change is from the
-    /// sample's position; with inertia ([`LocalProblem::set_inertia`]) each
-    /// call is a time step of the problem from its own step on, and the
-    /// change is from where the problem was at the sample's `t_ns` (its
-    /// ticks' history, interpolated). The change is capped at
-    /// `max_stiffness_n_per_m` times the tool's distance from the sample's
-    /// position (the secant stiffness a device renders stably; infinite:
-    /// no cap), and in contact at [`CHANGE_OF_STIFFNESS`] times the
-    /// sample's contact stiffness, direction kept. `None` without a
-    /// problem or when a solve fails (the caller falls back to another
-    /// method).
-    pub fn render(
-        &mut self,
-        latest: &ForceSample,
-        now_ns: u64,
-        tool_m: V3,
-        max_stiffness_n_per_m: f64,
-    ) -> Option<V3> {
-        // A problem newer than the sample (a restarted simulation) or
-        // much older (the simulation stopped sending them) says nothing
-        // about it.
-        if !self.ready
-            || latest.seq < self.seq
-            || latest.t_ns.saturating_sub(self.t_ns) > MAX_AGE_NS
-        {
-            return None;
-        }
-        // One budget for the whole tick.
-        self.budget = RENDER_ITERATIONS;
-        self.render_started = self.time_budget.map(|_| std::time::Instant::now());
-        let (change, touching, base) = if self.m_red.is_empty() {
-            let base = match self.base {
-                Some((seq, base)) if seq == latest.seq => base,
-                _ => {
-                    // Once per sample: where the problem puts the sample.
-                    let base = if latest.seq == self.seq {
-                        ZERO
-                    } else {
-                        self.solve_within_budget(latest.position_m)?.0
-                    };
-                    self.base = Some((latest.seq, base));
-                    base
-                }
-            };
-            let (change, touching) = self.solve_within_budget(tool_m)?;
-            (change, touching, base)
-        } else {
-            let (change, touching) = self.solve_within_budget(tool_m)?;
-            self.remember(now_ns, change);
-            let base = match self.base {
-                Some((seq, base)) if seq == latest.seq => base,
-                _ => {
-                    let base = if latest.seq == self.seq {
-                        ZERO
-                    } else {
-                        self.change_at(latest.t_ns)?
-                    };
-                    self.base = Some((latest.seq, base));
-                    base
-                }
-            };
-            (change, touching, base)
-        };
-        if !touching {
-            return Some(ZERO);
-        }
-        let mut d = sub(change, base);
-        // In contact, the change is also held to CHANGE_OF_STIFFNESS times
-        // the contact's own stiffness: a problem that snaps (a dragged
-        // vertex slipping around the tool, at once where the damped tissue
-        // follows some 15 ms later) would jump far faster than the contact
-        // stiffens; onsets (no stiffness yet) are not held.
-        let contact = spectral_norm(&latest.stiffness_n_per_m);
-        let cap = if latest.in_contact && contact > 0.0 {
-            max_stiffness_n_per_m.min(CHANGE_OF_STIFFNESS * contact)
-        } else {
-            max_stiffness_n_per_m
-        };
-        let limit = cap * norm(sub(tool_m, latest.position_m));
-        let size = norm(d);
-        if size > limit {
-            d = scale(d, limit / size);
-        }
-        Some(add(latest.force_n, d))
     }
 
     /// Sets the problem of a sample: the tool at `tool_m`, its `parts`,

@@ -1,4 +1,6 @@
 use super::*;
+use crate::extrapolate::ForceSample;
+use crate::math::{add, scale};
 
 const K_P: f64 = 300.0;
 const R: f64 = 0.005;

@@ -1,0 +1,103 @@
+//! [`LocalProblem::render`]: the force at the hand from the newest sample
+//! and the problem solved (or stepped) for the tool's position, re-based
+//! on a sample newer than the problem, capped.
+
+use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS, RENDER_ITERATIONS};
+use crate::extrapolate::ForceSample;
+use crate::math::{V3, ZERO, add, norm, scale, spectral_norm, sub};
+
+impl LocalProblem {
+    /// The force to render (N) at `now_ns` with the tool at `tool_m`,
+    /// `latest` being the newest force sample (taken at the problem's step
+    /// or after it): the sample's force plus the change of the points'
+    /// force on the tool from the sample to `tool_m`; zero when no point
+    /// touches the tool there. Quasi-static, the change is from the
+    /// sample's position; with inertia ([`LocalProblem::set_inertia`]) each
+    /// call is a time step of the problem from its own step on, and the
+    /// change is from where the problem was at the sample's `t_ns` (its
+    /// ticks' history, interpolated). The change is capped at
+    /// `max_stiffness_n_per_m` times the tool's distance from the sample's
+    /// position (the secant stiffness a device renders stably; infinite:
+    /// no cap), and in contact at [`CHANGE_OF_STIFFNESS`] times the
+    /// sample's contact stiffness, direction kept. `None` without a
+    /// problem or when a solve fails (the caller falls back to another
+    /// method).
+    pub fn render(
+        &mut self,
+        latest: &ForceSample,
+        now_ns: u64,
+        tool_m: V3,
+        max_stiffness_n_per_m: f64,
+    ) -> Option<V3> {
+        // A problem newer than the sample (a restarted simulation) or
+        // much older (the simulation stopped sending them) says nothing
+        // about it.
+        if !self.ready
+            || latest.seq < self.seq
+            || latest.t_ns.saturating_sub(self.t_ns) > MAX_AGE_NS
+        {
+            return None;
+        }
+        // One budget for the whole tick.
+        self.budget = RENDER_ITERATIONS;
+        self.render_started = self.time_budget.map(|_| std::time::Instant::now());
+        // Quasi-static, the base first (its solve moves the warm start);
+        // with inertia after this tick's step, which the history then has.
+        let inertia = !self.m_red.is_empty();
+        let early = if inertia {
+            None
+        } else {
+            Some(self.base_for(latest)?)
+        };
+        let (change, touching) = self.solve_within_budget(tool_m)?;
+        if inertia {
+            self.remember(now_ns, change);
+        }
+        let base = match early {
+            Some(base) => base,
+            None => self.base_for(latest)?,
+        };
+        if !touching {
+            return Some(ZERO);
+        }
+        let mut d = sub(change, base);
+        // In contact, the change is also held to CHANGE_OF_STIFFNESS times
+        // the contact's own stiffness: a problem that snaps (a dragged
+        // vertex slipping around the tool, at once where the damped tissue
+        // follows some 15 ms later) would jump far faster than the contact
+        // stiffens; onsets (no stiffness yet) are not held.
+        let contact = spectral_norm(&latest.stiffness_n_per_m);
+        let cap = if latest.in_contact && contact > 0.0 {
+            max_stiffness_n_per_m.min(CHANGE_OF_STIFFNESS * contact)
+        } else {
+            max_stiffness_n_per_m
+        };
+        let limit = cap * norm(sub(tool_m, latest.position_m));
+        let size = norm(d);
+        if size > limit {
+            d = scale(d, limit / size);
+        }
+        Some(add(latest.force_n, d))
+    }
+
+    /// Where the problem puts sample `latest` (the points' force change
+    /// there), once per sample: zero for the problem's own sample;
+    /// quasi-static, the problem solved at the sample's position; with
+    /// inertia, where the stepped problem was at the sample's `t_ns`.
+    fn base_for(&mut self, latest: &ForceSample) -> Option<V3> {
+        if let Some((seq, base)) = self.base
+            && seq == latest.seq
+        {
+            return Some(base);
+        }
+        let base = if latest.seq == self.seq {
+            ZERO
+        } else if self.m_red.is_empty() {
+            self.solve_within_budget(latest.position_m)?.0
+        } else {
+            self.change_at(latest.t_ns)?
+        };
+        self.base = Some((latest.seq, base));
+        Some(base)
+    }
+}
