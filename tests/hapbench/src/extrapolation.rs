@@ -45,6 +45,8 @@ struct LocalRender<'a> {
     hand: &'a [[f64; 3]],
     haptic_s: f64,
     sim_s: f64,
+    /// Transport delay of samples and problems (s).
+    delay_s: f64,
     rendered: Vec<[f64; 3]>,
     quasi_rendered: Vec<[f64; 3]>,
     /// Wall time of each tick's render with inertia (ns), what the RT
@@ -55,7 +57,7 @@ struct LocalRender<'a> {
 }
 
 impl<'a> LocalRender<'a> {
-    fn new(hand: &'a [[f64; 3]], haptic_s: f64, sim_s: f64, ticks: usize) -> Self {
+    fn new(hand: &'a [[f64; 3]], haptic_s: f64, sim_s: f64, delay_s: f64, ticks: usize) -> Self {
         Self {
             lp: LocalProblem::new(),
             quasi: LocalProblem::new(),
@@ -65,6 +67,7 @@ impl<'a> LocalRender<'a> {
             hand,
             haptic_s,
             sim_s,
+            delay_s,
             rendered: Vec::with_capacity(ticks),
             quasi_rendered: Vec::with_capacity(ticks),
             render_ns: Vec::with_capacity(ticks),
@@ -112,8 +115,8 @@ impl<'a> LocalRender<'a> {
             // The first implicit step spans the problem's age at the first
             // tick it serves (from its state's time, as the daemon's
             // set-up thread counts it).
-            let first_tick =
-                (((j + 1) as f64 * self.sim_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
+            let arrival_s = (j + 1) as f64 * self.sim_s + self.delay_s;
+            let first_tick = ((arrival_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
             let age_s = (first_tick - j as f64 * self.sim_s).max(self.haptic_s);
             let ok = self.lp.set_from_wire(&self.msg).is_ok()
                 && self
@@ -129,13 +132,14 @@ impl<'a> LocalRender<'a> {
         }
         // Ticks before the first delivery render nothing.
         while self.rendered.len() < self.hand.len()
-            && (self.rendered.len() as f64) * self.haptic_s < (j + 1) as f64 * self.sim_s - 1e-12
+            && (self.rendered.len() as f64) * self.haptic_s
+                < (j + 1) as f64 * self.sim_s + self.delay_s - 1e-12
         {
             self.rendered.push([0.0; 3]);
             self.quasi_rendered.push([0.0; 3]);
         }
         self.fallback.push(&delivered);
-        let end = (j + 2) as f64 * self.sim_s - 1e-12;
+        let end = (j + 2) as f64 * self.sim_s + self.delay_s - 1e-12;
         while self.rendered.len() < self.hand.len()
             && (self.rendered.len() as f64) * self.haptic_s < end
         {
@@ -180,6 +184,12 @@ pub struct Args {
     /// Haptic rate (Hz).
     #[arg(long, default_value_t = 1000.0)]
     pub haptic_rate: f64,
+    /// A transport delay (ms) added to every sample and contact problem
+    /// on its way to the haptic loop (a network between the simulation
+    /// and the daemon): each arrives this much later than the period after
+    /// its pose.
+    #[arg(long, default_value_t = 0.0)]
+    pub delay_ms: f64,
     /// Write the results here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -234,6 +244,8 @@ struct Report {
     trajectory: String,
     sim_rate_hz: f64,
     haptic_rate_hz: f64,
+    /// `--delay-ms`.
+    delay_ms: f64,
     duration_s: f64,
     ticks: usize,
     truth: MethodResult,
@@ -397,7 +409,7 @@ fn write_series(
 /// The samples of `--samples`, as the haptic loop receives them: one line
 /// per simulation step, CSV `delivered_s,pose_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,
 /// in_contact,k00..k22` (the contact stiffness row by row, N/m, dF = -K dP).
-fn write_samples(path: &Path, period_s: f64, samples: &[Sample]) -> Result<()> {
+fn write_samples(path: &Path, period_s: f64, delay_s: f64, samples: &[Sample]) -> Result<()> {
     use std::fmt::Write as _;
     let mut o = String::from("delivered_s,pose_s,x_m,y_m,z_m,fx_n,fy_n,fz_n,in_contact");
     for i in 0..3 {
@@ -412,7 +424,7 @@ fn write_samples(path: &Path, period_s: f64, samples: &[Sample]) -> Result<()> {
         write!(
             o,
             "{},{pose_s},{},{},{},{},{},{},{}",
-            pose_s + period_s,
+            pose_s + period_s + delay_s,
             p[0],
             p[1],
             p[2],
@@ -439,6 +451,10 @@ pub fn run(args: &Args) -> Result<()> {
         args.haptic_rate.is_finite() && args.haptic_rate >= args.sim_rate,
         "--haptic-rate must be at least the simulation rate"
     );
+    anyhow::ensure!(
+        args.delay_ms.is_finite() && (0.0..=1000.0).contains(&args.delay_ms),
+        "--delay-ms must be between 0 and 1000"
+    );
     let src = scene_source(args.scene.as_deref())?;
     let (traj, traj_name) = match &args.trajectory {
         Some(p) => (Trajectory::read(p)?, p.display().to_string()),
@@ -461,7 +477,8 @@ pub fn run(args: &Args) -> Result<()> {
         .context("ground truth with twice the sub-steps")?;
     b.finish();
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
-    let mut local = LocalRender::new(&hand[..ticks], h, s, ticks);
+    let delay_s = args.delay_ms * 1e-3;
+    let mut local = LocalRender::new(&hand[..ticks], h, s, delay_s, ticks);
     let b = bar(sim_steps, "simulation");
     let (samples, _) = simulate(
         &src,
@@ -476,7 +493,7 @@ pub fn run(args: &Args) -> Result<()> {
     b.finish();
 
     if let Some(path) = &args.samples {
-        write_samples(path, s, &samples)?;
+        write_samples(path, s, delay_s, &samples)?;
     }
     let truth_f: Vec<[f64; 3]> = truth.iter().map(|t| t.force_n).collect();
     let check_f: Vec<[f64; 3]> = check.iter().map(|t| t.force_n).collect();
@@ -523,8 +540,9 @@ pub fn run(args: &Args) -> Result<()> {
         let mut rendered = Vec::with_capacity(ticks);
         for (k, p) in hand.iter().take(ticks).enumerate() {
             let t = k as f64 * h;
-            // Sample j (pose at j s) is delivered one simulation period later.
-            while next < samples.len() && (next + 1) as f64 * s <= t + 1e-12 {
+            // Sample j (pose at j s) is delivered one simulation period
+            // later, plus the transport delay.
+            while next < samples.len() && (next + 1) as f64 * s + delay_s <= t + 1e-12 {
                 ex.push(&ForceSample {
                     t_ns: ns((next + 1) as f64 * s),
                     seq: next as u64,
@@ -545,6 +563,7 @@ pub fn run(args: &Args) -> Result<()> {
         trajectory: traj_name,
         sim_rate_hz: args.sim_rate,
         haptic_rate_hz: args.haptic_rate,
+        delay_ms: args.delay_ms,
         duration_s: duration,
         ticks,
         truth: figures(&truth_f, &truth_f, &hand, &phases, &snaps),

@@ -26,8 +26,18 @@ fn hapbench(args: &[&str], json: &Path, plot: Option<&Path>) -> serde_json::Valu
 fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
     let dir = scratch_dir("hapbench-ex");
     let (series, samples) = (dir.join("series.csv"), dir.join("samples.csv"));
+    // Both with a 5 ms transport delay (`--delay-ms`): the samples file
+    // must show it, and the rates must still order the errors.
     let run = |rate: &str, extra: &[&str]| {
-        let mut args = vec!["extrapolation", "--sim-rate", rate, "--haptic-rate", "1000"];
+        let mut args = vec![
+            "extrapolation",
+            "--sim-rate",
+            rate,
+            "--haptic-rate",
+            "1000",
+            "--delay-ms",
+            "5",
+        ];
         args.extend_from_slice(extra);
         hapbench(&args, &dir.join(format!("ex{rate}.json")), Some(&dir))
     };
@@ -84,7 +94,8 @@ fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
 
 /// `--samples` and `--series` describe the same run: at every tick the
 /// constant hold renders exactly the force of the latest sample delivered
-/// by then, and the samples come one simulation period apart.
+/// by then, the samples come one simulation period apart, and each is
+/// delivered a period plus the 5 ms delay after its pose.
 fn constant_hold_renders_the_delivered_samples(series: &Path, samples: &Path) {
     let (sh, srows) = read_csv(samples);
     assert_eq!(sh.len(), 18, "{sh:?}");
@@ -96,6 +107,9 @@ fn constant_hold_renders_the_delivered_samples(series: &Path, samples: &Path) {
     assert!(srows.iter().any(|r| r[8] == 1.0), "no sample in contact");
     for w in srows.windows(2) {
         assert!((w[1][0] - w[0][0] - 0.02).abs() < 1e-9, "{w:?}");
+    }
+    for r in &srows {
+        assert!((r[0] - r[1] - 0.025).abs() < 1e-9, "{r:?}");
     }
     let (th, trows) = read_csv(series);
     let col = th
