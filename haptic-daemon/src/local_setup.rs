@@ -64,6 +64,8 @@ pub fn run_local_setup(
         &services::local_contact_service(&node, &session)?,
         services::FORCE_BUFFER_LATEST,
     )?;
+    // How long the last problem's inertia took to set up (ns).
+    let mut inertia_setup_ns = 0;
     while !shared.flags.rt_done.load(Ordering::Acquire) {
         let mut newest = None;
         while let Ok(Some(sample)) = sub.receive() {
@@ -85,11 +87,15 @@ pub fn run_local_setup(
         let mut inertial = false;
         if ok && setup.inertia {
             let tick_s = setup.tick_ns as f64 * 1e-9;
-            let first_s = first_step_s(msg.t_ns, monotonic_ns(), setup.tick_ns);
+            // The RT thread first renders it after this set-up: counted
+            // with the last one's duration.
+            let t0 = monotonic_ns();
+            let first_s = first_step_s(msg.t_ns, t0 + inertia_setup_ns, setup.tick_ns);
             match problem.set_inertia_from_wire(&msg, first_s, tick_s) {
                 Ok(with) => inertial = with,
                 Err(_) => ok = false,
             }
+            inertia_setup_ns = monotonic_ns().saturating_sub(t0);
         }
         drop(msg);
         if ok {

@@ -30,7 +30,8 @@ pub struct LocalOut {
     last_seq: u64,
     /// Problems published.
     pub published: u64,
-    /// Problems that could not be published.
+    /// Problems that could not be published, or were too old to be (a
+    /// stalled stiffness worker).
     pub dropped: u64,
 }
 
@@ -88,13 +89,14 @@ impl LocalOut {
         let seq = self.last_seq;
         let back = tools.steps().saturating_sub(lc.step);
         let taken_seq = seq.saturating_sub(back);
-        // Older than the times kept (a stalled worker): the last step's,
-        // which the daemon's age limit then judges.
-        let taken_ns = if (back as usize) < STEP_TIMES && back <= seq {
-            self.step_times_ns[taken_seq as usize % STEP_TIMES]
-        } else {
-            self.step_times_ns[seq as usize % STEP_TIMES]
-        };
+        // Older than the times kept (a stalled worker): its state is long
+        // gone and its time unknown; dropped (counted), never sent as new.
+        if back as usize >= STEP_TIMES || back > seq {
+            tools.recycle_local_contact(lc);
+            self.dropped += 1;
+            return;
+        }
+        let taken_ns = self.step_times_ns[taken_seq as usize % STEP_TIMES];
         let sent = match self.publisher.loan() {
             Ok(mut sample) => {
                 let msg: &mut LocalContactMsg = sample.payload_mut();

@@ -182,6 +182,9 @@ pub struct LocalProblem {
     trial_sd: Vec<f64>,
     /// Newton iterations left in this render (bounds the RT thread's time).
     budget: usize,
+    /// The last Newton run: whether it converged, and its iterations.
+    converged: bool,
+    iterated: usize,
     /// With a time budget ([`LocalProblem::set_time_budget`]): the most a
     /// render may take, and when this one started.
     time_budget: Option<std::time::Duration>,
@@ -323,6 +326,8 @@ impl LocalProblem {
             sstep: Vec::with_capacity(n),
             trial_sd: Vec::with_capacity(n),
             budget: 0,
+            converged: false,
+            iterated: 0,
             time_budget: None,
             render_started: None,
             selected: false,
@@ -547,6 +552,9 @@ impl LocalProblem {
                 self.selected_dx = dx;
             }
             if !self.newton(dx, &mut forces) {
+                // The state before this solve stays (the next tick starts
+                // from it, as when the others-touch check fails below).
+                self.delta.copy_from_slice(&self.start);
                 self.forces = forces;
                 if inertia {
                     self.end_first_step();
@@ -568,6 +576,15 @@ impl LocalProblem {
                 return None;
             }
             slack_m *= 4.0;
+        }
+        if inertia && !self.converged && self.iterated == 0 {
+            // The budget was spent before the step's first iteration (a
+            // render that started late): committing the unmoved state
+            // would stop every vertex (v = 0). This tick falls back; the
+            // next takes the same step again.
+            self.delta.copy_from_slice(&self.start);
+            self.forces = forces;
+            return None;
         }
         // No point outside the active ones touches: they are the force.
         let (_, tool, touching) = self.evaluate(&self.delta, dx, &mut forces, None);

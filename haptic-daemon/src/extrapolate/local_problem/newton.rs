@@ -58,9 +58,13 @@ impl LocalProblem {
     }
 
     /// Newton down Pi over the active points from the current delta
-    /// (warm start); false if no Hessian could be factored.
+    /// (warm start); false if no Hessian could be factored. Sets
+    /// `converged` (false: the iteration or time budget ran out first) and
+    /// `iterated` (the iterations taken).
     pub(super) fn newton(&mut self, dx: V3, forces: &mut [f64]) -> bool {
         let n = self.delta.len();
+        self.converged = false;
+        self.iterated = 0;
         // S delta once, exactly; then kept up to date with S step.
         self.sd.clear();
         for row in self.s.chunks_exact(n) {
@@ -74,6 +78,7 @@ impl LocalProblem {
                 break;
             }
             self.budget -= 1;
+            self.iterated += 1;
             // Gradient S delta + f0 - f(delta).
             self.grad.clear();
             self.grad.extend(
@@ -84,6 +89,7 @@ impl LocalProblem {
                     .map(|((s, f0), f)| s + f0 - f),
             );
             if self.grad.iter().all(|g| g.abs() < TOLERANCE_N) {
+                self.converged = true;
                 break;
             }
             // The Newton step with the full Hessian, or where that is no
@@ -124,12 +130,14 @@ impl LocalProblem {
             if !accepted {
                 // No descent left: a minimum to rounding.
                 self.energy(&self.delta, &self.sd, dx, forces);
+                self.converged = true;
                 return true;
             }
             std::mem::swap(&mut self.delta, &mut self.trial);
             std::mem::swap(&mut self.sd, &mut self.trial_sd);
             let moved = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())) * alpha;
             if moved < TOLERANCE_M {
+                self.converged = true;
                 break;
             }
         }

@@ -547,3 +547,20 @@ fn a_spent_time_budget_stops_the_iterations_and_a_generous_one_changes_nothing()
         "{resumed:?} vs {solved:?}"
     );
 }
+
+#[test]
+fn with_inertia_a_step_without_a_single_iteration_is_not_committed() {
+    // A render whose time budget is spent before the first iteration falls
+    // back (None) and leaves the state as it was; given time, the same
+    // step is then taken as by a problem that never ran out.
+    let (mut p, centre) = with_inertia(0.01, 10.0, 1e-3);
+    let mut twin = p.clone();
+    let down = [centre[0], centre[1], centre[2] - 2e-4];
+    let (vel, delta) = (p.vel.clone(), p.delta.clone());
+    p.set_time_budget(Some(std::time::Duration::ZERO));
+    assert!(p.solve(down).is_none());
+    assert_eq!((&p.vel, &p.delta), (&vel, &delta));
+    p.set_time_budget(None);
+    let (a, b) = (p.solve(down).unwrap().0, twin.solve(down).unwrap().0);
+    assert!(norm(sub(a, b)) < 1e-12, "{a:?} vs {b:?}");
+}

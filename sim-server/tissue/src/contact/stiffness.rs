@@ -122,8 +122,10 @@ pub(super) struct Solver {
     /// M times a vertex's three K^-1 columns (3 x 3n).
     weighted: Vec<Real>,
     /// The column mass's 3x3 blocks by vertex pair (lower id first),
-    /// emptied with `columns`.
+    /// emptied with `columns` and after a cut (`blocks_for`: the model's
+    /// `topology_changes` they were built at).
     mass_blocks: HashMap<(u32, u32), [Real; 9]>,
+    blocks_for: u64,
 }
 
 impl Solver {
@@ -146,6 +148,7 @@ impl Solver {
             unit: Vec::new(),
             weighted: Vec::new(),
             mass_blocks: HashMap::new(),
+            blocks_for: model.topology_changes(),
         };
         if model.vertex_count() <= MAX_FACTOR_VERTICES {
             out.factor = build(model, &out.dirichlet);
@@ -290,47 +293,53 @@ impl Solver {
         // so that they vectorise (each block 9 x 3n multiply-adds: all 300
         // blocks of 24 vertices of the liver took half of a core at a
         // problem every 8 ms).
+        // The blocks were built with the masses of one topology: a cut
+        // changes the masses at once (the factor, and the columns with it,
+        // only when its rebuild is done).
+        let topology = model.topology_changes();
+        if self.blocks_for != topology {
+            self.mass_blocks.clear();
+            self.blocks_for = topology;
+        }
         let (columns, blocks, weighted) =
             (&self.columns, &mut self.mass_blocks, &mut self.weighted);
         for (i, &a) in verts.iter().enumerate() {
-            let mut weighted_for = None;
+            // M times a's three columns, made once when a block is missing.
+            let mut weighted_ready = false;
             for (j, &b) in verts.iter().enumerate().skip(i) {
                 let key = (a.min(b), a.max(b));
-                let block = match blocks.get(&key) {
+                // Stored as (lo's axes) x (hi's axes).
+                let stored = match blocks.get(&key) {
                     Some(block) => *block,
                     None => {
-                        let (lo, hi) = key;
-                        if weighted_for != Some(lo) {
+                        if !weighted_ready {
                             weighted.clear();
                             for axis in 0..3 {
                                 weighted.extend(
-                                    flat(columns, n, lo, axis)
+                                    flat(columns, n, a, axis)
                                         .iter()
                                         .enumerate()
                                         .map(|(k, x)| m[k / 3] * x),
                                 );
                             }
-                            weighted_for = Some(lo);
+                            weighted_ready = true;
                         }
-                        let mut block = [0.0; 9];
+                        let mut ab = [0.0; 9];
                         for r in 0..3 {
                             let wr = &weighted[r * 3 * n..(r + 1) * 3 * n];
                             for c in 0..3 {
-                                block[3 * r + c] = dot(wr, flat(columns, n, hi, c));
+                                ab[3 * r + c] = dot(wr, flat(columns, n, b, c));
                             }
                         }
+                        let block = if a <= b { ab } else { transpose3(ab) };
                         blocks.insert(key, block);
                         block
                     }
                 };
-                // The block is (lo's axes) x (hi's axes).
+                let ab = if a <= b { stored } else { transpose3(stored) };
                 for r in 0..3 {
                     for c in 0..3 {
-                        let g = if a <= b {
-                            block[3 * r + c]
-                        } else {
-                            block[3 * c + r]
-                        };
+                        let g = ab[3 * r + c];
                         out[(3 * i + r) * nv + 3 * j + c] = g;
                         out[(3 * j + c) * nv + 3 * i + r] = g;
                     }
@@ -435,7 +444,14 @@ impl Solver {
             return;
         };
         let n = model.vertex_count();
-        if self.columns.len() + self.verts.len() > MAX_CACHED {
+        // Only the vertices not cached yet count: the compliance and the
+        // column mass of one problem ask for the same ones in turn.
+        let new = self
+            .verts
+            .iter()
+            .filter(|v| !self.columns.contains_key(v))
+            .count();
+        if self.columns.len() + new > MAX_CACHED {
             self.columns.clear();
             self.mass_blocks.clear();
         }
@@ -572,6 +588,11 @@ fn dot(a: &[Real], b: &[Real]) -> Real {
         }
     }
     (s[0] + s[1]) + (s[2] + s[3]) + tail
+}
+
+/// A 3x3 block (row-major) transposed.
+fn transpose3(b: [Real; 9]) -> [Real; 9] {
+    [b[0], b[3], b[6], b[1], b[4], b[7], b[2], b[5], b[8]]
 }
 
 /// Vertex `v`'s K^-1 column for `axis` among `columns` (n vertices) as
