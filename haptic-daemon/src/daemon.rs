@@ -35,6 +35,7 @@ use crate::extrapolate::{Extrapolator, ForceSample, Method};
 use crate::live::{Live, LiveConfig, LiveError, LiveGuard};
 use crate::math::is_finite;
 use crate::plausible::{Plausible, PlausibleConfig, PlausibleError, Verdict};
+use crate::pose_history::PoseHistory;
 use crate::rt::LatenessHistogram;
 use crate::safety::{PassivityConfig, PassivityError, Safety, SafetyConfig, SafetyState};
 use crate::slots::{Flags, PoseSlot};
@@ -54,6 +55,9 @@ pub struct Shared {
     pub flags: Flags,
     /// Latest pose for the I/O thread to publish.
     pub pose: PoseSlot,
+    /// The device's recent positions (the contact-problem set-up steps a
+    /// problem through them).
+    pub pose_history: PoseHistory,
     /// Ticks for the I/O thread (telemetry, recording, statistics).
     pub telemetry: ArrayQueue<TelemetryTick>,
     /// Ticks that did not fit in the queue (the I/O thread fell behind).
@@ -86,6 +90,7 @@ impl Shared {
         Self {
             flags: Flags::default(),
             pose: PoseSlot::default(),
+            pose_history: PoseHistory::default(),
             telemetry: ArrayQueue::new(queue.max(1)),
             telemetry_dropped: AtomicU64::new(0),
             samples: AtomicU64::new(0),
@@ -339,6 +344,7 @@ impl<D: Device> RtLoop<D> {
             self.last.buttons,
         );
         self.shared.wake_io();
+        self.shared.pose_history.push(now_ns, self.last.position_m);
         // 3. Force samples: drain, newest wins (the extrapolator keeps two);
         // samples faster than wall time are not rendered.
         let mut resumed = false;

@@ -17,6 +17,7 @@ pub mod live;
 pub mod local_setup;
 pub mod math;
 pub mod plausible;
+pub mod pose_history;
 pub mod record;
 pub mod rt;
 pub mod safety;

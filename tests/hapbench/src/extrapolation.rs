@@ -28,6 +28,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use haptic_daemon::extrapolate::local_problem::{LocalContactMsg, LocalProblem};
+use haptic_daemon::local_setup::{MAX_CATCH_UP, catch_up};
+use haptic_daemon::pose_history::PoseHistory;
 use sim_server::contact::LocalContact;
 use sim_server::wire::{LOCAL_EVERY_S, local_contact_into, local_contact_msg};
 
@@ -54,6 +56,10 @@ struct LocalRender<'a> {
     render_ns: Vec<u64>,
     /// Simulated time of the last problem taken (s).
     last_problem_s: Option<f64>,
+    /// The hand's positions at the ticks rendered so far, as the daemon's
+    /// RT thread records them, and scratch to read them back.
+    history: PoseHistory,
+    poses: Vec<(u64, [f64; 3])>,
 }
 
 impl<'a> LocalRender<'a> {
@@ -72,6 +78,8 @@ impl<'a> LocalRender<'a> {
             quasi_rendered: Vec::with_capacity(ticks),
             render_ns: Vec::with_capacity(ticks),
             last_problem_s: None,
+            history: PoseHistory::default(),
+            poses: Vec::with_capacity(MAX_CATCH_UP),
         }
     }
 
@@ -112,17 +120,18 @@ impl<'a> LocalRender<'a> {
             if self.quasi.set_from_wire(&self.msg).is_err() {
                 self.quasi.clear();
             }
-            // The first implicit step spans the problem's age at the first
-            // tick it serves (from its state's time, as the daemon's
-            // set-up thread counts it).
-            let arrival_s = (j + 1) as f64 * self.sim_s + self.delay_s;
-            let first_tick = ((arrival_s - 1e-12) / self.haptic_s).ceil() * self.haptic_s;
-            let age_s = (first_tick - j as f64 * self.sim_s).max(self.haptic_s);
+            // Set up as the daemon's set-up thread does: stepped through
+            // the hand's positions since the problem's state (the ticks
+            // rendered so far), the first render going on from there.
             let ok = self.lp.set_from_wire(&self.msg).is_ok()
-                && self
-                    .lp
-                    .set_inertia_from_wire(&self.msg, age_s, self.haptic_s)
-                    .is_ok();
+                && catch_up(
+                    &mut self.lp,
+                    &self.msg,
+                    &self.history,
+                    self.haptic_s,
+                    &mut self.poses,
+                )
+                .is_ok();
             if !ok {
                 self.lp.clear();
             }
@@ -135,6 +144,9 @@ impl<'a> LocalRender<'a> {
             && (self.rendered.len() as f64) * self.haptic_s
                 < (j + 1) as f64 * self.sim_s + self.delay_s - 1e-12
         {
+            let k = self.rendered.len();
+            self.history
+                .push(ns(k as f64 * self.haptic_s), self.hand[k]);
             self.rendered.push([0.0; 3]);
             self.quasi_rendered.push([0.0; 3]);
         }
@@ -145,6 +157,7 @@ impl<'a> LocalRender<'a> {
         {
             let k = self.rendered.len();
             let (p, now) = (self.hand[k], ns(k as f64 * self.haptic_s));
+            self.history.push(now, p);
             let t0 = std::time::Instant::now();
             let f = self
                 .lp

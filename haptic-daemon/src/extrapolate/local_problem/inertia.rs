@@ -6,7 +6,7 @@
 //! the history of the problem's force that re-bases it on a newer sample.
 
 use super::dense::{cholesky, cholesky_inverse};
-use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError};
+use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError, RENDER_ITERATIONS};
 use crate::math::{V3, ZERO, add, scale, sub};
 
 impl LocalProblem {
@@ -123,6 +123,30 @@ impl LocalProblem {
         }
         cholesky_inverse(&self.w_factor, &mut self.m, w, n);
         true
+    }
+
+    /// With inertia, off the RT thread: one time step of the problem with
+    /// the tool at `tool_m` at `t_ns` (a position the hand took since the
+    /// problem's state), kept in the history as a render's would be, with
+    /// the full iteration budget and no time budget. The set-up thread
+    /// steps a new problem through the hand's recent positions so that the
+    /// RT thread goes on from now, one tick a step, where one implicit step
+    /// over the whole age damped the problem's transient (measured:
+    /// `hapbench extrapolation`, README). False if the step failed (the
+    /// problem is then better not used).
+    pub fn catch_up(&mut self, t_ns: u64, tool_m: V3) -> bool {
+        if !self.has_inertia() {
+            return false;
+        }
+        self.budget = RENDER_ITERATIONS;
+        self.render_started = None;
+        match self.solve_within_budget(tool_m) {
+            Some((change, _)) => {
+                self.remember(t_ns, change);
+                true
+            }
+            None => false,
+        }
     }
 
     /// Keeps a tick's force change (with inertia).

@@ -564,3 +564,48 @@ fn with_inertia_a_step_without_a_single_iteration_is_not_committed() {
     let (a, b) = (p.solve(down).unwrap().0, twin.solve(down).unwrap().0);
     assert!(norm(sub(a, b)) < 1e-12, "{a:?} vs {b:?}");
 }
+
+#[test]
+fn catching_up_through_the_hands_positions_equals_rendering_them() {
+    // The set-up thread's catch-up steps and the RT thread's renders are
+    // the same time steps: a problem caught up through five ticks renders
+    // the sixth as one that rendered all six.
+    let (mut caught, centre) = with_inertia(0.01, 10.0, 1e-3);
+    let mut rendered = caught.clone();
+    caught.seq = 4;
+    rendered.seq = 4;
+    let own = sample_at(4, 0, centre, [0.0, 0.0, 0.5]);
+    let ms = 1_000_000;
+    let path = |k: u64| {
+        [
+            centre[0] + 1e-4 * k as f64,
+            centre[1],
+            centre[2] - 3e-5 * k as f64,
+        ]
+    };
+    for k in 1..=5 {
+        assert!(caught.catch_up(k * ms, path(k)));
+        rendered
+            .render(&own, k * ms, path(k), f64::INFINITY)
+            .unwrap();
+    }
+    let a = caught.render(&own, 6 * ms, path(6), f64::INFINITY).unwrap();
+    let b = rendered
+        .render(&own, 6 * ms, path(6), f64::INFINITY)
+        .unwrap();
+    assert!(norm(sub(a, b)) < 1e-12, "{a:?} vs {b:?}");
+    // A newer sample re-bases on the caught-up ticks as on rendered ones.
+    let newer = sample_at(5, 3 * ms, centre, [0.0, 0.0, 0.6]);
+    let (a, b) = (
+        caught
+            .render(&newer, 7 * ms, path(7), f64::INFINITY)
+            .unwrap(),
+        rendered
+            .render(&newer, 7 * ms, path(7), f64::INFINITY)
+            .unwrap(),
+    );
+    assert!(norm(sub(a, b)) < 1e-12, "{a:?} vs {b:?}");
+    // Without inertia there is nothing to catch up.
+    let (mut quasi, _) = press(0.001);
+    assert!(!quasi.catch_up(ms, centre));
+}
