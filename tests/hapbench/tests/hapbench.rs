@@ -224,7 +224,7 @@ fn box_truth_holds(scene: &str) {
             assert!(e <= 0.0, "{m} puts {e} J into the hand\n{v}");
         }
         // With the tissue's inertia it also follows the snaps the
-        // quasi-static problem takes at once (measured at 60 Hz: 0.65x the
+        // quasi-static problem takes at once (measured at 60 Hz: 0.60x the
         // constant hold's RMS error, quasi-static 0.91x).
         let rms = |m: &str| num(&methods[m]["rms_error_n"], m);
         assert!(
