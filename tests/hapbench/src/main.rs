@@ -4,6 +4,7 @@
 
 mod extrapolation;
 mod latency;
+mod local_render;
 mod phases;
 mod plot;
 mod progress;

@@ -53,6 +53,8 @@ use crate::tensor_mass::ElasticModel;
 use std::collections::HashMap;
 use std::thread::JoinHandle;
 
+mod local_solves;
+
 /// Above this many vertices the stiffness uses the diagonal blocks only.
 pub const MAX_FACTOR_VERTICES: usize = 60_000;
 /// At most this many vertices' columns are kept (about 150 kB each on the
@@ -219,134 +221,6 @@ impl Solver {
         } else {
             self.effective(model, snap, tool, |p| p.spring)
         }
-    }
-
-    /// Adds the compliance at `lc`'s vertices and, when its velocities were
-    /// taken (see [`super::LocalSpec::inertia`]), the column mass; false
-    /// without a factor.
-    pub(super) fn solve_local(&mut self, model: &ElasticModel, lc: &mut LocalContact) -> bool {
-        let LocalContact {
-            vertices,
-            compliance_m_per_n,
-            column_mass,
-            velocities_m_per_s,
-            ..
-        } = lc;
-        column_mass.clear();
-        if !self.compliance(model, vertices, compliance_m_per_n) {
-            return false;
-        }
-        if !velocities_m_per_s.is_empty() && !self.column_mass(model, vertices, column_mass) {
-            velocities_m_per_s.clear();
-        }
-        true
-    }
-
-    /// W = (K^-1)_VV (m/N, row-major, 3|V| x 3|V|) of the vertices
-    /// `verts` into `out`; false without a factor (the diagonal blocks
-    /// alone would not be the tissue's compliance).
-    pub(super) fn compliance(
-        &mut self,
-        model: &ElasticModel,
-        verts: &[u32],
-        out: &mut Vec<Real>,
-    ) -> bool {
-        self.refresh(model);
-        if self.factor.is_none() {
-            return false;
-        }
-        self.verts.clear();
-        self.verts.extend_from_slice(verts);
-        let nv = 3 * verts.len();
-        self.fill_s(model, nv);
-        out.clear();
-        out.extend_from_slice(&self.s);
-        true
-    }
-
-    /// G = C_V^T M C_V (m^2/N^2 kg, row-major 3|V| square): the lumped
-    /// masses seen through the static response columns C_V = K^-1 P_V^T of
-    /// `verts` (the Guyan reduction of the tissue's mass onto V is
-    /// W^-1 G W^-1); false without a factor.
-    pub(super) fn column_mass(
-        &mut self,
-        model: &ElasticModel,
-        verts: &[u32],
-        out: &mut Vec<Real>,
-    ) -> bool {
-        self.refresh(model);
-        if self.factor.is_none() {
-            return false;
-        }
-        self.verts.clear();
-        self.verts.extend_from_slice(verts);
-        self.ensure_columns(model);
-        let n = model.vertex_count();
-        let m = model.masses_kg();
-        let nv = 3 * verts.len();
-        out.clear();
-        out.resize(nv * nv, 0.0);
-        // By vertex pairs: a pair's 3x3 block is kept (the columns do not
-        // change while the factor stands) and a problem 8 ms after the last
-        // mostly has the same vertices; a new block is M times a's three
-        // columns dotted with b's, over flat slices with four partial sums
-        // so that they vectorise (each block 9 x 3n multiply-adds: all 300
-        // blocks of 24 vertices of the liver took half of a core at a
-        // problem every 8 ms).
-        // The blocks were built with the masses of one topology: a cut
-        // changes the masses at once (the factor, and the columns with it,
-        // only when its rebuild is done).
-        let topology = model.topology_changes();
-        if self.blocks_for != topology {
-            self.mass_blocks.clear();
-            self.blocks_for = topology;
-        }
-        let (columns, blocks, weighted) =
-            (&self.columns, &mut self.mass_blocks, &mut self.weighted);
-        for (i, &a) in verts.iter().enumerate() {
-            // M times a's three columns, made once when a block is missing.
-            let mut weighted_ready = false;
-            for (j, &b) in verts.iter().enumerate().skip(i) {
-                let key = (a.min(b), a.max(b));
-                // Stored as (lo's axes) x (hi's axes).
-                let stored = match blocks.get(&key) {
-                    Some(block) => *block,
-                    None => {
-                        if !weighted_ready {
-                            weighted.clear();
-                            for axis in 0..3 {
-                                weighted.extend(
-                                    flat(columns, n, a, axis)
-                                        .iter()
-                                        .enumerate()
-                                        .map(|(k, x)| m[k / 3] * x),
-                                );
-                            }
-                            weighted_ready = true;
-                        }
-                        let mut ab = [0.0; 9];
-                        for r in 0..3 {
-                            let wr = &weighted[r * 3 * n..(r + 1) * 3 * n];
-                            for c in 0..3 {
-                                ab[3 * r + c] = dot(wr, flat(columns, n, b, c));
-                            }
-                        }
-                        let block = if a <= b { ab } else { transpose3(ab) };
-                        blocks.insert(key, block);
-                        block
-                    }
-                };
-                let ab = if a <= b { stored } else { transpose3(stored) };
-                for r in 0..3 {
-                    for c in 0..3 {
-                        let g = ab[3 * r + c];
-                        out[(3 * i + r) * nv + 3 * j + c] = g;
-                        out[(3 * j + c) * nv + 3 * i + r] = g;
-                    }
-                }
-            }
-        }
-        true
     }
 
     /// K_eff with each point's Hessian `hessian(p)`.
@@ -570,35 +444,6 @@ fn solve_in_place(m: &mut [Real], b: &mut [Real], n: usize, k: usize) -> bool {
         }
     }
     true
-}
-
-/// The dot product of two equal-length slices, four partial sums.
-fn dot(a: &[Real], b: &[Real]) -> Real {
-    let mut s = [0.0; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: Real = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for i in 0..4 {
-            s[i] += x[i] * y[i];
-        }
-    }
-    (s[0] + s[1]) + (s[2] + s[3]) + tail
-}
-
-/// A 3x3 block (row-major) transposed.
-fn transpose3(b: [Real; 9]) -> [Real; 9] {
-    [b[0], b[3], b[6], b[1], b[4], b[7], b[2], b[5], b[8]]
-}
-
-/// Vertex `v`'s K^-1 column for `axis` among `columns` (n vertices) as
-/// flat reals.
-fn flat(columns: &HashMap<u32, Vec<Vec3>>, n: usize, v: u32, axis: usize) -> &[Real] {
-    bytemuck::cast_slice::<Vec3, Real>(&columns[&v][axis * n..(axis + 1) * n])
 }
 
 #[cfg(test)]
