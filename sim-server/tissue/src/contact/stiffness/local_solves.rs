@@ -27,8 +27,8 @@ impl Solver {
         if !self.compliance(model, vertices, compliance_m_per_n) {
             return false;
         }
-        if !velocities_m_per_s.is_empty() && !self.column_mass(model, vertices, column_mass) {
-            velocities_m_per_s.clear();
+        if !velocities_m_per_s.is_empty() {
+            self.column_mass(model, column_mass);
         }
         true
     }
@@ -36,12 +36,7 @@ impl Solver {
     /// W = (K^-1)_VV (m/N, row-major, 3|V| x 3|V|) of the vertices
     /// `verts` into `out`; false without a factor (the diagonal blocks
     /// alone would not be the tissue's compliance).
-    pub(in crate::contact) fn compliance(
-        &mut self,
-        model: &ElasticModel,
-        verts: &[u32],
-        out: &mut Vec<Real>,
-    ) -> bool {
+    fn compliance(&mut self, model: &ElasticModel, verts: &[u32], out: &mut Vec<Real>) -> bool {
         self.refresh(model);
         if self.factor.is_none() {
             return false;
@@ -57,21 +52,11 @@ impl Solver {
 
     /// G = C_V^T M C_V (m^2/N^2 kg, row-major 3|V| square): the lumped
     /// masses seen through the static response columns C_V = K^-1 P_V^T of
-    /// `verts` (the Guyan reduction of the tissue's mass onto V is
-    /// W^-1 G W^-1); false without a factor.
-    pub(in crate::contact) fn column_mass(
-        &mut self,
-        model: &ElasticModel,
-        verts: &[u32],
-        out: &mut Vec<Real>,
-    ) -> bool {
-        self.refresh(model);
-        if self.factor.is_none() {
-            return false;
-        }
-        self.verts.clear();
-        self.verts.extend_from_slice(verts);
-        self.ensure_columns(model);
+    /// the vertices [`Solver::compliance`] was just given (its factor, its
+    /// vertices and their columns: the Guyan reduction of the tissue's mass
+    /// onto V is W^-1 G W^-1).
+    fn column_mass(&mut self, model: &ElasticModel, out: &mut Vec<Real>) {
+        let verts = &self.verts;
         let n = model.vertex_count();
         let m = model.masses_kg();
         let nv = 3 * verts.len();
@@ -137,7 +122,6 @@ impl Solver {
                 }
             }
         }
-        true
     }
 }
 
