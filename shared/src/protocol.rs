@@ -191,8 +191,9 @@ pub struct LocalContactMsg {
     pub tool: u32,
     /// `seq` of the force message of the step it was taken at.
     pub seq: u64,
-    /// `t_ns` of that force message: when that step finished
-    /// (`CLOCK_MONOTONIC`, ns).
+    /// The time of its state (`CLOCK_MONOTONIC`, ns): the device time of
+    /// the pose that step used (`PoseMsg::t_ns`), or the step's finish (its
+    /// force message's `t_ns`) when no pose drove it.
     pub t_ns: u64,
     /// The tool position the step used (m).
     pub tool_position_m: [f64; 3],

@@ -14,8 +14,8 @@ use sim_server::wire::{local_contact_msg, local_spec};
 
 /// How often the subscribers are counted (ns).
 const CHECK_EVERY_NS: u64 = 1_000_000_000;
-/// The finish times of this many recent steps are kept, to stamp a
-/// problem with its own step's (the worker hands it over a few steps on).
+/// The state times of this many recent steps are kept, to stamp a problem
+/// with its own step's (the worker hands it over a few steps on).
 const STEP_TIMES: usize = 64;
 
 /// The stream's publisher and whether problems are being made.
@@ -24,8 +24,9 @@ pub struct LocalOut {
     publisher: LocalContactPublisher,
     wanted: bool,
     checked_ns: u64,
-    /// `t_ns` of the force messages, by `seq` modulo [`STEP_TIMES`].
-    step_times_ns: [u64; STEP_TIMES],
+    /// The time of each step's state (see [`LocalOut::after_sample`]), by
+    /// its force message's `seq` modulo [`STEP_TIMES`].
+    state_times_ns: [u64; STEP_TIMES],
     /// `seq` of the newest force message.
     last_seq: u64,
     /// Problems published.
@@ -45,7 +46,7 @@ impl LocalOut {
             publisher,
             wanted: false,
             checked_ns: 0,
-            step_times_ns: [0; STEP_TIMES],
+            state_times_ns: [0; STEP_TIMES],
             last_seq: 0,
             published: 0,
             dropped: 0,
@@ -57,11 +58,15 @@ impl LocalOut {
         self.wanted
     }
 
-    /// After a step whose force message had `seq` and `now_ns` (its `t_ns`):
+    /// After a step whose force message had `seq` and `now_ns` (its `t_ns`),
+    /// its state being that of `state_ns` (the device time of the pose the
+    /// step used: the step held the tool there, so its state is the
+    /// tissue's answer to the hand where it was then, a whole period
+    /// before the sample for a simulation whose step takes its period):
     /// asks the tools for problems while someone listens, and publishes a
     /// finished one ([`LocalOut::publish_ready`]).
-    pub fn after_sample(&mut self, tools: &mut Tools, seq: u64, now_ns: u64) {
-        self.step_times_ns[seq as usize % STEP_TIMES] = now_ns;
+    pub fn after_sample(&mut self, tools: &mut Tools, seq: u64, now_ns: u64, state_ns: u64) {
+        self.state_times_ns[seq as usize % STEP_TIMES] = state_ns.min(now_ns);
         self.last_seq = seq;
         if now_ns.saturating_sub(self.checked_ns) >= CHECK_EVERY_NS {
             self.checked_ns = now_ns;
@@ -76,8 +81,8 @@ impl LocalOut {
 
     /// Publishes the newest finished problem, if any (after a step, and
     /// between steps as soon as the stiffness worker has it: the run loop
-    /// looks while it waits), stamped with the `seq` and `t_ns` of the step
-    /// it was taken at (its state is that step's). A problem that cannot be
+    /// looks while it waits), stamped with the `seq` of the step it was
+    /// taken at and that step's state time. A problem that cannot be
     /// published is dropped and counted (the daemon falls back to
     /// `local-normal` without it); it never stops the simulation.
     pub fn publish_ready(&mut self, tools: &mut Tools) {
@@ -96,7 +101,7 @@ impl LocalOut {
             self.dropped += 1;
             return;
         }
-        let taken_ns = self.step_times_ns[taken_seq as usize % STEP_TIMES];
+        let taken_ns = self.state_times_ns[taken_seq as usize % STEP_TIMES];
         let sent = match self.publisher.loan() {
             Ok(mut sample) => {
                 let msg: &mut LocalContactMsg = sample.payload_mut();

@@ -270,8 +270,12 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             .record(monotonic_ns().saturating_sub(self.woke_ns));
         // After the force sample: the problem reaches the daemon later
         // than the force it explains, never before.
-        self.local_out
-            .after_sample(&mut self.contacts, s.samples_published - 1, now);
+        self.local_out.after_sample(
+            &mut self.contacts,
+            s.samples_published - 1,
+            now,
+            pose.map_or(now, |p| p.t_ns),
+        );
         self.poses.check_publishers(&self.node, monotonic_ns());
         // Viewer: topology when it changed, positions at the viewer rate.
         if s.steps.is_multiple_of(self.frame_every) {
