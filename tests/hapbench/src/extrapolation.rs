@@ -128,6 +128,9 @@ struct Report {
     /// `local-problem`: wall time of one tick's render (us) over the
     /// ticks it solved, p50 / p99 / max (this machine, this run).
     local_problem_render_us: [f64; 3],
+    /// `local-problem`: wall time of a problem's set-up with its catch-up
+    /// (us), p50 / p99 / max: the daemon's set-up thread's work.
+    local_problem_setup_us: [f64; 3],
 }
 
 fn scene_source(path: Option<&Path>) -> Result<SceneSource> {
@@ -372,15 +375,8 @@ pub fn run(args: &Args) -> Result<()> {
     // Every extrapolator but `local-problem` from the samples alone; that
     // one was rendered during the simulation.
     local.rendered.resize(ticks, [0.0; 3]);
-    let render_us = {
-        let mut t = std::mem::take(&mut local.render_ns);
-        t.sort_unstable();
-        let q = |f: f64| {
-            t.get(((t.len() as f64 - 1.0) * f) as usize)
-                .map_or(0.0, |x| *x as f64 * 1e-3)
-        };
-        [q(0.5), q(0.99), q(1.0)]
-    };
+    let render_us = percentiles_us(std::mem::take(&mut local.render_ns));
+    let setup_us = percentiles_us(std::mem::take(&mut local.setup_ns));
     let mut local_rendered = Some(std::mem::take(&mut local.rendered));
     {
         let mut rendered = std::mem::take(&mut local.quasi_rendered);
@@ -442,6 +438,7 @@ pub fn run(args: &Args) -> Result<()> {
         truth_dropout_ticks: dropouts(&truth_f, h),
         truth_snap_ticks: snaps.iter().filter(|n| **n).count(),
         local_problem_render_us: render_us,
+        local_problem_setup_us: setup_us,
         phase_ticks: phases.iter().fold(BTreeMap::new(), |mut m, p| {
             *m.entry(p.name()).or_insert(0) += 1;
             m
@@ -481,10 +478,13 @@ pub fn run(args: &Args) -> Result<()> {
         println!();
     }
     println!(
-        "\nlocal-problem: a tick's render {:.1} us p50, {:.1} us p99, {:.1} us max",
+        "\nlocal-problem: a tick's render {:.1} us p50, {:.1} us p99, {:.1} us max; a problem's set-up with its catch-up {:.0} / {:.0} / {:.0} us",
         report.local_problem_render_us[0],
         report.local_problem_render_us[1],
-        report.local_problem_render_us[2]
+        report.local_problem_render_us[2],
+        report.local_problem_setup_us[0],
+        report.local_problem_setup_us[1],
+        report.local_problem_setup_us[2]
     );
     println!(
         "\ntruth: max |F| {:.3} N, {} dropout ticks, {} ticks near snaps; {} vs {} sub-steps per tick differ by {:.4} N RMS",
@@ -538,4 +538,15 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// p50, p99 and the largest of durations (ns) in microseconds (zeros when
+/// there are none).
+fn percentiles_us(mut t: Vec<u64>) -> [f64; 3] {
+    t.sort_unstable();
+    let q = |f: f64| {
+        t.get(((t.len() as f64 - 1.0) * f) as usize)
+            .map_or(0.0, |x| *x as f64 * 1e-3)
+    };
+    [q(0.5), q(0.99), q(1.0)]
 }

@@ -31,6 +31,9 @@ pub(crate) struct LocalRender<'a> {
     /// Wall time of each tick's render with inertia (ns), what the RT
     /// thread pays.
     pub(crate) render_ns: Vec<u64>,
+    /// Wall time of each problem's set-up with its catch-up (ns), what the
+    /// daemon's set-up thread pays.
+    pub(crate) setup_ns: Vec<u64>,
     /// Simulated time of the last problem taken (s).
     last_problem_s: Option<f64>,
     /// The hand's positions at the ticks rendered so far, as the daemon's
@@ -60,6 +63,7 @@ impl<'a> LocalRender<'a> {
             rendered: Vec::with_capacity(ticks),
             quasi_rendered: Vec::with_capacity(ticks),
             render_ns: Vec::with_capacity(ticks),
+            setup_ns: Vec::new(),
             last_problem_s: None,
             history: PoseHistory::default(),
             poses: Vec::with_capacity(MAX_CATCH_UP),
@@ -83,8 +87,8 @@ impl<'a> LocalRender<'a> {
             ..*sample
         };
         // The problems and the samples they render from are stamped with
-        // the time of their state, as live (where a step publishes within
-        // its cost): here the pose's time, a period before delivery.
+        // the time of their state, as the live server stamps a problem:
+        // the pose's time (here a period before delivery).
         let stated = ForceSample {
             t_ns: ns(j as f64 * self.sim_s),
             ..delivered
@@ -106,6 +110,7 @@ impl<'a> LocalRender<'a> {
             // Set up as the daemon's set-up thread does: stepped through
             // the hand's positions since the problem's state (the ticks
             // rendered so far), the first render going on from there.
+            let t0 = std::time::Instant::now();
             let ok = self.lp.set_from_wire(&self.msg).is_ok()
                 && catch_up(
                     &mut self.lp,
@@ -115,6 +120,7 @@ impl<'a> LocalRender<'a> {
                     &mut self.poses,
                 )
                 .is_ok();
+            self.setup_ns.push(t0.elapsed().as_nanos() as u64);
             if !ok {
                 self.lp.clear();
             }
