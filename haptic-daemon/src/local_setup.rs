@@ -23,7 +23,7 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 /// How long the thread sleeps when no problem came (the simulation sends
-/// one about every 4 ms).
+/// one at most every 8 ms).
 const POLL: Duration = Duration::from_millis(1);
 
 /// How the set-up thread treats the problems.
@@ -61,9 +61,8 @@ pub fn catch_up(
     tick_s: f64,
     poses: &mut Vec<(u64, [f64; 3])>,
 ) -> Result<bool, LocalProblemError> {
-    if !history.since(msg.t_ns, MAX_CATCH_UP, poses) {
-        poses.clear();
-    }
+    // Positions overwritten while read come back empty: no catch-up.
+    history.since(msg.t_ns, MAX_CATCH_UP, poses);
     let first_s = poses.first().map_or(tick_s, |(t, _)| {
         (t.saturating_sub(msg.t_ns) as f64 * 1e-9).max(tick_s)
     });

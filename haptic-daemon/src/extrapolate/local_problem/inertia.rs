@@ -6,7 +6,7 @@
 //! the history of the problem's force that re-bases it on a newer sample.
 
 use super::dense::{cholesky, cholesky_inverse};
-use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError, RENDER_ITERATIONS};
+use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError};
 use crate::math::{V3, ZERO, add, scale, sub};
 
 impl LocalProblem {
@@ -133,13 +133,12 @@ impl LocalProblem {
     /// RT thread goes on from now, one tick a step, where one implicit step
     /// over the whole age damped the problem's transient (measured:
     /// `hapbench extrapolation`, README). False if the step failed (the
-    /// problem is then better not used).
+    /// state before it stands; the set-up stops catching up there).
     pub fn catch_up(&mut self, t_ns: u64, tool_m: V3) -> bool {
         if !self.has_inertia() {
             return false;
         }
-        self.budget = RENDER_ITERATIONS;
-        self.render_started = None;
+        self.begin_solve(false);
         match self.solve_within_budget(tool_m) {
             Some((change, _)) => {
                 self.remember(t_ns, change);

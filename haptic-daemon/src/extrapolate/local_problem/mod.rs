@@ -361,6 +361,16 @@ impl LocalProblem {
         self.time_budget = budget;
     }
 
+    /// A new solve's budgets: [`RENDER_ITERATIONS`] iterations and, if
+    /// `timed` and a time budget is set, the clock started.
+    pub(super) fn begin_solve(&mut self, timed: bool) {
+        self.budget = RENDER_ITERATIONS;
+        self.render_started = self
+            .time_budget
+            .filter(|_| timed)
+            .map(|_| std::time::Instant::now());
+    }
+
     /// Whether this render's time budget is spent.
     pub(super) fn out_of_time(&self) -> bool {
         match (self.time_budget, self.render_started) {
@@ -379,8 +389,7 @@ impl LocalProblem {
     /// solve fails (then the caller holds the sample). The second value
     /// says whether any point touches the tool there.
     pub fn solve(&mut self, tool_m: V3) -> Option<(V3, bool)> {
-        self.budget = RENDER_ITERATIONS;
-        self.render_started = self.time_budget.map(|_| std::time::Instant::now());
+        self.begin_solve(true);
         self.solve_within_budget(tool_m)
     }
 

@@ -2,7 +2,7 @@
 //! and the problem solved (or stepped) for the tool's position, re-based
 //! on a sample newer than the problem, capped.
 
-use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS, RENDER_ITERATIONS};
+use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS};
 use crate::extrapolate::ForceSample;
 use crate::math::{V3, ZERO, add, norm, scale, spectral_norm, sub};
 
@@ -39,8 +39,7 @@ impl LocalProblem {
             return None;
         }
         // One budget for the whole tick.
-        self.budget = RENDER_ITERATIONS;
-        self.render_started = self.time_budget.map(|_| std::time::Instant::now());
+        self.begin_solve(true);
         // Quasi-static, the base first (its solve moves the warm start);
         // with inertia after this tick's step, which the history then has.
         let inertia = !self.m_red.is_empty();
