@@ -1,9 +1,9 @@
-//! Corotational elements four at a time: the same rotation, force
+//! Corotational elements a block of lanes at a time: the same rotation, force
 //! correction and tangent bound as the scalar path of `large_strain`
 //! (`nonlinear::extract_rotation`, then P = R sigma(sym(R^T F) - I) minus
 //! the linear stress), written lane by lane ([`super::lanes`]).
 //!
-//! The rotation iterations run on all four lanes together, each lane
+//! The rotation iterations run on all lanes together, each lane
 //! masked once it has converged (or met a NaN), so every lane takes exactly
 //! the iterations the scalar path would: the block costs the slowest lane's
 //! count (warm-started, one or two). The Newton step needs (tr S I - S)^-1,
@@ -17,36 +17,48 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, abs, add, fma, gradient, identity_plus, lanes, mask, mat, matmul, mul,
-    row_abs, scatter, splat, stress, sub, vec3, zero,
+    L, LaneBlock, M, Scalar, abs, add, fma, gradient, lanes, mask, mat, matmul, mul, row_abs,
+    scatter, splat, stress, sub, vec3, zero,
 };
 use super::nonlinear::{ROTATION_MAX_ITER, ROTATION_TOL_RAD};
 use crate::math::Real;
 use glam::DQuat;
 
 /// A quaternion per lane: x, y, z, w.
-type Q = [L; 4];
+type Q<S, const N: usize> = [L<S, N>; 4];
 
-/// The rotation matrix of unit quaternions (glam's `Mat3::from_quat`),
-/// row-major.
+/// R - I for the rotation matrix R of unit quaternions (glam's
+/// `Mat3::from_quat` without its ones), row-major. Everything downstream is
+/// written in differences from the identity (R - I, R^T F - I): for small
+/// strains and rotations these are small numbers computed without
+/// cancelling against 1, which is what lets the f32 lanes keep the
+/// strain's digits (with R and F themselves, f32's 6e-8 near 1 was a
+/// 1e-5 error in the force of a 1% strain).
 #[inline(always)]
-fn rotation(q: &Q) -> M {
+fn rotation_minus_identity<S: Scalar, const N: usize>(q: &Q<S, N>) -> M<S, N> {
     let [x, y, z, w] = *q;
     let (x2, y2, z2) = (add(x, x), add(y, y), add(z, z));
     let (xx, yy, zz) = (mul(x, x2), mul(y, y2), mul(z, z2));
     let (xy, xz, yz) = (mul(x, y2), mul(x, z2), mul(y, z2));
     let (wx, wy, wz) = (mul(w, x2), mul(w, y2), mul(w, z2));
-    let one = splat(1.0);
+    let zero = splat(0.0);
     [
-        [sub(one, add(yy, zz)), sub(xy, wz), add(xz, wy)],
-        [add(xy, wz), sub(one, add(xx, zz)), sub(yz, wx)],
-        [sub(xz, wy), add(yz, wx), sub(one, add(xx, yy))],
+        [sub(zero, add(yy, zz)), sub(xy, wz), add(xz, wy)],
+        [add(xy, wz), sub(zero, add(xx, zz)), sub(yz, wx)],
+        [sub(xz, wy), add(yz, wx), sub(zero, add(xx, yy))],
     ]
+}
+
+/// G = R^T (I + H) - I - H = (R - I)^T + (R - I)^T H, from `rmi` = R - I.
+#[inline(always)]
+fn turned_part<S: Scalar, const N: usize>(rmi: &M<S, N>, h: &M<S, N>) -> M<S, N> {
+    let t = transpose_mul(rmi, h);
+    mat(|r, c| add(rmi[c][r], t[r][c]))
 }
 
 /// a^T b for lane matrices.
 #[inline(always)]
-fn transpose_mul(a: &M, b: &M) -> M {
+fn transpose_mul<S: Scalar, const N: usize>(a: &M<S, N>, b: &M<S, N>) -> M<S, N> {
     let mut c = zero();
     for r in 0..3 {
         for col in 0..3 {
@@ -60,33 +72,42 @@ fn transpose_mul(a: &M, b: &M) -> M {
 
 /// Per lane: `if mask { a } else { b }`.
 #[inline(always)]
-fn select(mask: [bool; 4], a: L, b: L) -> L {
+fn select<S: Scalar, const N: usize>(mask: [bool; N], a: L<S, N>, b: L<S, N>) -> L<S, N> {
     lanes(|i| if mask[i] { a[i] } else { b[i] })
 }
 
 /// One rotation step of every active lane (`nonlinear::extract_rotation`'s
 /// loop body): updates `q` where `active`, and returns which lanes go on.
 #[inline(always)]
-fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
-    let a = transpose_mul(&rotation(q), f);
+fn rotation_step<S: Scalar, const N: usize>(
+    h: &M<S, N>,
+    q: &mut Q<S, N>,
+    active: [bool; N],
+) -> [bool; N] {
+    // A - I with A = R^T F: its skew part is the residual, its symmetric
+    // part B = S - I.
+    let g = turned_part(&rotation_minus_identity(q), h);
+    let a: M<S, N> = mat(|r, c| add(g[r][c], h[r][c]));
     let axial = [
         sub(a[2][1], a[1][2]),
         sub(a[0][2], a[2][0]),
         sub(a[1][0], a[0][1]),
     ];
     let half = splat(0.5);
-    let s: M = mat(|r, c| mul(half, add(a[r][c], a[c][r])));
-    let tr = add(add(s[0][0], s[1][1]), s[2][2]);
-    // m = tr S I - S, symmetric.
-    let m: M = mat(|r, c| {
-        let neg = mul(splat(-1.0), s[r][c]);
-        if r == c { add(tr, neg) } else { neg }
+    let b: M<S, N> = mat(|r, c| mul(half, add(a[r][c], a[c][r])));
+    let tr_b = add(add(b[0][0], b[1][1]), b[2][2]);
+    // tr S = 3 + tr B; m = tr S I - S = (2 + tr B) I - B, symmetric.
+    let tr = add(tr_b, splat(3.0));
+    let diag = add(tr_b, splat(2.0));
+    let m: M<S, N> = mat(|r, c| {
+        let neg = mul(splat(-1.0), b[r][c]);
+        if r == c { add(diag, neg) } else { neg }
     });
     // Adjugate (cofactors of a symmetric matrix) and determinant.
     let cof = |r0: usize, r1: usize, c0: usize, c1: usize| {
         sub(mul(m[r0][c0], m[r1][c1]), mul(m[r0][c1], m[r1][c0]))
     };
-    let adj: M = [
+    let adj: M<S, N> = [
         [cof(1, 2, 1, 2), cof(0, 2, 2, 1), cof(0, 1, 1, 2)],
         [cof(1, 2, 2, 0), cof(0, 2, 0, 2), cof(0, 1, 2, 0)],
         [cof(1, 2, 0, 1), cof(0, 2, 1, 0), cof(0, 1, 0, 1)],
@@ -100,12 +121,17 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
     let tr_m = add(add(m[0][0], m[1][1]), m[2][2]);
     let scale = add(abs(tr_m), splat(1e-300));
     let minor = sub(mul(m[0][0], m[1][1]), mul(m[0][1], m[1][0]));
+    // Non-short-circuit `&` and selects below, not branches: the compiler
+    // then keeps every lane in one vector register.
     let pd = mask(|i| {
         let sc = scale[i];
-        m[0][0][i] > 1e-3 * sc && minor[i] > 1e-6 * sc * sc && det[i] > 1e-9 * sc * sc * sc
+        (m[0][0][i] > S::of(1e-3) * sc)
+            & (minor[i] > S::of(1e-6) * sc * sc)
+            & (det[i] > S::of(1e-9) * sc * sc * sc)
     });
-    let inv_det = lanes(|i| if pd[i] { 1.0 / det[i] } else { 0.0 });
-    let mueller = lanes(|i| 1.0 / (tr[i].abs() + 1e-12));
+    let one = S::of(1.0);
+    let inv_det = select(pd, lanes(|i| one / det[i]), splat(0.0));
+    let mueller = lanes(|i| one / (tr[i].abs() + S::of(1e-12)));
     let omega = vec3(|r| {
         let newton = mul(
             inv_det,
@@ -122,7 +148,7 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
         omega[0],
         fma(omega[1], omega[1], mul(omega[2], omega[2])),
     );
-    let w = lanes(|i| w2[i].sqrt());
+    let w: L<S, N> = lanes(|i| w2[i].sqrt());
     // q * (omega / 2, 1), normalised.
     let [hx, hy, hz] = omega.map(|o| mul(half, o));
     let [x, y, z, qw] = *q;
@@ -131,67 +157,65 @@ fn rotation_step(f: &M, q: &mut Q, active: [bool; 4]) -> [bool; 4] {
     let ny = add(fma(qw, hy, y), sub(mul(z, hx), mul(x, hz)));
     let nz = add(fma(qw, hz, z), sub(mul(x, hy), mul(y, hx)));
     let n2 = fma(nx, nx, fma(ny, ny, fma(nz, nz, mul(nw, nw))));
-    let inv = lanes(|i| 1.0 / n2[i].sqrt());
+    let inv = lanes(|i| one / n2[i].sqrt());
     // A NaN stops a lane before its update, as in the scalar loop.
-    let update = mask(|i| active[i] && !w[i].is_nan());
+    let update = mask(|i| active[i] & !w[i].is_nan());
     *q = [
         select(update, mul(nx, inv), q[0]),
         select(update, mul(ny, inv), q[1]),
         select(update, mul(nz, inv), q[2]),
         select(update, mul(nw, inv), q[3]),
     ];
-    mask(|i| update[i] && w[i] > ROTATION_TOL_RAD)
+    mask(|i| update[i] & (w[i] > S::of(ROTATION_TOL_RAD)))
 }
 
-/// Four corotational elements' force corrections into `out` (`alive`
+/// A block of corotational elements' force corrections into `out` (`alive`
 /// masks removed ones), their rotations refined in place in `rotations`:
 /// returns the largest tangent bound.
 #[inline(always)]
-pub fn corotational_block(
-    b: &LaneBlock,
-    alive: [bool; 4],
+pub fn corotational_block<S: Scalar, const N: usize>(
+    b: &LaneBlock<S, N>,
+    alive: [bool; N],
     rotations: &mut [DQuat],
     u: &[V3],
-    out: &mut [[V3; 4]],
+    out: &mut [[L<S, N>; 3]; 4],
 ) -> Real {
     let h = gradient(b, u);
-    let f = identity_plus(&h);
-    let quat = |k: usize| lanes(|lane| rotations[lane].to_array()[k]);
-    let mut q: Q = [quat(0), quat(1), quat(2), quat(3)];
+    let quat = |k: usize| lanes(|lane| S::of(rotations[lane].to_array()[k]));
+    let mut q: Q<S, N> = [quat(0), quat(1), quat(2), quat(3)];
     let mut active = alive;
     for _ in 0..ROTATION_MAX_ITER {
         if !active.contains(&true) {
             break;
         }
-        active = rotation_step(&f, &mut q, active);
+        active = rotation_step(&h, &mut q, active);
     }
-    for (lane, r) in rotations.iter_mut().enumerate().take(4) {
+    for (lane, r) in rotations.iter_mut().enumerate().take(N) {
         if alive[lane] {
-            *r = DQuat::from_xyzw(q[0][lane], q[1][lane], q[2][lane], q[3][lane]);
+            let (x, y, z, w) = (q[0][lane], q[1][lane], q[2][lane], q[3][lane]);
+            *r = DQuat::from_xyzw(x.real(), y.real(), z.real(), w.real());
         }
     }
-    let r = rotation(&q);
-    let a = transpose_mul(&r, &f);
+    // The rotated strain sym(R^T F) - I = sym H + sym G, its stress
+    // sigma_lin + sigma(sym G), and P - sigma_lin = sigma(sym G) + (R - I)
+    // sigma_rot, each a small quantity computed as such.
+    let rmi = rotation_minus_identity(&q);
+    let g = turned_part(&rmi, &h);
     let half = splat(0.5);
-    let rotated: M = mat(|i, j| {
-        let s = mul(half, add(a[i][j], a[j][i]));
-        if i == j { sub(s, splat(1.0)) } else { s }
-    });
-    let lin: M = mat(|i, j| mul(half, add(h[i][j], h[j][i])));
-    let p = matmul(&r, &stress(b, &rotated));
+    let lin: M<S, N> = mat(|i, j| mul(half, add(h[i][j], h[j][i])));
+    let turned: M<S, N> = mat(|i, j| mul(half, add(g[i][j], g[j][i])));
     let sl = stress(b, &lin);
-    let mut d = zero();
-    for i in 0..3 {
-        for j in 0..3 {
-            d[i][j] = sub(p[i][j], sl[i][j]);
-        }
-    }
+    let st = stress(b, &turned);
+    let rot: M<S, N> = mat(|i, j| add(sl[i][j], st[i][j]));
+    let rmi_rot = matmul(&rmi, &rot);
+    let d: M<S, N> = mat(|i, j| add(st[i][j], rmi_rot[i][j]));
+    let p: M<S, N> = mat(|i, j| add(rot[i][j], rmi_rot[i][j]));
     scatter(b, &d, alive, out);
     // The rotated rest tangent plus the rotation's terms (see
     // `large_strain::element`).
     let bound = fma(mul(splat(2.0), row_abs(&p)), b.geometric, b.rest_lambda);
-    (0..4)
+    (0..N)
         .filter(|l| alive[*l])
-        .map(|l| bound[l])
+        .map(|l| bound[l].real())
         .fold(0.0, Real::max)
 }

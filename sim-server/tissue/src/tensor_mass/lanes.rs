@@ -1,11 +1,15 @@
-//! Four elements at a time: the lane type, lane arithmetic and the pieces
-//! the StVK and corotational lanes share (the displacement gradient, the
-//! paper's stress, the nodal forces), over structure-of-arrays rest data so
-//! that the compiler turns each line into one vector operation (AVX2 and FMA
-//! where the CPU has them, checked at run time as for the linear kernel).
-//! Isotropic and anisotropic elements share the lanes: an isotropic lane
-//! has zero fibre coefficients. Removed elements are masked (zero force, no
-//! bound).
+//! Elements a block at a time: the lane type, lane arithmetic and the
+//! pieces the StVK and corotational lanes share (the displacement gradient,
+//! the paper's stress, the nodal forces), over structure-of-arrays rest data
+//! so that the compiler turns each line into one vector operation (AVX2 and
+//! FMA where the CPU has them, checked at run time as for the linear kernel).
+//! Generic over the scalar and the lane count: four f64 lanes (the static
+//! solver, f64 storage; tested equal to the scalar path to round-off) or
+//! eight f32 lanes (the explicit step with f32 storage, as the linear
+//! kernel: the same 256-bit registers hold twice the elements and the rest
+//! data is half the bytes). Isotropic and anisotropic elements share the
+//! lanes: an isotropic lane has zero fibre coefficients. Removed elements
+//! are masked (zero force, no bound).
 
 // Tensor indices (r, c, k) written as in the formulas read better than
 // iterator chains over rows of lanes.
@@ -13,63 +17,133 @@
 
 use super::kernel::V3;
 use crate::math::Real;
+use std::ops::{Add, Div, Mul, Sub};
 
-/// Four lanes.
-pub type L = [Real; 4];
-/// A 3x3 tensor of lanes, row-major.
-pub type M = [[L; 3]; 3];
-
-/// The rest data of four elements of one model.
-#[derive(Clone, Debug, Default)]
-pub struct LaneBlock {
-    /// Vertices, per lane.
-    pub vertices: [[u32; 4]; 4],
-    /// Shape vectors m_1..m_3 (m_0 = -(m_1 + m_2 + m_3)): `m[k][c]` lane-wise.
-    pub m: [[L; 3]; 3],
-    /// Rest volume (m^3).
-    pub volume: L,
-    /// lambda, mu (Pa).
-    pub lambda: L,
-    /// mu (Pa).
-    pub mu: L,
-    /// Fibre direction (zero for isotropic lanes).
-    pub dir: [L; 3],
-    /// Stretch, cross and shear coefficients (Pa; zero when off).
-    pub stretch: L,
-    /// Cross-stretch coefficient.
-    pub cross: L,
-    /// Shear coefficient.
-    pub shear: L,
-    /// Irons' rest bound (1/s^2).
-    pub rest_lambda: L,
-    /// Geometric term per Pa (1/(s^2 Pa)).
-    pub geometric: L,
+/// The scalar of a lane: f64 or f32.
+pub trait Scalar:
+    Copy
+    + Default
+    + PartialOrd
+    + Send
+    + Sync
+    + std::fmt::Debug
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+{
+    /// Rounds from f64.
+    fn of(x: Real) -> Self;
+    /// Widens to f64.
+    fn real(self) -> Real;
+    /// Square root.
+    fn sqrt(self) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// The larger (the other if one is NaN).
+    fn max(self, other: Self) -> Self;
+    /// Whether it is NaN.
+    fn is_nan(self) -> bool;
 }
 
-/// Four lanes from `f(lane)`. Written out rather than by
+macro_rules! scalar {
+    ($t:ty) => {
+        impl Scalar for $t {
+            #[inline(always)]
+            fn of(x: Real) -> Self {
+                x as $t
+            }
+            #[inline(always)]
+            fn real(self) -> Real {
+                self as Real
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            #[inline(always)]
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+            #[inline(always)]
+            fn max(self, other: Self) -> Self {
+                <$t>::max(self, other)
+            }
+            #[inline(always)]
+            fn is_nan(self) -> bool {
+                <$t>::is_nan(self)
+            }
+        }
+    };
+}
+scalar!(f64);
+scalar!(f32);
+
+/// N lanes.
+pub type L<S, const N: usize> = [S; N];
+/// A 3x3 tensor of lanes, row-major.
+pub type M<S, const N: usize> = [[L<S, N>; 3]; 3];
+
+/// The rest data of N elements of one model.
+#[derive(Clone, Debug)]
+pub struct LaneBlock<S: Scalar, const N: usize> {
+    /// Vertices, per lane.
+    pub vertices: [[u32; 4]; N],
+    /// Shape vectors m_1..m_3 (m_0 = -(m_1 + m_2 + m_3)): `m[k][c]` lane-wise.
+    pub m: [[L<S, N>; 3]; 3],
+    /// Rest volume (m^3).
+    pub volume: L<S, N>,
+    /// lambda, mu (Pa).
+    pub lambda: L<S, N>,
+    /// mu (Pa).
+    pub mu: L<S, N>,
+    /// Fibre direction (zero for isotropic lanes).
+    pub dir: [L<S, N>; 3],
+    /// Stretch, cross and shear coefficients (Pa; zero when off).
+    pub stretch: L<S, N>,
+    /// Cross-stretch coefficient.
+    pub cross: L<S, N>,
+    /// Shear coefficient.
+    pub shear: L<S, N>,
+    /// Irons' rest bound (1/s^2).
+    pub rest_lambda: L<S, N>,
+    /// Geometric term per Pa (1/(s^2 Pa)).
+    pub geometric: L<S, N>,
+}
+
+/// N lanes from `f(lane)`. A plain loop rather than
 /// `std::array::from_fn`, whose adapters LLVM does not always inline into
 /// the AVX2 pass (measured: the corotational pass ran 1.7x slower when they
 /// were left out of line after the core moved to its own crate).
 #[inline(always)]
-pub fn lanes(f: impl Fn(usize) -> Real) -> L {
-    [f(0), f(1), f(2), f(3)]
+pub fn lanes<S: Scalar, const N: usize>(f: impl Fn(usize) -> S) -> L<S, N> {
+    let mut out = [S::default(); N];
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = f(i);
+    }
+    out
 }
 
 /// A per-lane mask from `f(lane)`.
 #[inline(always)]
-pub fn mask(f: impl Fn(usize) -> bool) -> [bool; 4] {
-    [f(0), f(1), f(2), f(3)]
+pub fn mask<const N: usize>(f: impl Fn(usize) -> bool) -> [bool; N] {
+    let mut out = [false; N];
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = f(i);
+    }
+    out
 }
 
 /// Three lane vectors from `f(row)`.
 #[inline(always)]
-pub fn vec3(f: impl Fn(usize) -> L) -> [L; 3] {
+pub fn vec3<S: Scalar, const N: usize>(f: impl Fn(usize) -> L<S, N>) -> [L<S, N>; 3] {
     [f(0), f(1), f(2)]
 }
 
 /// A lane matrix from `f(row, column)`.
 #[inline(always)]
-pub fn mat(f: impl Fn(usize, usize) -> L) -> M {
+pub fn mat<S: Scalar, const N: usize>(f: impl Fn(usize, usize) -> L<S, N>) -> M<S, N> {
     [
         [f(0, 0), f(0, 1), f(0, 2)],
         [f(1, 0), f(1, 1), f(1, 2)],
@@ -78,48 +152,48 @@ pub fn mat(f: impl Fn(usize, usize) -> L) -> M {
 }
 
 #[inline(always)]
-pub fn splat(x: Real) -> L {
-    [x; 4]
+pub fn splat<S: Scalar, const N: usize>(x: Real) -> L<S, N> {
+    [S::of(x); N]
 }
 
 #[inline(always)]
-pub fn add(a: L, b: L) -> L {
+pub fn add<S: Scalar, const N: usize>(a: L<S, N>, b: L<S, N>) -> L<S, N> {
     lanes(|i| a[i] + b[i])
 }
 
 #[inline(always)]
-pub fn sub(a: L, b: L) -> L {
+pub fn sub<S: Scalar, const N: usize>(a: L<S, N>, b: L<S, N>) -> L<S, N> {
     lanes(|i| a[i] - b[i])
 }
 
 #[inline(always)]
-pub fn mul(a: L, b: L) -> L {
+pub fn mul<S: Scalar, const N: usize>(a: L<S, N>, b: L<S, N>) -> L<S, N> {
     lanes(|i| a[i] * b[i])
 }
 
 #[inline(always)]
-pub fn fma(a: L, b: L, c: L) -> L {
+pub fn fma<S: Scalar, const N: usize>(a: L<S, N>, b: L<S, N>, c: L<S, N>) -> L<S, N> {
     lanes(|i| a[i] * b[i] + c[i])
 }
 
 #[inline(always)]
-pub fn max(a: L, b: L) -> L {
+pub fn max<S: Scalar, const N: usize>(a: L<S, N>, b: L<S, N>) -> L<S, N> {
     lanes(|i| a[i].max(b[i]))
 }
 
 #[inline(always)]
-pub fn abs(a: L) -> L {
+pub fn abs<S: Scalar, const N: usize>(a: L<S, N>) -> L<S, N> {
     lanes(|i| a[i].abs())
 }
 
 #[inline(always)]
-pub fn zero() -> M {
+pub fn zero<S: Scalar, const N: usize>() -> M<S, N> {
     [[splat(0.0); 3]; 3]
 }
 
 /// a b for lane matrices.
 #[inline(always)]
-pub fn matmul(a: &M, b: &M) -> M {
+pub fn matmul<S: Scalar, const N: usize>(a: &M<S, N>, b: &M<S, N>) -> M<S, N> {
     let mut c = zero();
     for r in 0..3 {
         for col in 0..3 {
@@ -133,10 +207,10 @@ pub fn matmul(a: &M, b: &M) -> M {
 
 /// The paper's stress of a symmetric strain, lane-wise (see `TetElastic::stress`).
 #[inline(always)]
-pub fn stress(b: &LaneBlock, e: &M) -> M {
+pub fn stress<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, e: &M<S, N>) -> M<S, N> {
     let i1 = add(add(e[0][0], e[1][1]), e[2][2]);
     let a = b.dir;
-    let ea: [L; 3] = vec3(|r| fma(e[r][0], a[0], fma(e[r][1], a[1], mul(e[r][2], a[2]))));
+    let ea: [L<S, N>; 3] = vec3(|r| fma(e[r][0], a[0], fma(e[r][1], a[1], mul(e[r][2], a[2]))));
     let i4 = fma(a[0], ea[0], fma(a[1], ea[1], mul(a[2], ea[2])));
     // coefficient of a(x)a: 2 stretch I4 + cross (I1 - 2 I4) - 4 shear I4
     let two_i4 = add(i4, i4);
@@ -168,7 +242,7 @@ pub fn stress(b: &LaneBlock, e: &M) -> M {
 
 /// Gershgorin's upper bound on the largest eigenvalue (symmetric), lane-wise.
 #[inline(always)]
-pub fn gershgorin(m: &M) -> L {
+pub fn gershgorin<S: Scalar, const N: usize>(m: &M<S, N>) -> L<S, N> {
     let row = |r: usize| {
         let mut x = m[r][r];
         for c in (0..3).filter(|c| *c != r) {
@@ -181,14 +255,14 @@ pub fn gershgorin(m: &M) -> L {
 
 /// The largest absolute row sum, lane-wise.
 #[inline(always)]
-pub fn row_abs(m: &M) -> L {
+pub fn row_abs<S: Scalar, const N: usize>(m: &M<S, N>) -> L<S, N> {
     let row = |r: usize| add(add(abs(m[r][0]), abs(m[r][1])), abs(m[r][2]));
     max(max(row(0), row(1)), row(2))
 }
 
 /// I + h: the deformation gradient F of a displacement gradient.
 #[inline(always)]
-pub fn identity_plus(h: &M) -> M {
+pub fn identity_plus<S: Scalar, const N: usize>(h: &M<S, N>) -> M<S, N> {
     mat(|r, c| {
         if r == c {
             add(h[r][c], splat(1.0))
@@ -198,17 +272,31 @@ pub fn identity_plus(h: &M) -> M {
     })
 }
 
-/// H = sum_{k=1..3} (u_k - u_0) (x) m_k, the displacement gradient.
+/// H = sum_{k=1..3} (u_k - u_0) (x) m_k, the displacement gradient. The
+/// corners' displacements relative to corner 0 are taken in f64 before
+/// they are rounded to the lane's scalar (a body far from rest keeps its
+/// strain's digits).
 #[inline(always)]
-pub fn gradient(b: &LaneBlock, u: &[V3]) -> M {
-    let corner = |k: usize| vec3(|c| lanes(|lane| u[b.vertices[lane][k] as usize][c]));
-    let du: [[L; 3]; 4] = [corner(0), corner(1), corner(2), corner(3)];
+pub fn gradient<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, u: &[V3]) -> M<S, N> {
+    // Written as loops: the closures of a `lanes(|lane| ...)` form were
+    // left out of line here (9% of the StVK pass in `perf`).
+    let mut du: [[L<S, N>; 3]; 3] = [[[S::default(); N]; 3]; 3];
+    for lane in 0..N {
+        let v = &b.vertices[lane];
+        let u0 = u[v[0] as usize];
+        for k in 0..3 {
+            let uk = u[v[k + 1] as usize];
+            for c in 0..3 {
+                du[k][c][lane] = S::of(uk[c] - u0[c]);
+            }
+        }
+    }
     let mut h = zero();
     for r in 0..3 {
         for c in 0..3 {
             let mut x = splat(0.0);
             for k in 0..3 {
-                x = fma(sub(du[k + 1][r], du[0][r]), b.m[k][c], x);
+                x = fma(du[k][r], b.m[k][c], x);
             }
             h[r][c] = x;
         }
@@ -217,27 +305,28 @@ pub fn gradient(b: &LaneBlock, u: &[V3]) -> M {
 }
 
 /// The nodal forces f_k = -V d m_k (k = 1..3), f_0 = -(f_1 + f_2 + f_3) of
-/// each live lane into `out` (zero for a removed one).
+/// each live lane into `out[corner][coordinate]` (zero for a removed one).
 #[inline(always)]
-pub fn scatter(b: &LaneBlock, d: &M, alive: [bool; 4], out: &mut [[V3; 4]]) {
+pub fn scatter<S: Scalar, const N: usize>(
+    b: &LaneBlock<S, N>,
+    d: &M<S, N>,
+    alive: [bool; N],
+    out: &mut [[L<S, N>; 3]; 4],
+) {
     let minus_v = mul(splat(-1.0), b.volume);
-    for lane in 0..4 {
-        let slot = &mut out[lane];
-        if !alive[lane] {
-            *slot = [[0.0; 3]; 4];
-            continue;
+    // Removed lanes: a zero volume, so zero forces.
+    let minus_v: L<S, N> = lanes(|l| if alive[l] { minus_v[l] } else { S::default() });
+    let mut f0: [L<S, N>; 3] = [splat(0.0); 3];
+    for kk in 0..3 {
+        for r in 0..3 {
+            let dot = add(
+                add(mul(d[r][0], b.m[kk][0]), mul(d[r][1], b.m[kk][1])),
+                mul(d[r][2], b.m[kk][2]),
+            );
+            let x = mul(minus_v, dot);
+            out[kk + 1][r] = x;
+            f0[r] = sub(f0[r], x);
         }
-        let mut f0 = [0.0; 3];
-        for kk in 0..3 {
-            for r in 0..3 {
-                let x = minus_v[lane]
-                    * (d[r][0][lane] * b.m[kk][0][lane]
-                        + d[r][1][lane] * b.m[kk][1][lane]
-                        + d[r][2][lane] * b.m[kk][2][lane]);
-                slot[kk + 1][r] = x;
-                f0[r] -= x;
-            }
-        }
-        slot[0] = f0;
     }
+    out[0] = f0;
 }

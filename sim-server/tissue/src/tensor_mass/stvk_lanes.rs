@@ -1,8 +1,8 @@
-//! StVK elements four at a time: the same force correction and tangent
+//! StVK elements a block of lanes at a time: the same force correction and tangent
 //! bound as `large_strain::stvk`, written lane by lane ([`super::lanes`]).
 //! The scalar path computed one element at a time in ~75 ns; the lanes
-//! share every instruction between four. Tested against the scalar path to
-//! round-off.
+//! share every instruction between four (f64) or eight (f32). Tested
+//! against the scalar path to round-off (f64) and to f32's precision.
 
 // Tensor indices (r, c, k) written as in the formulas read better than
 // iterator chains over rows of lanes.
@@ -10,16 +10,21 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, add, fma, gershgorin, gradient, identity_plus, matmul, max, mul, row_abs,
+    L, LaneBlock, Scalar, add, fma, gershgorin, gradient, identity_plus, matmul, max, mul, row_abs,
     scatter, splat, stress, sub, zero,
 };
 use super::nonlinear::{STVK_BARRIER_J, STVK_BARRIER_SCALE};
 use crate::math::Real;
 
-/// Four elements' force corrections into `out` (`alive` masks removed
+/// A block's force corrections into `out` (`alive` masks removed
 /// ones): returns (largest tangent bound, elements in the barrier).
 #[inline(always)]
-pub fn stvk_block(b: &LaneBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]) -> (Real, usize) {
+pub fn stvk_block<S: Scalar, const N: usize>(
+    b: &LaneBlock<S, N>,
+    alive: [bool; N],
+    u: &[V3],
+    out: &mut [[L<S, N>; 3]; 4],
+) -> (Real, usize) {
     let h = gradient(b, u);
     let mut lin = zero();
     let mut quad = zero();
@@ -46,7 +51,7 @@ pub fn stvk_block(b: &LaneBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]
     // F = I + H, its determinant and cofactor (columns f2 x f3, f3 x f1, f1 x f2).
     let f = identity_plus(&h);
     let col = |c: usize| [f[0][c], f[1][c], f[2][c]];
-    let cross = |a: [L; 3], b: [L; 3]| -> [L; 3] {
+    let cross = |a: [L<S, N>; 3], b: [L<S, N>; 3]| -> [L<S, N>; 3] {
         [
             sub(mul(a[1], b[2]), mul(a[2], b[1])),
             sub(mul(a[2], b[0]), mul(a[0], b[2])),
@@ -100,10 +105,11 @@ pub fn stvk_block(b: &LaneBlock, alive: [bool; 4], u: &[V3], out: &mut [[V3; 4]]
     scatter(b, &d, alive, out);
     let mut lambda: Real = 0.0;
     let mut in_barrier = 0;
-    for lane in (0..4).filter(|l| alive[*l]) {
-        let barrier = gap[lane] > 0.0;
+    for lane in (0..N).filter(|l| alive[*l]) {
+        let barrier = gap[lane] > S::default();
         in_barrier += barrier as usize;
-        lambda = lambda.max(if barrier { inside[lane] } else { outside[lane] });
+        let bound = if barrier { inside[lane] } else { outside[lane] };
+        lambda = lambda.max(bound.real());
     }
     (lambda, in_barrier)
 }
