@@ -6,10 +6,12 @@
 //! stiffness, the rest bound and cutting stay as they are); for each
 //! nonlinear element this pass adds the difference between its nonlinear
 //! force and its linear one, -V (P - sigma_lin) m_k. The pass writes each
-//! element's four forces to its own slots and then sums them per vertex
-//! (a gather over a vertex-to-slot list built once): threads own element
-//! ranges and vertex ranges, no atomics, and the result does not depend on
-//! the thread count.
+//! element's four forces to its own slots (threads own element ranges, no
+//! atomics), then one sequential sweep adds the slots to their vertices in
+//! element order: every vertex sums its forces in the same order whatever
+//! the thread count, and the sweep reads the slots as they lie in memory
+//! (a per-vertex gather read them across the array and, past the cache at
+//! 1M tetrahedra, cost more than the elements).
 
 use super::corotational_lanes::corotational_block;
 use super::element::{Geometry, TetElastic};
@@ -71,10 +73,8 @@ pub struct LargeStrain {
     rotations: Vec<DQuat>,
     /// Index of each tetrahedron's element (u32::MAX: linear).
     element_of: Vec<u32>,
-    /// Vertices touched, and for each its slots (element * 4 + corner).
+    /// Vertices touched (their sums are overwritten).
     vertices: Vec<u32>,
-    slot_start: Vec<u32>,
-    slots: Vec<u32>,
     last: PassReport,
 }
 
@@ -136,22 +136,6 @@ impl LargeStrain {
         let vertices: Vec<u32> = (0..count.len() as u32)
             .filter(|v| count[*v as usize] > 0)
             .collect();
-        let mut slot_start = Vec::with_capacity(vertices.len() + 1);
-        slot_start.push(0u32);
-        let mut first = vec![0u32; mesh.vertex_count()];
-        for &v in &vertices {
-            let end = slot_start.last().copied().unwrap_or(0);
-            first[v as usize] = end;
-            slot_start.push(end + count[v as usize]);
-        }
-        let mut slots = vec![0u32; slot_start.last().copied().unwrap_or(0) as usize];
-        for (i, e) in elements.iter().enumerate() {
-            for (k, v) in e.vertices.iter().enumerate() {
-                let at = &mut first[*v as usize];
-                slots[*at as usize] = (4 * i + k) as u32;
-                *at += 1;
-            }
-        }
         let lanes = match precision {
             LanePrecision::F64 => Lanes::F64(LaneSet::of(&elements)),
             LanePrecision::F32 => Lanes::F32(LaneSet::of(&elements)),
@@ -163,8 +147,6 @@ impl LargeStrain {
             elements,
             element_of,
             vertices,
-            slot_start,
-            slots,
             last: PassReport::default(),
         })
     }
@@ -222,19 +204,12 @@ impl LargeStrain {
             lanes,
             rotations,
             vertices,
-            slot_start,
-            slots,
             ..
         } = self;
         let min = MIN_ELEMENTS_PER_TASK.max(elements.len() / threads.max(1) + 1);
-        let slots = Slots {
-            vertices,
-            slot_start,
-            slots,
-        };
         self.last = match lanes {
-            Lanes::F64(set) => set.pass(elements, alive, rotations, u, min, &slots, out),
-            Lanes::F32(set) => set.pass(elements, alive, rotations, u, min, &slots, out),
+            Lanes::F64(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
+            Lanes::F32(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
         };
     }
 
@@ -246,13 +221,6 @@ impl LargeStrain {
             Lanes::F32(set) => set.load(i),
         }
     }
-}
-
-/// Each touched vertex's slots (element * 4 + corner).
-struct Slots<'a> {
-    vertices: &'a [u32],
-    slot_start: &'a [u32],
-    slots: &'a [u32],
 }
 
 /// The scalar of the lanes.
@@ -293,6 +261,29 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
         }
     }
 
+    /// out[v] = the sum of v's element forces (zeroed first for the
+    /// `touched` vertices), added in element order.
+    fn add_to_vertices(&self, elements: &[Element], touched: &[u32], out: &mut [V3]) {
+        for &v in touched {
+            out[v as usize] = [0.0; 3];
+        }
+        for (k, (block, f)) in self.blocks.iter().zip(&self.forces).enumerate() {
+            let count = N.min(elements.len() - k * N);
+            for l in 0..count {
+                let vertices = match block {
+                    Block::Stvk(b) | Block::Corotational(b) => &b.vertices[l],
+                    Block::Scalar => &elements[k * N + l].vertices,
+                };
+                for (corner, &v) in vertices.iter().enumerate() {
+                    let o = &mut out[v as usize];
+                    for c in 0..3 {
+                        o[c] += f[corner][c][l].real();
+                    }
+                }
+            }
+        }
+    }
+
     /// Element `i`'s forces into its lane.
     fn store(&mut self, i: usize, f: &[V3; 4]) {
         let block = &mut self.forces[i / N];
@@ -310,7 +301,8 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
         std::array::from_fn(|k| std::array::from_fn(|c| block[k][c][i % N].real()))
     }
 
-    /// The pass over all elements, then the per-vertex sums into `out`.
+    /// The pass over all elements, then the per-vertex sums into `out` at
+    /// the `touched` vertices.
     #[allow(clippy::too_many_arguments)]
     fn pass(
         &mut self,
@@ -319,7 +311,7 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
         rotations: &mut [DQuat],
         u: &[V3],
         min: usize,
-        slots: &Slots<'_>,
+        touched: &[u32],
         out: &mut [V3],
     ) -> PassReport {
         let range = Range {
@@ -330,7 +322,7 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
             forces: &mut self.forces,
         };
         let report = element_range(range, u, min);
-        gather(slots, &self.forces, out);
+        self.add_to_vertices(elements, touched, out);
         report
     }
 }
@@ -414,11 +406,52 @@ fn element_range<S: Scalar, const N: usize>(
     leaf(r, u)
 }
 
-/// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation).
+/// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation),
+/// with subnormals flushed to zero while it runs: ahead of a wave the
+/// displacements are tiny but not zero, their products underflow f32
+/// (below 1e-38), and every such operation took a microcode assist (the
+/// f32 pass on a 1M-tetrahedron cube ran 2x slower than the f64 one until
+/// its first 60 steps had passed). A force below 1e-38 N is zero to the
+/// simulation.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn leaf_avx2<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
+    let _flush = FlushSubnormals::new();
     leaf(r, u)
+}
+
+/// Flush-to-zero and denormals-are-zero in this thread's MXCSR until
+/// dropped (the previous mode is restored).
+#[cfg(target_arch = "x86_64")]
+struct FlushSubnormals(u32);
+
+#[cfg(target_arch = "x86_64")]
+impl FlushSubnormals {
+    /// FTZ (bit 15) and DAZ (bit 6).
+    const BITS: u32 = 0x8040;
+
+    // The MXCSR intrinsics are deprecated in favour of inline assembly
+    // for code that changes the rounding mode; setting FTZ/DAZ around a
+    // pass that makes no calls out is their documented use.
+    #[allow(deprecated)]
+    fn new() -> Self {
+        use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
+        // SAFETY: SSE is part of x86_64; only the flush bits change.
+        unsafe {
+            let old = _mm_getcsr();
+            _mm_setcsr(old | Self::BITS);
+            Self(old)
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Drop for FlushSubnormals {
+    #[allow(deprecated)]
+    fn drop(&mut self) {
+        // SAFETY: restores the mode `new` found.
+        unsafe { std::arch::x86_64::_mm_setcsr(self.0) }
+    }
 }
 
 /// One task's blocks: N StVK or N corotational elements as lanes, the
@@ -559,261 +592,6 @@ fn gershgorin_abs(m: &Mat3) -> Real {
         .fold(0.0, Real::max)
 }
 
-/// out[v] = sum of v's element forces, for the touched vertices.
-fn gather<S: Scalar, const N: usize>(
-    slots: &Slots<'_>,
-    forces: &[BlockForces<S, N>],
-    out: &mut [V3],
-) {
-    for (i, &v) in slots.vertices.iter().enumerate() {
-        let mut sum = [0.0; 3];
-        let range = slots.slot_start[i] as usize..slots.slot_start[i + 1] as usize;
-        for &s in &slots.slots[range] {
-            let (element, corner) = (s as usize / 4, s as usize % 4);
-            let f = &forces[element / N][corner];
-            for d in 0..3 {
-                sum[d] += f[d][element % N].real();
-            }
-        }
-        out[v as usize] = sum;
-    }
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::material::{Elasticity, Isotropic, Material, Terms, TransverselyIsotropic};
-    use crate::material_map::TetMaterials;
-    use crate::mesh::{BoxSpec, CellSize};
-
-    /// A 2 x 1 x 1 cm block of `model` elements, a third of them
-    /// anisotropic (fibres along (1, 0.3, 0.2)), tetrahedron 6 removed.
-    fn mixed_block(model: MaterialModel) -> ElasticModel {
-        let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
-            .generate()
-            .unwrap();
-        let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
-        let aniso = TransverselyIsotropic::new(iso, 3000.0, 2500.0, Terms::ALL).unwrap();
-        let material = |e| Material::new(e, 1000.0, 0.0).unwrap().with_model(model);
-        let mut mats =
-            TetMaterials::uniform(material(Elasticity::Isotropic(iso)), mesh.tet_count());
-        let id = mats.add(material(Elasticity::Transverse(aniso))).unwrap();
-        for t in (0..mesh.tet_count()).filter(|t| t % 3 == 1) {
-            mats.assign(TetId::from(t), id).unwrap();
-            mats.set_fiber(TetId::from(t), Vec3::new(1.0, 0.3, 0.2))
-                .unwrap();
-        }
-        let mut model = ElasticModel::new(mesh, mats).unwrap();
-        model.remove_tet(TetId(6)).unwrap();
-        model
-    }
-
-    /// How close the lanes must be to the scalar path: f64 lanes to
-    /// round-off; f32 lanes to f32's precision of the element's forces
-    /// (relative to the linear force plus the correction: a small
-    /// correction is a difference of larger terms).
-    struct Tolerance {
-        /// Of the largest element force.
-        force: Real,
-        /// Of 1 in |q . q'|.
-        rotation: Real,
-        /// Of the bound.
-        lambda: Real,
-    }
-
-    fn tolerance(precision: LanePrecision) -> Tolerance {
-        match precision {
-            LanePrecision::F64 => Tolerance {
-                force: 1e-12,
-                rotation: 1e-12,
-                lambda: 1e-9,
-            },
-            LanePrecision::F32 => Tolerance {
-                force: 1e-6,
-                rotation: 1e-6,
-                lambda: 1e-5,
-            },
-        }
-    }
-
-    /// The largest element force of the linear model at `u` plus that of
-    /// the pass's corrections: the scale the f32 lanes are judged against.
-    fn force_scale(large: &LargeStrain, u: &[V3]) -> Real {
-        let mut scale: Real = 0.0;
-        for (i, e) in large.elements.iter().enumerate() {
-            let du = e.vertices.map(|v| Vec3::from_array(u[v as usize]));
-            let f = deformation_gradient(&e.geom, &du);
-            let mut unused = DQuat::IDENTITY;
-            let lin = first_piola(Law::Linear, &e.elastic, &f, &mut unused);
-            for m in &e.geom.shape {
-                scale = scale.max((lin * *m).abs().max_element() * e.geom.volume_m3);
-            }
-            let corrections = large.element_forces(i);
-            scale = scale.max(
-                corrections
-                    .iter()
-                    .flatten()
-                    .fold(0.0, |m, x| m.max(x.abs())),
-            );
-        }
-        scale
-    }
-
-    /// The StVK lane blocks (four f64 or eight f32) give the scalar path's
-    /// forces and bound: isotropic and anisotropic lanes, a removed element,
-    /// stretched and squeezed (barrier) states.
-    #[test]
-    fn lanes_equal_the_scalar_path() {
-        stvk_lanes_equal_the_scalar_path(LanePrecision::F64);
-        stvk_lanes_equal_the_scalar_path(LanePrecision::F32);
-    }
-
-    fn stvk_lanes_equal_the_scalar_path(precision: LanePrecision) {
-        let tol = tolerance(precision);
-        let model = mixed_block(MaterialModel::Stvk);
-        let mut large = LargeStrain::with_precision(&model, precision).unwrap();
-        let stvk_blocks = match &large.lanes {
-            Lanes::F64(set) => set
-                .blocks
-                .iter()
-                .filter(|b| matches!(b, Block::Stvk(_)))
-                .count(),
-            Lanes::F32(set) => set
-                .blocks
-                .iter()
-                .filter(|b| matches!(b, Block::Stvk(_)))
-                .count(),
-        };
-        assert!(stvk_blocks > 0);
-        let p = model.mesh().positions_m();
-        for squash in [1.0, 0.3] {
-            let u: Vec<V3> = p
-                .iter()
-                .map(|x| {
-                    [
-                        0.4 * x.x + 0.1 * x.z,
-                        (squash - 1.0) * x.y,
-                        -0.2 * x.x * x.y / 0.01,
-                    ]
-                })
-                .collect();
-            let mut out = vec![[0.0; 3]; u.len()];
-            large.pass(&u, &mut out, 1);
-            let scale = force_scale(&large, &u);
-            let mut lambda: Real = 0.0;
-            let mut collapsed = 0;
-            for (i, e) in large.elements.iter().enumerate() {
-                let mut f = [[0.0; 3]; 4];
-                if large.alive[i] {
-                    let r = element(e, &mut DQuat::default(), &mut f, &u);
-                    lambda = lambda.max(r.lambda);
-                    collapsed += r.collapsed;
-                }
-                for (a, b) in f.iter().zip(&large.element_forces(i)) {
-                    for d in 0..3 {
-                        let bound = match precision {
-                            LanePrecision::F64 => tol.force * (1.0 + a[d].abs()),
-                            LanePrecision::F32 => tol.force * scale,
-                        };
-                        assert!(
-                            (a[d] - b[d]).abs() <= bound,
-                            "{precision:?} element {i}: {a:?} vs {b:?}"
-                        );
-                    }
-                }
-            }
-            assert!((large.last().lambda - lambda).abs() <= tol.lambda * lambda);
-            assert_eq!(large.last().collapsed, collapsed);
-            assert_eq!(collapsed > 0, squash < 0.5, "squash {squash}");
-        }
-    }
-
-    /// The corotational lane blocks (four f64 or eight f32) give the
-    /// scalar path's forces, rotations and bound, warm-started from the
-    /// rotations the previous pass left: isotropic and anisotropic lanes, a
-    /// removed element, a small deformation, a large rotation (many
-    /// iterations) and an inverted state (Mueller's steps).
-    #[test]
-    fn corotational_lanes_equal_the_scalar_path() {
-        corotational_lanes_equal(LanePrecision::F64);
-        corotational_lanes_equal(LanePrecision::F32);
-    }
-
-    fn corotational_lanes_equal(precision: LanePrecision) {
-        let tol = tolerance(precision);
-        // The rotation converges to 1e-6 rad, its error about the square.
-        let corotational_force_tol = match precision {
-            LanePrecision::F64 => 1e-10,
-            LanePrecision::F32 => tol.force,
-        };
-        let model = mixed_block(MaterialModel::Corotational);
-        let mut large = LargeStrain::with_precision(&model, precision).unwrap();
-        let (lanes, width) = match &large.lanes {
-            Lanes::F64(set) => (
-                set.blocks
-                    .iter()
-                    .filter(|b| matches!(b, Block::Corotational(_)))
-                    .count(),
-                4,
-            ),
-            Lanes::F32(set) => (
-                set.blocks
-                    .iter()
-                    .filter(|b| matches!(b, Block::Corotational(_)))
-                    .count(),
-                8,
-            ),
-        };
-        assert_eq!(lanes, large.elements.len() / width);
-        let p = model.mesh().positions_m();
-        let turned = |angle: Real, shear: Real, flip: Real| -> Vec<V3> {
-            let r = Mat3::from_rotation_z(angle) * Mat3::from_rotation_x(0.5 * angle);
-            p.iter()
-                .map(|x| {
-                    let y = Vec3::new(x.x + shear * x.y / 0.01 * 0.002, x.y, flip * x.z);
-                    (r * y - *x).to_array()
-                })
-                .collect()
-        };
-        for u in [
-            turned(0.01, 0.1, 1.0),
-            turned(0.02, 0.12, 1.0),
-            turned(1.3, 0.3, 1.0),
-            turned(0.4, 0.2, -0.3),
-        ] {
-            let before = large.rotations.clone();
-            let mut out = vec![[0.0; 3]; u.len()];
-            large.pass(&u, &mut out, 1);
-            let mut lambda: Real = 0.0;
-            let scale = match precision {
-                LanePrecision::F64 => (0..large.len())
-                    .flat_map(|i| large.element_forces(i))
-                    .flatten()
-                    .fold(0.0 as Real, |m, x| m.max(x.abs())),
-                LanePrecision::F32 => force_scale(&large, &u),
-            };
-            for (i, e) in large.elements.iter().enumerate() {
-                let mut f = [[0.0; 3]; 4];
-                let mut q = before[i];
-                if large.alive[i] {
-                    lambda = lambda.max(element(e, &mut q, &mut f, &u).lambda);
-                }
-                assert!(
-                    (q.dot(large.rotations[i]).abs() - 1.0).abs() < tol.rotation,
-                    "{precision:?} element {i}: rotation {q:?} vs {:?}",
-                    large.rotations[i]
-                );
-                for (a, b) in f.iter().zip(&large.element_forces(i)) {
-                    for d in 0..3 {
-                        assert!(
-                            (a[d] - b[d]).abs() <= corotational_force_tol * scale,
-                            "{precision:?} element {i}: {a:?} vs {b:?} (scale {scale}, q {q:?} vs {:?})",
-                            large.rotations[i]
-                        );
-                    }
-                }
-            }
-            assert!((large.last().lambda - lambda).abs() <= tol.lambda * lambda);
-        }
-    }
-}
+#[path = "large_strain_tests.rs"]
+mod tests;

@@ -1,0 +1,236 @@
+//! The nonlinear pass's lanes (four f64, eight f32) against the scalar path.
+
+use super::*;
+use crate::material::{Elasticity, Isotropic, Material, Terms, TransverselyIsotropic};
+use crate::material_map::TetMaterials;
+use crate::mesh::{BoxSpec, CellSize};
+
+/// A 2 x 1 x 1 cm block of `model` elements, a third of them
+/// anisotropic (fibres along (1, 0.3, 0.2)), tetrahedron 6 removed.
+fn mixed_block(model: MaterialModel) -> ElasticModel {
+    let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
+    let aniso = TransverselyIsotropic::new(iso, 3000.0, 2500.0, Terms::ALL).unwrap();
+    let material = |e| Material::new(e, 1000.0, 0.0).unwrap().with_model(model);
+    let mut mats = TetMaterials::uniform(material(Elasticity::Isotropic(iso)), mesh.tet_count());
+    let id = mats.add(material(Elasticity::Transverse(aniso))).unwrap();
+    for t in (0..mesh.tet_count()).filter(|t| t % 3 == 1) {
+        mats.assign(TetId::from(t), id).unwrap();
+        mats.set_fiber(TetId::from(t), Vec3::new(1.0, 0.3, 0.2))
+            .unwrap();
+    }
+    let mut model = ElasticModel::new(mesh, mats).unwrap();
+    model.remove_tet(TetId(6)).unwrap();
+    model
+}
+
+/// How close the lanes must be to the scalar path: f64 lanes to
+/// round-off; f32 lanes to f32's precision of the element's forces
+/// (relative to the linear force plus the correction: a small
+/// correction is a difference of larger terms).
+struct Tolerance {
+    /// Of the largest element force.
+    force: Real,
+    /// Of 1 in |q . q'|.
+    rotation: Real,
+    /// Of the bound.
+    lambda: Real,
+}
+
+fn tolerance(precision: LanePrecision) -> Tolerance {
+    match precision {
+        LanePrecision::F64 => Tolerance {
+            force: 1e-12,
+            rotation: 1e-12,
+            lambda: 1e-9,
+        },
+        LanePrecision::F32 => Tolerance {
+            force: 1e-6,
+            rotation: 1e-6,
+            lambda: 1e-5,
+        },
+    }
+}
+
+/// The largest element force of the linear model at `u` plus that of
+/// the pass's corrections: the scale the f32 lanes are judged against.
+fn force_scale(large: &LargeStrain, u: &[V3]) -> Real {
+    let mut scale: Real = 0.0;
+    for (i, e) in large.elements.iter().enumerate() {
+        let du = e.vertices.map(|v| Vec3::from_array(u[v as usize]));
+        let f = deformation_gradient(&e.geom, &du);
+        let mut unused = DQuat::IDENTITY;
+        let lin = first_piola(Law::Linear, &e.elastic, &f, &mut unused);
+        for m in &e.geom.shape {
+            scale = scale.max((lin * *m).abs().max_element() * e.geom.volume_m3);
+        }
+        let corrections = large.element_forces(i);
+        scale = scale.max(
+            corrections
+                .iter()
+                .flatten()
+                .fold(0.0, |m, x| m.max(x.abs())),
+        );
+    }
+    scale
+}
+
+/// The StVK lane blocks (four f64 or eight f32) give the scalar path's
+/// forces and bound: isotropic and anisotropic lanes, a removed element,
+/// stretched and squeezed (barrier) states.
+#[test]
+fn lanes_equal_the_scalar_path() {
+    stvk_lanes_equal_the_scalar_path(LanePrecision::F64);
+    stvk_lanes_equal_the_scalar_path(LanePrecision::F32);
+}
+
+fn stvk_lanes_equal_the_scalar_path(precision: LanePrecision) {
+    let tol = tolerance(precision);
+    let model = mixed_block(MaterialModel::Stvk);
+    let mut large = LargeStrain::with_precision(&model, precision).unwrap();
+    let stvk_blocks = match &large.lanes {
+        Lanes::F64(set) => set
+            .blocks
+            .iter()
+            .filter(|b| matches!(b, Block::Stvk(_)))
+            .count(),
+        Lanes::F32(set) => set
+            .blocks
+            .iter()
+            .filter(|b| matches!(b, Block::Stvk(_)))
+            .count(),
+    };
+    assert!(stvk_blocks > 0);
+    let p = model.mesh().positions_m();
+    for squash in [1.0, 0.3] {
+        let u: Vec<V3> = p
+            .iter()
+            .map(|x| {
+                [
+                    0.4 * x.x + 0.1 * x.z,
+                    (squash - 1.0) * x.y,
+                    -0.2 * x.x * x.y / 0.01,
+                ]
+            })
+            .collect();
+        let mut out = vec![[0.0; 3]; u.len()];
+        large.pass(&u, &mut out, 1);
+        let scale = force_scale(&large, &u);
+        let mut lambda: Real = 0.0;
+        let mut collapsed = 0;
+        for (i, e) in large.elements.iter().enumerate() {
+            let mut f = [[0.0; 3]; 4];
+            if large.alive[i] {
+                let r = element(e, &mut DQuat::default(), &mut f, &u);
+                lambda = lambda.max(r.lambda);
+                collapsed += r.collapsed;
+            }
+            for (a, b) in f.iter().zip(&large.element_forces(i)) {
+                for d in 0..3 {
+                    let bound = match precision {
+                        LanePrecision::F64 => tol.force * (1.0 + a[d].abs()),
+                        LanePrecision::F32 => tol.force * scale,
+                    };
+                    assert!(
+                        (a[d] - b[d]).abs() <= bound,
+                        "{precision:?} element {i}: {a:?} vs {b:?}"
+                    );
+                }
+            }
+        }
+        assert!((large.last().lambda - lambda).abs() <= tol.lambda * lambda);
+        assert_eq!(large.last().collapsed, collapsed);
+        assert_eq!(collapsed > 0, squash < 0.5, "squash {squash}");
+    }
+}
+
+/// The corotational lane blocks (four f64 or eight f32) give the
+/// scalar path's forces, rotations and bound, warm-started from the
+/// rotations the previous pass left: isotropic and anisotropic lanes, a
+/// removed element, a small deformation, a large rotation (many
+/// iterations) and an inverted state (Mueller's steps).
+#[test]
+fn corotational_lanes_equal_the_scalar_path() {
+    corotational_lanes_equal(LanePrecision::F64);
+    corotational_lanes_equal(LanePrecision::F32);
+}
+
+fn corotational_lanes_equal(precision: LanePrecision) {
+    let tol = tolerance(precision);
+    // The rotation converges to 1e-6 rad, its error about the square.
+    let corotational_force_tol = match precision {
+        LanePrecision::F64 => 1e-10,
+        LanePrecision::F32 => tol.force,
+    };
+    let model = mixed_block(MaterialModel::Corotational);
+    let mut large = LargeStrain::with_precision(&model, precision).unwrap();
+    let (lanes, width) = match &large.lanes {
+        Lanes::F64(set) => (
+            set.blocks
+                .iter()
+                .filter(|b| matches!(b, Block::Corotational(_)))
+                .count(),
+            4,
+        ),
+        Lanes::F32(set) => (
+            set.blocks
+                .iter()
+                .filter(|b| matches!(b, Block::Corotational(_)))
+                .count(),
+            8,
+        ),
+    };
+    assert_eq!(lanes, large.elements.len() / width);
+    let p = model.mesh().positions_m();
+    let turned = |angle: Real, shear: Real, flip: Real| -> Vec<V3> {
+        let r = Mat3::from_rotation_z(angle) * Mat3::from_rotation_x(0.5 * angle);
+        p.iter()
+            .map(|x| {
+                let y = Vec3::new(x.x + shear * x.y / 0.01 * 0.002, x.y, flip * x.z);
+                (r * y - *x).to_array()
+            })
+            .collect()
+    };
+    for u in [
+        turned(0.01, 0.1, 1.0),
+        turned(0.02, 0.12, 1.0),
+        turned(1.3, 0.3, 1.0),
+        turned(0.4, 0.2, -0.3),
+    ] {
+        let before = large.rotations.clone();
+        let mut out = vec![[0.0; 3]; u.len()];
+        large.pass(&u, &mut out, 1);
+        let mut lambda: Real = 0.0;
+        let scale = match precision {
+            LanePrecision::F64 => (0..large.len())
+                .flat_map(|i| large.element_forces(i))
+                .flatten()
+                .fold(0.0 as Real, |m, x| m.max(x.abs())),
+            LanePrecision::F32 => force_scale(&large, &u),
+        };
+        for (i, e) in large.elements.iter().enumerate() {
+            let mut f = [[0.0; 3]; 4];
+            let mut q = before[i];
+            if large.alive[i] {
+                lambda = lambda.max(element(e, &mut q, &mut f, &u).lambda);
+            }
+            assert!(
+                (q.dot(large.rotations[i]).abs() - 1.0).abs() < tol.rotation,
+                "{precision:?} element {i}: rotation {q:?} vs {:?}",
+                large.rotations[i]
+            );
+            for (a, b) in f.iter().zip(&large.element_forces(i)) {
+                for d in 0..3 {
+                    assert!(
+                        (a[d] - b[d]).abs() <= corotational_force_tol * scale,
+                        "{precision:?} element {i}: {a:?} vs {b:?} (scale {scale}, q {q:?} vs {:?})",
+                        large.rotations[i]
+                    );
+                }
+            }
+        }
+        assert!((large.last().lambda - lambda).abs() <= tol.lambda * lambda);
+    }
+}
