@@ -5,7 +5,7 @@
 
 use super::huge_pages::huge_vec;
 use super::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind};
-use super::large_strain::{LanePrecision, LargeStrain};
+use super::large_strain::LargeStrain;
 use super::model::{CutChange, CutError, ElasticModel};
 use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
 use crate::ids::{TetId, VertexId};
@@ -223,12 +223,7 @@ impl<S: Storage> Explicit<S> {
         };
         // The nonlinear lanes in the kernel's precision: with f32 tensors,
         // eight f32 elements to a register.
-        let precision = if S::NAME == "f32" {
-            LanePrecision::F32
-        } else {
-            LanePrecision::F64
-        };
-        let large = LargeStrain::with_precision(&model, precision);
+        let large = LargeStrain::with_precision(&model, S::LANES);
         let fnl = if large.is_some() {
             huge_vec(n, [0.0; 3])
         } else {

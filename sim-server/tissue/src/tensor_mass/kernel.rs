@@ -11,6 +11,7 @@
 //! and the few rows they reach are finished after the join. No atomics.
 
 use super::huge_pages::collect_huge;
+use super::large_strain::LanePrecision;
 use super::model::{CutChange, ElasticModel};
 use crate::math::{Mat3, Real};
 
@@ -27,6 +28,8 @@ pub type Windows = (
 pub trait Storage: Copy + Default + Send + Sync + std::fmt::Debug + 'static {
     /// `"f32"` or `"f64"`.
     const NAME: &'static str;
+    /// The nonlinear elements' lanes that go with this storage.
+    const LANES: LanePrecision;
     /// Rounds from f64.
     fn from_real(x: Real) -> Self;
     /// Widens to f64.
@@ -43,6 +46,7 @@ pub trait Storage: Copy + Default + Send + Sync + std::fmt::Debug + 'static {
 
 impl Storage for f32 {
     const NAME: &'static str = "f32";
+    const LANES: LanePrecision = LanePrecision::F32;
     #[inline(always)]
     fn from_real(x: Real) -> Self {
         x as f32
@@ -71,6 +75,7 @@ impl Storage for f32 {
 
 impl Storage for f64 {
     const NAME: &'static str = "f64";
+    const LANES: LanePrecision = LanePrecision::F64;
     #[inline(always)]
     fn from_real(x: Real) -> Self {
         x

@@ -33,6 +33,16 @@ pub trait Scalar:
     + Mul<Output = Self>
     + Div<Output = Self>
 {
+    /// Corner displacement differences (m) below this are taken as zero
+    /// before rounding: f32 products of smaller ones (ahead of a wave the
+    /// displacements are tiny, not zero) underflow to subnormals, and each
+    /// subnormal operation took a microcode assist (the 1M-tetrahedron
+    /// corotational cube ran 2x slower in f32 than in f64 until its first
+    /// 60 steps had passed). A picometre across an element is far below
+    /// what f32 resolves of its size; f64 lanes keep every digit.
+    const FLUSH_BELOW_M: Real;
+    /// The smallest positive normal number.
+    const MIN_POSITIVE: Self;
     /// Rounds from f64.
     fn of(x: Real) -> Self;
     /// Widens to f64.
@@ -48,8 +58,10 @@ pub trait Scalar:
 }
 
 macro_rules! scalar {
-    ($t:ty) => {
+    ($t:ty, $flush:expr) => {
         impl Scalar for $t {
+            const FLUSH_BELOW_M: Real = $flush;
+            const MIN_POSITIVE: Self = <$t>::MIN_POSITIVE;
             #[inline(always)]
             fn of(x: Real) -> Self {
                 x as $t
@@ -77,8 +89,8 @@ macro_rules! scalar {
         }
     };
 }
-scalar!(f64);
-scalar!(f32);
+scalar!(f64, 0.0);
+scalar!(f32, 1e-12);
 
 /// N lanes.
 pub type L<S, const N: usize> = [S; N];
@@ -275,13 +287,19 @@ pub fn identity_plus<S: Scalar, const N: usize>(h: &M<S, N>) -> M<S, N> {
 /// H = sum_{k=1..3} (u_k - u_0) (x) m_k, the displacement gradient. The
 /// corners' displacements relative to corner 0 are taken in f64 before
 /// they are rounded to the lane's scalar (a body far from rest keeps its
-/// strain's digits).
+/// strain's digits), and in f32 flushed to zero below
+/// [`Scalar::FLUSH_BELOW_M`]. A removed lane gets H = 0 (so zero stress
+/// and zero force, whatever its vertices do).
 #[inline(always)]
-pub fn gradient<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, u: &[V3]) -> M<S, N> {
+pub fn gradient<S: Scalar, const N: usize>(
+    b: &LaneBlock<S, N>,
+    alive: [bool; N],
+    u: &[V3],
+) -> M<S, N> {
     // Written as loops: the closures of a `lanes(|lane| ...)` form were
     // left out of line here (9% of the StVK pass in `perf`).
     let mut du: [[L<S, N>; 3]; 3] = [[[S::default(); N]; 3]; 3];
-    for lane in 0..N {
+    for lane in (0..N).filter(|l| alive[*l]) {
         let v = &b.vertices[lane];
         let u0 = u[v[0] as usize];
         for k in 0..3 {
@@ -289,6 +307,19 @@ pub fn gradient<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, u: &[V3]) -> M<S
             for c in 0..3 {
                 du[k][c][lane] = S::of(uk[c] - u0[c]);
             }
+        }
+    }
+    if S::FLUSH_BELOW_M > 0.0 {
+        // Lane-wise compare and blend, not a branch per value.
+        let floor = S::of(S::FLUSH_BELOW_M);
+        for row in du.iter_mut().flatten() {
+            *row = lanes(|l| {
+                if row[l].abs() < floor {
+                    S::default()
+                } else {
+                    row[l]
+                }
+            });
         }
     }
     let mut h = zero();
@@ -314,8 +345,9 @@ pub fn scatter<S: Scalar, const N: usize>(
     out: &mut [[L<S, N>; 3]; 4],
 ) {
     let minus_v = mul(splat(-1.0), b.volume);
-    // Removed lanes: a zero volume, so zero forces.
-    let minus_v: L<S, N> = lanes(|l| if alive[l] { minus_v[l] } else { S::default() });
+    // Removed lanes: `gradient` gave them H = 0, so d = 0 and their
+    // forces are exactly zero without a select here.
+    debug_assert!((0..N).all(|l| alive[l] || d.iter().flatten().all(|x| x[l] == S::default())));
     let mut f0: [L<S, N>; 3] = [splat(0.0); 3];
     for kk in 0..3 {
         for r in 0..3 {

@@ -93,10 +93,10 @@ impl LargeStrain {
         let mut elements = Vec::new();
         let mut alive = Vec::new();
         // By model (StVK, then corotational), so that they fill whole blocks of
-        // four lanes; within a model by their lowest vertex, so that the
-        // elements around a vertex sit together in memory (the vertices are
-        // in RCM order): the pass reads displacements and the gather reads
-        // element forces nearly in sequence instead of across the mesh.
+        // lanes; within a model by their lowest vertex, so that the elements
+        // around a vertex sit together in memory (the vertices are in RCM
+        // order): the pass reads displacements and the sweep adds element
+        // forces to vertices nearly in sequence instead of across the mesh.
         let of_model = |m: MaterialModel| {
             let mut ts: Vec<TetId> = (0..mesh.tet_count())
                 .map(TetId::from)
@@ -198,6 +198,12 @@ impl LargeStrain {
     /// other vertices are left as they are). Runs on the current rayon
     /// pool's threads when called inside one.
     pub fn pass(&mut self, u: &[V3], out: &mut [V3], threads: usize) {
+        let min = MIN_ELEMENTS_PER_TASK.max(self.elements.len() / threads.max(1) + 1);
+        self.pass_in_tasks(u, out, min);
+    }
+
+    /// The pass with tasks of at least `min` elements.
+    fn pass_in_tasks(&mut self, u: &[V3], out: &mut [V3], min: usize) {
         let Self {
             elements,
             alive,
@@ -206,7 +212,6 @@ impl LargeStrain {
             vertices,
             ..
         } = self;
-        let min = MIN_ELEMENTS_PER_TASK.max(elements.len() / threads.max(1) + 1);
         self.last = match lanes {
             Lanes::F64(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
             Lanes::F32(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
@@ -243,8 +248,8 @@ enum Lanes {
 type BlockForces<S, const N: usize> = [[L<S, N>; 3]; 4];
 
 /// The elements as blocks of N lanes and their forces, block by block (the
-/// pass stores each block's forces with a few vector writes; the gather
-/// reads them per vertex).
+/// pass stores each block's forces with a few vector writes; the sweep
+/// reads them in the same order).
 #[derive(Clone, Debug)]
 struct LaneSet<S: Scalar, const N: usize> {
     /// Block k holds elements kN..(k+1)N (a last, short block is scalar).
@@ -337,14 +342,14 @@ enum Block<S: Scalar, const N: usize> {
 }
 
 impl<S: Scalar, const N: usize> Block<S, N> {
-    fn of(four: &[Element]) -> Self {
-        let model = four[0].model;
-        if four.len() < N || four.iter().any(|e| e.model != model) {
+    fn of(chunk: &[Element]) -> Self {
+        let model = chunk[0].model;
+        if chunk.len() < N || chunk.iter().any(|e| e.model != model) {
             return Block::Scalar;
         }
         match model {
-            MaterialModel::Stvk => Block::Stvk(block(four)),
-            MaterialModel::Corotational => Block::Corotational(block(four)),
+            MaterialModel::Stvk => Block::Stvk(block(chunk)),
+            MaterialModel::Corotational => Block::Corotational(block(chunk)),
             MaterialModel::Linear => Block::Scalar,
         }
     }
@@ -406,52 +411,11 @@ fn element_range<S: Scalar, const N: usize>(
     leaf(r, u)
 }
 
-/// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation),
-/// with subnormals flushed to zero while it runs: ahead of a wave the
-/// displacements are tiny but not zero, their products underflow f32
-/// (below 1e-38), and every such operation took a microcode assist (the
-/// f32 pass on a 1M-tetrahedron cube ran 2x slower than the f64 one until
-/// its first 60 steps had passed). A force below 1e-38 N is zero to the
-/// simulation.
+/// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn leaf_avx2<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
-    let _flush = FlushSubnormals::new();
     leaf(r, u)
-}
-
-/// Flush-to-zero and denormals-are-zero in this thread's MXCSR until
-/// dropped (the previous mode is restored).
-#[cfg(target_arch = "x86_64")]
-struct FlushSubnormals(u32);
-
-#[cfg(target_arch = "x86_64")]
-impl FlushSubnormals {
-    /// FTZ (bit 15) and DAZ (bit 6).
-    const BITS: u32 = 0x8040;
-
-    // The MXCSR intrinsics are deprecated in favour of inline assembly
-    // for code that changes the rounding mode; setting FTZ/DAZ around a
-    // pass that makes no calls out is their documented use.
-    #[allow(deprecated)]
-    fn new() -> Self {
-        use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
-        // SAFETY: SSE is part of x86_64; only the flush bits change.
-        unsafe {
-            let old = _mm_getcsr();
-            _mm_setcsr(old | Self::BITS);
-            Self(old)
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-impl Drop for FlushSubnormals {
-    #[allow(deprecated)]
-    fn drop(&mut self) {
-        // SAFETY: restores the mode `new` found.
-        unsafe { std::arch::x86_64::_mm_setcsr(self.0) }
-    }
 }
 
 /// One task's blocks: N StVK or N corotational elements as lanes, the
@@ -497,12 +461,12 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
 }
 
 /// N elements' rest data as lanes.
-fn block<S: Scalar, const N: usize>(four: &[Element]) -> LaneBlock<S, N> {
+fn block<S: Scalar, const N: usize>(chunk: &[Element]) -> LaneBlock<S, N> {
     let lanes =
-        |f: &dyn Fn(&Element) -> Real| -> [S; N] { std::array::from_fn(|k| S::of(f(&four[k]))) };
+        |f: &dyn Fn(&Element) -> Real| -> [S; N] { std::array::from_fn(|k| S::of(f(&chunk[k]))) };
     let fiber = |e: &Element| e.elastic.fiber;
     LaneBlock {
-        vertices: std::array::from_fn(|k| four[k].vertices),
+        vertices: std::array::from_fn(|k| chunk[k].vertices),
         m: std::array::from_fn(|k| std::array::from_fn(|c| lanes(&|e| e.geom.shape[k + 1][c]))),
         volume: lanes(&|e| e.geom.volume_m3),
         lambda: lanes(&|e| e.elastic.lambda_pa),

@@ -55,10 +55,12 @@ fn tolerance(precision: LanePrecision) -> Tolerance {
 }
 
 /// The largest element force of the linear model at `u` plus that of
-/// the pass's corrections: the scale the f32 lanes are judged against.
-fn force_scale(large: &LargeStrain, u: &[V3]) -> Real {
+/// the scalar path's corrections `scalar` (per element): the scale the
+/// f32 lanes are judged against (taken from the reference, not from what
+/// is checked).
+fn force_scale(large: &LargeStrain, u: &[V3], scalar: &[[V3; 4]]) -> Real {
     let mut scale: Real = 0.0;
-    for (i, e) in large.elements.iter().enumerate() {
+    for (e, corrections) in large.elements.iter().zip(scalar) {
         let du = e.vertices.map(|v| Vec3::from_array(u[v as usize]));
         let f = deformation_gradient(&e.geom, &du);
         let mut unused = DQuat::IDENTITY;
@@ -66,7 +68,6 @@ fn force_scale(large: &LargeStrain, u: &[V3]) -> Real {
         for m in &e.geom.shape {
             scale = scale.max((lin * *m).abs().max_element() * e.geom.volume_m3);
         }
-        let corrections = large.element_forces(i);
         scale = scale.max(
             corrections
                 .iter()
@@ -75,6 +76,139 @@ fn force_scale(large: &LargeStrain, u: &[V3]) -> Real {
         );
     }
     scale
+}
+
+/// The scalar path's element forces at `u` from rotations `before` (zero
+/// for removed elements).
+fn scalar_forces(large: &LargeStrain, u: &[V3], before: &[DQuat]) -> Vec<[V3; 4]> {
+    (0..large.len())
+        .map(|i| {
+            let mut f = [[0.0; 3]; 4];
+            if large.alive[i] {
+                let mut q = before[i];
+                element(&large.elements[i], &mut q, &mut f, u);
+            }
+            f
+        })
+        .collect()
+}
+
+/// A 2.4 x 1.2 x 1.2 cm block of 324 tetrahedra (not a multiple of eight)
+/// with StVK and corotational elements, so that the lanes hold blocks of
+/// each model, a block of both (scalar) and a short last block (scalar).
+fn two_model_block() -> ElasticModel {
+    let mesh = BoxSpec::new(Vec3::new(0.024, 0.012, 0.012), CellSize::EdgeM(0.004))
+        .generate()
+        .unwrap();
+    assert_eq!(mesh.tet_count() % 8, 4);
+    let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
+    let material = |m| {
+        Material::new(Elasticity::Isotropic(iso), 1000.0, 0.0)
+            .unwrap()
+            .with_model(m)
+    };
+    let mut mats = TetMaterials::uniform(material(MaterialModel::Stvk), mesh.tet_count());
+    let id = mats.add(material(MaterialModel::Corotational)).unwrap();
+    for t in (0..mesh.tet_count()).filter(|t| t % 5 == 2) {
+        mats.assign(TetId::from(t), id).unwrap();
+    }
+    ElasticModel::new(mesh, mats).unwrap()
+}
+
+/// The vertex sums of a pass equal the scalar path's element forces
+/// summed per vertex (both precisions), the same to the bit in one task
+/// or split into many, and follow an element's removal and restoration.
+#[test]
+fn vertex_sums_equal_the_scalar_forces_summed() {
+    for precision in [LanePrecision::F64, LanePrecision::F32] {
+        let model = two_model_block();
+        let mut large = LargeStrain::with_precision(&model, precision).unwrap();
+        let scalar_blocks = match &large.lanes {
+            Lanes::F64(set) => set
+                .blocks
+                .iter()
+                .filter(|b| matches!(b, Block::Scalar))
+                .count(),
+            Lanes::F32(set) => set
+                .blocks
+                .iter()
+                .filter(|b| matches!(b, Block::Scalar))
+                .count(),
+        };
+        // A mixed block; in eights also a short last one (324 = 40 x 8 + 4).
+        let expected = if precision == LanePrecision::F32 {
+            2
+        } else {
+            1
+        };
+        assert!(scalar_blocks >= expected, "{precision:?}: {scalar_blocks}");
+        let p = model.mesh().positions_m();
+        let u: Vec<V3> = p
+            .iter()
+            .map(|x| {
+                let t = 12.0 * x.x;
+                [0.3 * x.z * t, -0.1 * x.y + 0.2 * x.x * t, -0.25 * x.y * t]
+            })
+            .collect();
+        // An element inside a corotational lane block, removed after a pass.
+        let removed = (0..large.len() - 16)
+            .find(|i| {
+                large.elements[*i..*i + 16]
+                    .iter()
+                    .all(|e| e.model == MaterialModel::Corotational)
+            })
+            .map(|i| i + 8)
+            .unwrap();
+        let tet = TetId::from(
+            large
+                .element_of
+                .iter()
+                .position(|e| *e as usize == removed)
+                .unwrap(),
+        );
+        for step in 0..3 {
+            if step == 1 {
+                large.set_alive(tet, false);
+            } else if step == 2 {
+                large.set_alive(tet, true);
+            }
+            let before = large.rotations.clone();
+            let mut split = large.clone();
+            let mut out = vec![[0.0; 3]; u.len()];
+            let mut out_split = vec![[0.0; 3]; u.len()];
+            large.pass_in_tasks(&u, &mut out, usize::MAX);
+            split.pass_in_tasks(&u, &mut out_split, 16);
+            assert_eq!(out, out_split, "{precision:?}: one task against many");
+            let forces = scalar_forces(&large, &u, &before);
+            let mut sums = vec![[0.0; 3]; u.len()];
+            for (e, f) in large.elements.iter().zip(&forces) {
+                for (v, fk) in e.vertices.iter().zip(f) {
+                    for d in 0..3 {
+                        sums[*v as usize][d] += fk[d];
+                    }
+                }
+            }
+            let scale = force_scale(&large, &u, &forces);
+            let tol = match precision {
+                LanePrecision::F64 => 1e-10 * scale,
+                LanePrecision::F32 => 1e-5 * scale,
+            };
+            for (v, (a, b)) in sums.iter().zip(&out).enumerate() {
+                for d in 0..3 {
+                    assert!(
+                        (a[d] - b[d]).abs() <= tol,
+                        "{precision:?} step {step} vertex {v}: {a:?} vs {b:?}"
+                    );
+                }
+            }
+            let zero = large
+                .element_forces(removed)
+                .iter()
+                .flatten()
+                .all(|x| *x == 0.0);
+            assert_eq!(zero, step == 1, "{precision:?} step {step}");
+        }
+    }
 }
 
 /// The StVK lane blocks (four f64 or eight f32) give the scalar path's
@@ -117,7 +251,8 @@ fn stvk_lanes_equal_the_scalar_path(precision: LanePrecision) {
             .collect();
         let mut out = vec![[0.0; 3]; u.len()];
         large.pass(&u, &mut out, 1);
-        let scale = force_scale(&large, &u);
+        let reference = scalar_forces(&large, &u, &large.rotations.clone());
+        let scale = force_scale(&large, &u, &reference);
         let mut lambda: Real = 0.0;
         let mut collapsed = 0;
         for (i, e) in large.elements.iter().enumerate() {
@@ -208,7 +343,7 @@ fn corotational_lanes_equal(precision: LanePrecision) {
                 .flat_map(|i| large.element_forces(i))
                 .flatten()
                 .fold(0.0 as Real, |m, x| m.max(x.abs())),
-            LanePrecision::F32 => force_scale(&large, &u),
+            LanePrecision::F32 => force_scale(&large, &u, &scalar_forces(&large, &u, &before)),
         };
         for (i, e) in large.elements.iter().enumerate() {
             let mut f = [[0.0; 3]; 4];

@@ -25,7 +25,7 @@ pub fn stvk_block<S: Scalar, const N: usize>(
     u: &[V3],
     out: &mut [[L<S, N>; 3]; 4],
 ) -> (Real, usize) {
-    let h = gradient(b, u);
+    let h = gradient(b, alive, u);
     let mut lin = zero();
     let mut quad = zero();
     for r in 0..3 {
