@@ -18,8 +18,8 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, Scalar, abs, add, fma, gradient, lanes, mask, mat, matmul, mul, row_abs,
-    scatter, splat, stress, sub, vec3, zero,
+    L, LaneBlock, M, Scalar, abs, add, fma, gradient, lanes, mat, matmul, mul, row_abs, scatter,
+    splat, stress, sub, vec3, zero,
 };
 use super::nonlinear::{ROTATION_MAX_ITER, ROTATION_TOL_RAD};
 use crate::math::Real;
@@ -71,20 +71,56 @@ fn transpose_mul<S: Scalar, const N: usize>(a: &M<S, N>, b: &M<S, N>) -> M<S, N>
     c
 }
 
+// Lane masks are lanes of 1 (set) and 0, not `[bool; N]`: compares,
+// `and`s and selects then stay single vector instructions, where packing
+// bools into bytes and back cost most of a rotation step (measured: the
+// iteration took half the corotational pass).
+
+/// 1 where `a > b`, else 0.
+#[inline(always)]
+fn gt<S: Scalar, const N: usize>(a: L<S, N>, b: L<S, N>) -> L<S, N> {
+    lanes(|i| {
+        if a[i] > b[i] {
+            S::of(1.0)
+        } else {
+            S::default()
+        }
+    })
+}
+
+/// 1 where `a` is not NaN, else 0.
+#[inline(always)]
+fn not_nan<S: Scalar, const N: usize>(a: L<S, N>) -> L<S, N> {
+    lanes(|i| {
+        if !a[i].is_nan() {
+            S::of(1.0)
+        } else {
+            S::default()
+        }
+    })
+}
+
 /// Per lane: `if mask { a } else { b }`.
 #[inline(always)]
-fn select<S: Scalar, const N: usize>(mask: [bool; N], a: L<S, N>, b: L<S, N>) -> L<S, N> {
-    lanes(|i| if mask[i] { a[i] } else { b[i] })
+fn select<S: Scalar, const N: usize>(mask: L<S, N>, a: L<S, N>, b: L<S, N>) -> L<S, N> {
+    lanes(|i| if mask[i] != S::default() { a[i] } else { b[i] })
+}
+
+/// Whether any lane of a mask is set.
+#[inline(always)]
+fn any<S: Scalar, const N: usize>(mask: L<S, N>) -> bool {
+    mask.iter().any(|m| *m != S::default())
 }
 
 /// One rotation step of every active lane (`nonlinear::extract_rotation`'s
-/// loop body): updates `q` where `active`, and returns which lanes go on.
+/// loop body): updates `q` where `active` (a lane mask), and returns the
+/// mask of the lanes that go on.
 #[inline(always)]
 fn rotation_step<S: Scalar, const N: usize>(
     h: &M<S, N>,
     q: &mut Q<S, N>,
-    active: [bool; N],
-) -> [bool; N] {
+    active: L<S, N>,
+) -> L<S, N> {
     // A - I with A = R^T F: its skew part is the residual, its symmetric
     // part B = S - I.
     let g = turned_part(&rotation_minus_identity(q), h);
@@ -123,14 +159,14 @@ fn rotation_step<S: Scalar, const N: usize>(
     // The scalar path's 1e-300, or f32's smallest normal.
     let scale = add(abs(tr_m), [S::of(1e-300).max(S::MIN_POSITIVE); N]);
     let minor = sub(mul(m[0][0], m[1][1]), mul(m[0][1], m[1][0]));
-    // Non-short-circuit `&` and selects below, not branches: the compiler
-    // then keeps every lane in one vector register.
-    let pd = mask(|i| {
-        let sc = scale[i];
-        (m[0][0][i] > S::of(1e-3) * sc)
-            & (minor[i] > S::of(1e-6) * sc * sc)
-            & (det[i] > S::of(1e-9) * sc * sc * sc)
-    });
+    let scale2 = mul(scale, scale);
+    let pd = mul(
+        mul(
+            gt(m[0][0], mul(splat(1e-3), scale)),
+            gt(minor, mul(splat(1e-6), scale2)),
+        ),
+        gt(det, mul(splat(1e-9), mul(scale2, scale))),
+    );
     let one = S::of(1.0);
     let inv_det = select(pd, lanes(|i| one / det[i]), splat(0.0));
     let mueller = lanes(|i| one / (tr[i].abs() + S::of(1e-12)));
@@ -161,14 +197,14 @@ fn rotation_step<S: Scalar, const N: usize>(
     let n2 = fma(nx, nx, fma(ny, ny, fma(nz, nz, mul(nw, nw))));
     let inv = lanes(|i| one / n2[i].sqrt());
     // A NaN stops a lane before its update, as in the scalar loop.
-    let update = mask(|i| active[i] & !w[i].is_nan());
+    let update = mul(active, not_nan(w));
     *q = [
         select(update, mul(nx, inv), q[0]),
         select(update, mul(ny, inv), q[1]),
         select(update, mul(nz, inv), q[2]),
         select(update, mul(nw, inv), q[3]),
     ];
-    mask(|i| update[i] & (w[i] > S::of(ROTATION_TOL_RAD)))
+    mul(update, gt(w, splat(ROTATION_TOL_RAD)))
 }
 
 /// A block of corotational elements' force corrections into `out` (`alive`
@@ -185,9 +221,9 @@ pub fn corotational_block<S: Scalar, const N: usize>(
     let h = gradient(b, alive, u);
     let quat = |k: usize| lanes(|lane| S::of(rotations[lane].to_array()[k]));
     let mut q: Q<S, N> = [quat(0), quat(1), quat(2), quat(3)];
-    let mut active = alive;
+    let mut active: L<S, N> = lanes(|l| if alive[l] { S::of(1.0) } else { S::default() });
     for _ in 0..ROTATION_MAX_ITER {
-        if !active.contains(&true) {
+        if !any(active) {
             break;
         }
         active = rotation_step(&h, &mut q, active);

@@ -137,16 +137,6 @@ pub fn lanes<S: Scalar, const N: usize>(f: impl Fn(usize) -> S) -> L<S, N> {
     out
 }
 
-/// A per-lane mask from `f(lane)`.
-#[inline(always)]
-pub fn mask<const N: usize>(f: impl Fn(usize) -> bool) -> [bool; N] {
-    let mut out = [false; N];
-    for (i, o) in out.iter_mut().enumerate() {
-        *o = f(i);
-    }
-    out
-}
-
 /// Three lane vectors from `f(row)`.
 #[inline(always)]
 pub fn vec3<S: Scalar, const N: usize>(f: impl Fn(usize) -> L<S, N>) -> [L<S, N>; 3] {
