@@ -23,10 +23,9 @@ use super::lanes::{
 };
 use super::nonlinear::{ROTATION_MAX_ITER, ROTATION_TOL_RAD};
 use crate::math::Real;
-use glam::DQuat;
 
 /// A quaternion per lane: x, y, z, w.
-type Q<S, const N: usize> = [L<S, N>; 4];
+pub type Q<S, const N: usize> = [L<S, N>; 4];
 
 /// R - I for the rotation matrix R of unit quaternions (glam's
 /// `Mat3::from_quat` without its ones), row-major. Everything downstream is
@@ -208,19 +207,19 @@ fn rotation_step<S: Scalar, const N: usize>(
 }
 
 /// A block of corotational elements' force corrections into `out` (`alive`
-/// masks removed ones), their rotations refined in place in `rotations`:
+/// masks removed ones), their rotations (lane quaternions) refined in place in `rotation`:
 /// returns the largest tangent bound.
 #[inline(always)]
 pub fn corotational_block<S: Scalar, const N: usize>(
     b: &LaneBlock<S, N>,
     alive: [bool; N],
-    rotations: &mut [DQuat],
+    rotation: &mut Q<S, N>,
     u: &[V3],
     out: &mut [[L<S, N>; 3]; 4],
 ) -> Real {
     let h = gradient(b, alive, u);
-    let quat = |k: usize| lanes(|lane| S::of(rotations[lane].to_array()[k]));
-    let mut q: Q<S, N> = [quat(0), quat(1), quat(2), quat(3)];
+    // A local copy the iterations keep in registers, stored back once.
+    let mut q = *rotation;
     let mut active: L<S, N> = lanes(|l| if alive[l] { S::of(1.0) } else { S::default() });
     for _ in 0..ROTATION_MAX_ITER {
         if !any(active) {
@@ -228,12 +227,7 @@ pub fn corotational_block<S: Scalar, const N: usize>(
         }
         active = rotation_step(&h, &mut q, active);
     }
-    for (lane, r) in rotations.iter_mut().enumerate().take(N) {
-        if alive[lane] {
-            let (x, y, z, w) = (q[0][lane], q[1][lane], q[2][lane], q[3][lane]);
-            *r = DQuat::from_xyzw(x.real(), y.real(), z.real(), w.real());
-        }
-    }
+    *rotation = q;
     // The rotated strain sym(R^T F) - I = sym H + sym G, its stress
     // sigma_lin + sigma(sym G), and P - sigma_lin = sigma(sym G) + (R - I)
     // sigma_rot, each a small quantity computed as such.

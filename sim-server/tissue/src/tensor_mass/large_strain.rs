@@ -13,7 +13,7 @@
 //! (a per-vertex gather read them across the array and, past the cache at
 //! 1M tetrahedra, cost more than the elements).
 
-use super::corotational_lanes::corotational_block;
+use super::corotational_lanes::{Q, corotational_block};
 use super::element::{Geometry, TetElastic};
 use super::kernel::V3;
 use super::lanes::{L, LaneBlock, Scalar};
@@ -190,6 +190,10 @@ impl LargeStrain {
                 Lanes::F32(set) => set.store(i, &[[0.0; 3]; 4]),
             }
             self.rotations[i] = DQuat::IDENTITY;
+            match &mut self.lanes {
+                Lanes::F64(set) => set.reset_rotation(i),
+                Lanes::F32(set) => set.reset_rotation(i),
+            }
         }
     }
 
@@ -216,6 +220,22 @@ impl LargeStrain {
             Lanes::F64(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
             Lanes::F32(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
         };
+    }
+
+    /// Element `i`'s rotation (corotational elements; identity otherwise).
+    #[cfg(test)]
+    fn rotation(&self, i: usize) -> DQuat {
+        let lanes = match &self.lanes {
+            Lanes::F64(set) => set.rotation(i),
+            Lanes::F32(set) => set.rotation(i),
+        };
+        lanes.unwrap_or(self.rotations[i])
+    }
+
+    /// Every element's rotation.
+    #[cfg(test)]
+    fn rotations(&self) -> Vec<DQuat> {
+        (0..self.len()).map(|i| self.rotation(i)).collect()
     }
 
     /// Element `i`'s four corner forces of the last pass (N).
@@ -255,15 +275,43 @@ struct LaneSet<S: Scalar, const N: usize> {
     /// Block k holds elements kN..(k+1)N (a last, short block is scalar).
     blocks: Vec<Block<S, N>>,
     forces: Vec<BlockForces<S, N>>,
+    /// Per block: the corotational lanes' rotations (x, y, z, w), kept in
+    /// lanes between passes (the scalar elements keep theirs as `DQuat`s).
+    quats: Vec<Q<S, N>>,
 }
 
 impl<S: Scalar, const N: usize> LaneSet<S, N> {
     fn of(elements: &[Element]) -> Self {
         let blocks: Vec<Block<S, N>> = elements.chunks(N).map(Block::of).collect();
+        let identity = [
+            [S::default(); N],
+            [S::default(); N],
+            [S::default(); N],
+            [S::of(1.0); N],
+        ];
         Self {
             forces: vec![[[[S::default(); N]; 3]; 4]; blocks.len()],
+            quats: vec![identity; blocks.len()],
             blocks,
         }
+    }
+
+    /// Element `i`'s lane rotation back to the identity.
+    fn reset_rotation(&mut self, i: usize) {
+        let q = &mut self.quats[i / N];
+        for (k, c) in q.iter_mut().enumerate() {
+            c[i % N] = S::of(if k == 3 { 1.0 } else { 0.0 });
+        }
+    }
+
+    /// Element `i`'s rotation if it is in a corotational lane block.
+    #[cfg(test)]
+    fn rotation(&self, i: usize) -> Option<DQuat> {
+        matches!(self.blocks[i / N], Block::Corotational(_)).then(|| {
+            let q = &self.quats[i / N];
+            let [x, y, z, w] = [0, 1, 2, 3].map(|k| q[k][i % N].real());
+            DQuat::from_xyzw(x, y, z, w)
+        })
     }
 
     /// out[v] = the sum of v's element forces (zeroed first for the
@@ -325,6 +373,7 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
             rotations,
             blocks: &self.blocks,
             forces: &mut self.forces,
+            quats: &mut self.quats,
         };
         let report = element_range(range, u, min);
         self.add_to_vertices(elements, touched, out);
@@ -362,6 +411,7 @@ struct Range<'a, S: Scalar, const N: usize> {
     rotations: &'a mut [DQuat],
     blocks: &'a [Block<S, N>],
     forces: &'a mut [BlockForces<S, N>],
+    quats: &'a mut [Q<S, N>],
 }
 
 /// The elements of one range, split in halves (whole blocks) on the pool
@@ -379,6 +429,7 @@ fn element_range<S: Scalar, const N: usize>(
         let (ra, rb) = r.rotations.split_at_mut(mid);
         let (ba, bb) = r.blocks.split_at(half_blocks);
         let (fa, fb) = r.forces.split_at_mut(half_blocks);
+        let (qa, qb) = r.quats.split_at_mut(half_blocks);
         let (a, b) = rayon::join(
             || {
                 let range = Range {
@@ -387,6 +438,7 @@ fn element_range<S: Scalar, const N: usize>(
                     rotations: ra,
                     blocks: ba,
                     forces: fa,
+                    quats: qa,
                 };
                 element_range(range, u, min)
             },
@@ -397,6 +449,7 @@ fn element_range<S: Scalar, const N: usize>(
                     rotations: rb,
                     blocks: bb,
                     forces: fb,
+                    quats: qb,
                 };
                 element_range(range, u, min)
             },
@@ -425,7 +478,13 @@ unsafe fn leaf_avx2<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> 
 #[inline(always)]
 fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
     let mut report = PassReport::default();
-    for (k, (block, forces)) in r.blocks.iter().zip(r.forces.iter_mut()).enumerate() {
+    for (k, ((block, forces), q)) in r
+        .blocks
+        .iter()
+        .zip(r.forces.iter_mut())
+        .zip(r.quats.iter_mut())
+        .enumerate()
+    {
         let i = k * N;
         let alive = || std::array::from_fn(|l| r.alive[i + l]);
         match &block {
@@ -434,7 +493,6 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
                 report = report.join(PassReport { lambda, collapsed });
             }
             Block::Corotational(b) => {
-                let q = &mut r.rotations[i..i + N];
                 let lambda = corotational_block(b, alive(), q, u, forces);
                 report = report.join(PassReport {
                     lambda,

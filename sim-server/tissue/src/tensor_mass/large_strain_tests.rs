@@ -172,7 +172,7 @@ fn vertex_sums_equal_the_scalar_forces_summed() {
             } else if step == 2 {
                 large.set_alive(tet, true);
             }
-            let before = large.rotations.clone();
+            let before = large.rotations();
             let mut split = large.clone();
             let mut out = vec![[0.0; 3]; u.len()];
             let mut out_split = vec![[0.0; 3]; u.len()];
@@ -251,7 +251,7 @@ fn stvk_lanes_equal_the_scalar_path(precision: LanePrecision) {
             .collect();
         let mut out = vec![[0.0; 3]; u.len()];
         large.pass(&u, &mut out, 1);
-        let reference = scalar_forces(&large, &u, &large.rotations.clone());
+        let reference = scalar_forces(&large, &u, &large.rotations());
         let scale = force_scale(&large, &u, &reference);
         let mut lambda: Real = 0.0;
         let mut collapsed = 0;
@@ -334,7 +334,7 @@ fn corotational_lanes_equal(precision: LanePrecision) {
         turned(1.3, 0.3, 1.0),
         turned(0.4, 0.2, -0.3),
     ] {
-        let before = large.rotations.clone();
+        let before = large.rotations();
         let mut out = vec![[0.0; 3]; u.len()];
         large.pass(&u, &mut out, 1);
         let mut lambda: Real = 0.0;
@@ -352,16 +352,16 @@ fn corotational_lanes_equal(precision: LanePrecision) {
                 lambda = lambda.max(element(e, &mut q, &mut f, &u).lambda);
             }
             assert!(
-                (q.dot(large.rotations[i]).abs() - 1.0).abs() < tol.rotation,
+                (q.dot(large.rotation(i)).abs() - 1.0).abs() < tol.rotation,
                 "{precision:?} element {i}: rotation {q:?} vs {:?}",
-                large.rotations[i]
+                large.rotation(i)
             );
             for (a, b) in f.iter().zip(&large.element_forces(i)) {
                 for d in 0..3 {
                     assert!(
                         (a[d] - b[d]).abs() <= corotational_force_tol * scale,
                         "{precision:?} element {i}: {a:?} vs {b:?} (scale {scale}, q {q:?} vs {:?})",
-                        large.rotations[i]
+                        large.rotation(i)
                     );
                 }
             }
