@@ -227,9 +227,11 @@ pub fn stress<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, e: &M<S, N>) -> M<
     let diag = fma(b.lambda, i1, mul(b.cross, i4));
     let two_mu = add(b.mu, b.mu);
     let two_shear = add(b.shear, b.shear);
+    // The upper triangle, mirrored: for a symmetric strain each term is
+    // symmetric to the bit (the products commute and so do the sums).
     let mut s = zero();
     for r in 0..3 {
-        for c in 0..3 {
+        for c in r..3 {
             let mut x = mul(two_mu, e[r][c]);
             x = fma(coef_aa, mul(a[r], a[c]), x);
             x = fma(two_shear, fma(a[r], ea[c], mul(ea[r], a[c])), x);
@@ -237,6 +239,7 @@ pub fn stress<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, e: &M<S, N>) -> M<
                 x = add(x, diag);
             }
             s[r][c] = x;
+            s[c][r] = x;
         }
     }
     s

@@ -10,8 +10,8 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, Scalar, add, fma, gershgorin, gradient, identity_plus, matmul, max, mul, row_abs,
-    scatter, splat, stress, sub, zero,
+    L, LaneBlock, M, Scalar, add, fma, gershgorin, gradient, identity_plus, mat, matmul, max, mul,
+    row_abs, scatter, splat, stress, sub, zero,
 };
 use super::nonlinear::{STVK_BARRIER_J, STVK_BARRIER_SCALE};
 use crate::math::Real;
@@ -72,7 +72,8 @@ pub fn stvk_block<S: Scalar, const N: usize>(
     let gap = max(sub(splat(STVK_BARRIER_J), det), splat(0.0));
     let barrier_coef = mul(mul(splat(-3.0), k), mul(gap, gap));
     // P = F S + b, d = H S + sigma(quad) + b.
-    let fs = matmul(&f, &s);
+    // F S = S + H S (for the bound only).
+    let fs: M<S, N> = mat(|r, c| add(s[r][c], hs[r][c]));
     let mut d = zero();
     let mut p = zero();
     for r in 0..3 {
