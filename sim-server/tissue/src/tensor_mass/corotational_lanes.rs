@@ -158,13 +158,14 @@ fn rotation_step<S: Scalar, const N: usize>(
     // The scalar path's 1e-300, or f32's smallest normal.
     let scale = add(abs(tr_m), [S::of(1e-300).max(S::MIN_POSITIVE); N]);
     let minor = sub(mul(m[0][0], m[1][1]), mul(m[0][1], m[1][0]));
-    let scale2 = mul(scale, scale);
+    // Grouped as the scalar path's `1e-6 * sc * sc`, so f64 lanes take
+    // the same branch to the bit.
     let pd = mul(
         mul(
             gt(m[0][0], mul(splat(1e-3), scale)),
-            gt(minor, mul(splat(1e-6), scale2)),
+            gt(minor, mul(mul(splat(1e-6), scale), scale)),
         ),
-        gt(det, mul(splat(1e-9), mul(scale2, scale))),
+        gt(det, mul(mul(mul(splat(1e-9), scale), scale), scale)),
     );
     let one = S::of(1.0);
     let inv_det = select(pd, lanes(|i| one / det[i]), splat(0.0));

@@ -227,8 +227,10 @@ pub fn stress<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, e: &M<S, N>) -> M<
     let diag = fma(b.lambda, i1, mul(b.cross, i4));
     let two_mu = add(b.mu, b.mu);
     let two_shear = add(b.shear, b.shear);
-    // The upper triangle, mirrored: for a symmetric strain each term is
-    // symmetric to the bit (the products commute and so do the sums).
+    // Each entry of the upper triangle computed once and mirrored: symmetric
+    // by construction, and for a symmetric strain equal to the bit to the
+    // nine-entry form (the products commute, and `fma` here is the unfused
+    // a * b + c, so the two products of the fibre term add the same way).
     let mut s = zero();
     for r in 0..3 {
         for c in r..3 {

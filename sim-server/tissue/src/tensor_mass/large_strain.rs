@@ -68,8 +68,12 @@ pub struct LargeStrain {
     elements: Vec<Element>,
     /// Per element: whether its tetrahedron is in the mesh.
     alive: Vec<bool>,
-    /// Elements kN..(k+1)N as lanes, and their forces.
+    /// Elements kN..(k+1)N as lanes, their forces and (corotational
+    /// blocks) their rotations.
     lanes: Lanes,
+    /// Per element: the rotation of a corotational element in a scalar
+    /// block (mixed models, or the short last block); lane blocks keep
+    /// theirs in [`LaneSet`]'s `quats`.
     rotations: Vec<DQuat>,
     /// Index of each tetrahedron's element (u32::MAX: linear).
     element_of: Vec<u32>,
@@ -267,9 +271,9 @@ enum Lanes {
 /// One block's corner forces, lane-wise: `[corner][coordinate][lane]`.
 type BlockForces<S, const N: usize> = [[L<S, N>; 3]; 4];
 
-/// The elements as blocks of N lanes and their forces, block by block (the
+/// The elements as blocks of N lanes, their forces block by block (the
 /// pass stores each block's forces with a few vector writes; the sweep
-/// reads them in the same order).
+/// reads them in the same order) and the corotational blocks' rotations.
 #[derive(Clone, Debug)]
 struct LaneSet<S: Scalar, const N: usize> {
     /// Block k holds elements kN..(k+1)N (a last, short block is scalar).
@@ -404,7 +408,8 @@ impl<S: Scalar, const N: usize> Block<S, N> {
     }
 }
 
-/// A contiguous range of whole blocks: their elements, blocks and buffers.
+/// A contiguous range of whole blocks: their elements, blocks, forces and
+/// lane rotations, and the scalar elements' rotations.
 struct Range<'a, S: Scalar, const N: usize> {
     elements: &'a [Element],
     alive: &'a [bool],

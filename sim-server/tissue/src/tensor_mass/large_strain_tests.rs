@@ -172,6 +172,11 @@ fn vertex_sums_equal_the_scalar_forces_summed() {
             } else if step == 2 {
                 large.set_alive(tet, true);
             }
+            if step > 0 {
+                // Its lane's rotation starts afresh (a dead lane with H = 0
+                // and another rotation would push).
+                assert_eq!(large.rotation(removed), DQuat::IDENTITY, "{precision:?}");
+            }
             let before = large.rotations();
             let mut split = large.clone();
             let mut out = vec![[0.0; 3]; u.len()];
@@ -367,5 +372,47 @@ fn corotational_lanes_equal(precision: LanePrecision) {
             }
         }
         assert!((large.last().lambda - lambda).abs() <= tol.lambda * lambda);
+    }
+}
+
+/// The lanes' stress of a symmetric strain equals the scalar
+/// `TetElastic::stress` of each lane (isotropic and anisotropic lanes), in
+/// f64 to round-off and in f32 to its precision, and is symmetric.
+#[test]
+fn lane_stress_equals_the_scalar_stress() {
+    let model = mixed_block(MaterialModel::Stvk);
+    let large = LargeStrain::new(&model).unwrap();
+    let e = Mat3::from_cols_array(&[
+        0.012, -0.004, 0.007, -0.004, -0.009, 0.002, 0.007, 0.002, 0.015,
+    ]);
+    for chunk in large.elements.chunks_exact(8).take(3) {
+        let wide: LaneBlock<f64, 8> = block(chunk);
+        let narrow: LaneBlock<f32, 8> = block(chunk);
+        let lane64: [[[f64; 8]; 3]; 3] =
+            std::array::from_fn(|r| std::array::from_fn(|c| [e.col(c)[r]; 8]));
+        let lane32: [[[f32; 8]; 3]; 3] =
+            std::array::from_fn(|r| std::array::from_fn(|c| [e.col(c)[r] as f32; 8]));
+        let s64 = super::super::lanes::stress(&wide, &lane64);
+        let s32 = super::super::lanes::stress(&narrow, &lane32);
+        for (l, el) in chunk.iter().enumerate() {
+            let reference = el.elastic.stress(&e);
+            let size = (0..3)
+                .map(|c| reference.col(c).abs().max_element())
+                .fold(0.0, Real::max);
+            for r in 0..3 {
+                for c in 0..3 {
+                    let want = reference.col(c)[r];
+                    assert!(
+                        (s64[r][c][l] - want).abs() <= 1e-12 * size,
+                        "{r}{c} lane {l}"
+                    );
+                    assert!(
+                        (s32[r][c][l] as Real - want).abs() <= 1e-6 * size,
+                        "{r}{c} lane {l}"
+                    );
+                    assert_eq!(s64[r][c][l], s64[c][r][l]);
+                }
+            }
+        }
     }
 }
