@@ -26,6 +26,26 @@ fn mixed_block(model: MaterialModel) -> ElasticModel {
     model
 }
 
+/// How many blocks of `large` are StVK lanes, corotational lanes and
+/// scalar, and the lane count.
+fn block_kinds(large: &LargeStrain) -> ([usize; 3], usize) {
+    fn kinds<S: Scalar, const N: usize>(set: &LaneSet<S, N>) -> ([usize; 3], usize) {
+        let mut k = [0; 3];
+        for b in &set.blocks {
+            k[match b {
+                Block::Stvk(_) => 0,
+                Block::Corotational(_) => 1,
+                Block::Scalar => 2,
+            }] += 1;
+        }
+        (k, N)
+    }
+    match &large.lanes {
+        Lanes::F64(set) => kinds(set),
+        Lanes::F32(set) => kinds(set),
+    }
+}
+
 /// How close the lanes must be to the scalar path: f64 lanes to
 /// round-off; f32 lanes to f32's precision of the element's forces
 /// (relative to the linear force plus the correction: a small
@@ -123,18 +143,7 @@ fn vertex_sums_equal_the_scalar_forces_summed() {
     for precision in [LanePrecision::F64, LanePrecision::F32] {
         let model = two_model_block();
         let mut large = LargeStrain::with_precision(&model, precision).unwrap();
-        let scalar_blocks = match &large.lanes {
-            Lanes::F64(set) => set
-                .blocks
-                .iter()
-                .filter(|b| matches!(b, Block::Scalar))
-                .count(),
-            Lanes::F32(set) => set
-                .blocks
-                .iter()
-                .filter(|b| matches!(b, Block::Scalar))
-                .count(),
-        };
+        let scalar_blocks = block_kinds(&large).0[2];
         // A mixed block; in eights also a short last one (324 = 40 x 8 + 4).
         let expected = if precision == LanePrecision::F32 {
             2
@@ -229,18 +238,7 @@ fn stvk_lanes_equal_the_scalar_path(precision: LanePrecision) {
     let tol = tolerance(precision);
     let model = mixed_block(MaterialModel::Stvk);
     let mut large = LargeStrain::with_precision(&model, precision).unwrap();
-    let stvk_blocks = match &large.lanes {
-        Lanes::F64(set) => set
-            .blocks
-            .iter()
-            .filter(|b| matches!(b, Block::Stvk(_)))
-            .count(),
-        Lanes::F32(set) => set
-            .blocks
-            .iter()
-            .filter(|b| matches!(b, Block::Stvk(_)))
-            .count(),
-    };
+    let stvk_blocks = block_kinds(&large).0[0];
     assert!(stvk_blocks > 0);
     let p = model.mesh().positions_m();
     for squash in [1.0, 0.3] {
@@ -306,22 +304,7 @@ fn corotational_lanes_equal(precision: LanePrecision) {
     };
     let model = mixed_block(MaterialModel::Corotational);
     let mut large = LargeStrain::with_precision(&model, precision).unwrap();
-    let (lanes, width) = match &large.lanes {
-        Lanes::F64(set) => (
-            set.blocks
-                .iter()
-                .filter(|b| matches!(b, Block::Corotational(_)))
-                .count(),
-            4,
-        ),
-        Lanes::F32(set) => (
-            set.blocks
-                .iter()
-                .filter(|b| matches!(b, Block::Corotational(_)))
-                .count(),
-            8,
-        ),
-    };
+    let ([_, lanes, _], width) = block_kinds(&large);
     assert_eq!(lanes, large.elements.len() / width);
     let p = model.mesh().positions_m();
     let turned = |angle: Real, shear: Real, flip: Real| -> Vec<V3> {
