@@ -207,7 +207,8 @@ fn rotation_step<S: Scalar, const N: usize>(
     mul(update, gt(w, splat(ROTATION_TOL_RAD)))
 }
 
-/// A block of corotational elements' force corrections into `out` (`alive`
+/// A block of corotational elements' force corrections (whole forces when
+/// `whole`) into `out` (`alive`
 /// masks removed ones), their rotations (lane quaternions) refined in place in `rotation`:
 /// returns the largest tangent bound.
 #[inline(always)]
@@ -216,6 +217,7 @@ pub fn corotational_block<S: Scalar, const N: usize>(
     alive: [bool; N],
     rotation: &mut Q<S, N>,
     u: &[V3],
+    whole: bool,
     out: &mut [[L<S, N>; 3]; 4],
 ) -> Real {
     let h = gradient(b, alive, u);
@@ -241,8 +243,12 @@ pub fn corotational_block<S: Scalar, const N: usize>(
     let st = stress(b, &turned);
     let rot: M<S, N> = mat(|i, j| add(sl[i][j], st[i][j]));
     let rmi_rot = matmul(&rmi, &rot);
-    let d: M<S, N> = mat(|i, j| add(st[i][j], rmi_rot[i][j]));
     let p: M<S, N> = mat(|i, j| add(rot[i][j], rmi_rot[i][j]));
+    let d: M<S, N> = if whole {
+        p
+    } else {
+        mat(|i, j| add(st[i][j], rmi_rot[i][j]))
+    };
     scatter(b, &d, alive, out);
     // The rotated rest tangent plus the rotation's terms (see
     // `large_strain::element`).

@@ -204,7 +204,20 @@ impl<S: Storage> Explicit<S> {
         } else {
             None
         };
-        let kernel = Kernel::new(&model);
+        // The nonlinear lanes in the kernel's precision: with f32 tensors,
+        // eight f32 elements to a register. When every element is
+        // nonlinear the pass computes the whole elastic force and the
+        // kernel carries no tensors (it only integrates); otherwise the
+        // kernel keeps every element's linear tensors and the pass adds the
+        // nonlinear ones' differences.
+        let large = LargeStrain::with_precision(&model, S::LANES);
+        let (kernel, large) = match large {
+            Some(l) if l.covers_every_tetrahedron() => (
+                Kernel::without_elastic(model.vertex_count()),
+                Some(l.computing_whole_forces()),
+            ),
+            other => (Kernel::new(&model), other),
+        };
         let n = model.vertex_count();
         let plans = plan_parts(&kernel, threads);
         let (fmem, capsule_vertices) = match model.membrane() {
@@ -221,9 +234,6 @@ impl<S: Storage> Explicit<S> {
             }
             _ => (Vec::new(), Vec::new()),
         };
-        // The nonlinear lanes in the kernel's precision: with f32 tensors,
-        // eight f32 elements to a register.
-        let large = LargeStrain::with_precision(&model, S::LANES);
         let fnl = if large.is_some() {
             huge_vec(n, [0.0; 3])
         } else {
@@ -662,7 +672,8 @@ impl<S: Storage> Explicit<S> {
         &self.model
     }
 
-    /// The hot kernel.
+    /// The hot kernel (without elastic tensors when every element is
+    /// nonlinear: see [`Kernel::without_elastic`]).
     pub fn kernel(&self) -> &Kernel<S> {
         &self.kernel
     }

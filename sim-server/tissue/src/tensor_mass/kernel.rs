@@ -179,6 +179,9 @@ pub struct Kernel<S: Storage> {
     edges: Vec<EdgeBlock<S>>,
     /// Largest j - i over the edges: how far ahead a row scatters.
     span: usize,
+    /// False: no elastic tensors at all (every element is nonlinear and
+    /// computes its whole force in the nonlinear pass); cuts change nothing.
+    elastic: bool,
 }
 
 impl<S: Storage> Kernel<S> {
@@ -212,11 +215,35 @@ impl<S: Storage> Kernel<S> {
                 .map(|[a, b]| (b.0 - a.0) as usize)
                 .max()
                 .unwrap_or(0),
+            elastic: true,
         }
+    }
+
+    /// A kernel without elastic tensors for `n` vertices: K u = 0, so the
+    /// step only integrates the other forces (for a model whose every
+    /// element is nonlinear: the nonlinear pass then computes the whole
+    /// elastic force, and streaming the linear tensors only to cancel them
+    /// would cost the linear step again).
+    pub fn without_elastic(n: usize) -> Self {
+        Self {
+            diag: collect_huge(n, std::iter::repeat_n([S::default(); 9], n)),
+            row_start: vec![0; n + 1],
+            edges: Vec::new(),
+            span: 0,
+            elastic: false,
+        }
+    }
+
+    /// Whether it holds the elastic tensors.
+    pub fn is_elastic(&self) -> bool {
+        self.elastic
     }
 
     /// Copies the 4 vertex and 6 edge tensors a cut changed.
     pub fn update(&mut self, model: &ElasticModel, change: &CutChange) {
+        if !self.elastic {
+            return;
+        }
         for v in change.vertices {
             self.diag[v.idx()] = pack(&model.vertex_tensors()[v.idx()]);
         }

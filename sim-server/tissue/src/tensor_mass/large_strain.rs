@@ -79,6 +79,9 @@ pub struct LargeStrain {
     element_of: Vec<u32>,
     /// Vertices touched (their sums are overwritten).
     vertices: Vec<u32>,
+    /// The pass computes each element's whole elastic force, not its
+    /// difference from the linear one (see [`LargeStrain::computing_whole_forces`]).
+    whole: bool,
     last: PassReport,
 }
 
@@ -151,8 +154,24 @@ impl LargeStrain {
             elements,
             element_of,
             vertices,
+            whole: false,
             last: PassReport::default(),
         })
+    }
+
+    /// Whether every tetrahedron of the model is nonlinear.
+    pub fn covers_every_tetrahedron(&self) -> bool {
+        self.elements.len() == self.element_of.len()
+    }
+
+    /// The same pass computing each element's whole elastic force, P
+    /// instead of P - sigma_lin: for a model whose every tetrahedron is
+    /// nonlinear, run beside a kernel without elastic tensors
+    /// ([`super::Kernel::without_elastic`]), which then no longer streams
+    /// the linear tensors only for the pass to cancel them.
+    pub fn computing_whole_forces(mut self) -> Self {
+        self.whole = true;
+        self
     }
 
     /// Number of nonlinear elements (live or not).
@@ -218,11 +237,13 @@ impl LargeStrain {
             lanes,
             rotations,
             vertices,
+            whole,
             ..
         } = self;
+        let whole = *whole;
         self.last = match lanes {
-            Lanes::F64(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
-            Lanes::F32(set) => set.pass(elements, alive, rotations, u, min, vertices, out),
+            Lanes::F64(set) => set.pass(elements, alive, rotations, u, min, whole, vertices, out),
+            Lanes::F32(set) => set.pass(elements, alive, rotations, u, min, whole, vertices, out),
         };
     }
 
@@ -368,10 +389,12 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
         rotations: &mut [DQuat],
         u: &[V3],
         min: usize,
+        whole: bool,
         touched: &[u32],
         out: &mut [V3],
     ) -> PassReport {
         let range = Range {
+            whole,
             elements,
             alive,
             rotations,
@@ -411,6 +434,8 @@ impl<S: Scalar, const N: usize> Block<S, N> {
 /// A contiguous range of whole blocks: their elements, blocks, forces and
 /// lane rotations, and the scalar elements' rotations.
 struct Range<'a, S: Scalar, const N: usize> {
+    /// Whole forces (P), not corrections (P - sigma_lin).
+    whole: bool,
     elements: &'a [Element],
     alive: &'a [bool],
     rotations: &'a mut [DQuat],
@@ -438,6 +463,7 @@ fn element_range<S: Scalar, const N: usize>(
         let (a, b) = rayon::join(
             || {
                 let range = Range {
+                    whole: r.whole,
                     elements: ea,
                     alive: la,
                     rotations: ra,
@@ -449,6 +475,7 @@ fn element_range<S: Scalar, const N: usize>(
             },
             || {
                 let range = Range {
+                    whole: r.whole,
                     elements: eb,
                     alive: lb,
                     rotations: rb,
@@ -494,11 +521,11 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
         let alive = || std::array::from_fn(|l| r.alive[i + l]);
         match &block {
             Block::Stvk(b) => {
-                let (lambda, collapsed) = stvk_block(b, alive(), u, forces);
+                let (lambda, collapsed) = stvk_block(b, alive(), u, r.whole, forces);
                 report = report.join(PassReport { lambda, collapsed });
             }
             Block::Corotational(b) => {
-                let lambda = corotational_block(b, alive(), q, u, forces);
+                let lambda = corotational_block(b, alive(), q, u, r.whole, forces);
                 report = report.join(PassReport {
                     lambda,
                     collapsed: 0,
@@ -508,7 +535,13 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
                 for l in 0..N.min(r.elements.len() - i) {
                     let mut f = [[0.0; 3]; 4];
                     if r.alive[i + l] {
-                        let e = element(&r.elements[i + l], &mut r.rotations[i + l], &mut f, u);
+                        let e = element(
+                            &r.elements[i + l],
+                            &mut r.rotations[i + l],
+                            &mut f,
+                            u,
+                            r.whole,
+                        );
                         report = report.join(e);
                     }
                     for (k, fk) in f.iter().enumerate() {
@@ -543,20 +576,33 @@ fn block<S: Scalar, const N: usize>(chunk: &[Element]) -> LaneBlock<S, N> {
     }
 }
 
-/// One element's force correction into `out`, and its bound.
+/// One element's force correction into `out` (its whole elastic force
+/// when `whole`), and its bound.
 #[inline]
-fn element(e: &Element, q: &mut DQuat, out: &mut [V3; 4], u: &[V3]) -> PassReport {
+fn element(e: &Element, q: &mut DQuat, out: &mut [V3; 4], u: &[V3], whole: bool) -> PassReport {
     let du = e.vertices.map(|v| Vec3::from_array(u[v as usize]));
     let f = deformation_gradient(&e.geom, &du);
     let (d, lambda, barrier) = match Law::of(e.model) {
-        Law::Stvk => stvk(e, &f),
+        Law::Stvk => {
+            let (d, lambda, barrier) = stvk(e, &f);
+            let d = if whole {
+                d + first_piola(Law::Linear, &e.elastic, &f, q)
+            } else {
+                d
+            };
+            (d, lambda, barrier)
+        }
         law => {
             // Corotational: the rotated rest tangent plus the rotation's
             // terms, which scale with the stress (an estimate, exact at rest).
             let p = first_piola(law, &e.elastic, &f, q);
-            let lin = first_piola(Law::Linear, &e.elastic, &f, q);
             let lambda = e.rest_lambda + 2.0 * gershgorin_abs(&p) * e.geometric_per_pa;
-            (p - lin, lambda, false)
+            let d = if whole {
+                p
+            } else {
+                p - first_piola(Law::Linear, &e.elastic, &f, q)
+            };
+            (d, lambda, false)
         }
     };
     let d = d * (-e.geom.volume_m3);

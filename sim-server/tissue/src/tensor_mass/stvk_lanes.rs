@@ -16,13 +16,14 @@ use super::lanes::{
 use super::nonlinear::{STVK_BARRIER_J, STVK_BARRIER_SCALE};
 use crate::math::Real;
 
-/// A block's force corrections into `out` (`alive` masks removed
+/// A block's force corrections (whole forces when `whole`) into `out` (`alive` masks removed
 /// ones): returns (largest tangent bound, elements in the barrier).
 #[inline(always)]
 pub fn stvk_block<S: Scalar, const N: usize>(
     b: &LaneBlock<S, N>,
     alive: [bool; N],
     u: &[V3],
+    whole: bool,
     out: &mut [[L<S, N>; 3]; 4],
 ) -> (Real, usize) {
     let h = gradient(b, alive, u);
@@ -80,6 +81,10 @@ pub fn stvk_block<S: Scalar, const N: usize>(
         for c in 0..3 {
             let bar = mul(barrier_coef, cof_cols[c][r]);
             d[r][c] = add(add(hs[r][c], sq[r][c]), bar);
+            if whole {
+                // P = F S + b = sigma_lin + (H S + sigma(quad) + b).
+                d[r][c] = add(d[r][c], sl[r][c]);
+            }
             p[r][c] = add(fs[r][c], bar);
         }
     }
