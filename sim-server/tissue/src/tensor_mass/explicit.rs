@@ -206,13 +206,14 @@ impl<S: Storage> Explicit<S> {
         };
         // The nonlinear lanes in the kernel's precision: with f32 tensors,
         // eight f32 elements to a register. When every element is
-        // nonlinear the pass computes the whole elastic force and the
-        // kernel carries no tensors (it only integrates); otherwise the
-        // kernel keeps every element's linear tensors and the pass adds the
-        // nonlinear ones' differences.
+        // nonlinear and the tensors hold nothing else (a linear capsule
+        // membrane lives in them), the pass computes the whole elastic
+        // force and the kernel carries no tensors (it only integrates);
+        // otherwise the kernel keeps the linear tensors and the pass adds
+        // the nonlinear elements' differences.
         let large = LargeStrain::with_precision(&model, S::LANES);
         let (kernel, large) = match large {
-            Some(l) if l.covers_every_tetrahedron() => (
+            Some(l) if l.covers_every_tetrahedron() && model.tensors_are_elements_only() => (
                 Kernel::without_elastic(model.vertex_count()),
                 Some(l.computing_whole_forces()),
             ),

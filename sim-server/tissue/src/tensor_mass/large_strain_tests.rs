@@ -483,4 +483,10 @@ fn whole_forces_are_the_corrections_plus_the_linear_forces() {
     let all =
         super::super::Explicit::<f32>::new(mixed_block(MaterialModel::Stvk), config()).unwrap();
     assert!(!all.kernel().is_elastic());
+    // A linear capsule membrane lives in the tensors: they stay.
+    let capsule = mixed_block(MaterialModel::Stvk)
+        .with_membrane(5000.0, crate::membrane::MembraneModel::Linear)
+        .unwrap();
+    let with_capsule = super::super::Explicit::<f32>::new(capsule, config()).unwrap();
+    assert!(with_capsule.kernel().is_elastic());
 }
