@@ -148,8 +148,8 @@ pub struct Explicit<S: Storage> {
     /// a nonlinear membrane: a scene without one pays nothing).
     fmem: Vec<V3>,
     capsule_vertices: Vec<u32>,
-    /// Nonlinear elements and their force corrections (none and empty in
-    /// a linear scene).
+    /// Nonlinear elements and their force corrections, or whole forces
+    /// when every element is nonlinear (none and empty in a linear scene).
     large: Option<LargeStrain>,
     fnl: Vec<V3>,
     threads: usize,
@@ -206,8 +206,8 @@ impl<S: Storage> Explicit<S> {
         };
         // The nonlinear lanes in the kernel's precision: with f32 tensors,
         // eight f32 elements to a register. When every element is
-        // nonlinear and the tensors hold nothing else (a linear capsule
-        // membrane lives in them), the pass computes the whole elastic
+        // nonlinear and the tensors hold nothing else (as a linear capsule
+        // membrane would), the pass computes the whole elastic
         // force and the kernel carries no tensors (it only integrates);
         // otherwise the kernel keeps the linear tensors and the pass adds
         // the nonlinear elements' differences.
@@ -725,11 +725,15 @@ impl<S: Storage> Explicit<S> {
 
     /// Bytes the step streams per sub-step: the kernel's tensors and indices
     /// plus the state arrays (U read, U(t-1) read and U(t+1) written in its
-    /// place, coefficients and kinds read). The K U accumulators live in a
+    /// place, coefficients and kinds read), and the nonlinear pass's rest
+    /// data, forces and rotations. The K U accumulators live in a
     /// cache-sized ring and are not counted.
     pub fn bytes_per_substep(&self) -> usize {
         let n = self.u.len();
-        self.kernel.bytes() + n * (24 + 48 + 24 + 1)
+        // The nonlinear pass's rest data and buffers, and the vertex
+        // forces it hands the step.
+        let large = self.large.as_ref().map_or(0, |l| l.bytes() + n * 24);
+        self.kernel.bytes() + n * (24 + 48 + 24 + 1) + large
     }
 
     /// The number of parts a step is split into.

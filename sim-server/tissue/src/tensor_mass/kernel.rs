@@ -331,7 +331,8 @@ pub struct StepInputs<'a> {
     pub fext: &'a [V3],
     /// Nonlinear membrane forces (N); empty without a nonlinear membrane.
     pub fmem: &'a [V3],
-    /// Large-strain corrections of nonlinear elements (N); empty without them.
+    /// Nonlinear elements' forces (N): corrections to the linear ones, or
+    /// whole forces beside a kernel without tensors; empty without them.
     pub fnl: &'a [V3],
 }
 

@@ -2,10 +2,14 @@
 //! per-element rest data packed once, a force pass every sub-step, and the
 //! bound of the current tangent for the stable step.
 //!
-//! The hot kernel keeps the linear tensors of *every* element (so contact
-//! stiffness, the rest bound and cutting stay as they are); for each
-//! nonlinear element this pass adds the difference between its nonlinear
-//! force and its linear one, -V (P - sigma_lin) m_k. The pass writes each
+//! In a model with linear elements (or a linear capsule folded into the
+//! tensors) the hot kernel keeps the linear tensors of *every* element (so
+//! contact stiffness, the rest bound and cutting stay as they are) and for
+//! each nonlinear element this pass adds the difference between its
+//! nonlinear force and its linear one, -V (P - sigma_lin) m_k. When every
+//! element is nonlinear and the tensors hold nothing else, the kernel
+//! carries no tensors and the pass computes the whole force, -V P m_k
+//! ([`LargeStrain::computing_whole_forces`]). The pass writes each
 //! element's four forces to its own slots (threads own element ranges, no
 //! atomics), then one sequential sweep adds the slots to their vertices in
 //! element order: every vertex sums its forces in the same order whatever
@@ -220,7 +224,23 @@ impl LargeStrain {
         }
     }
 
-    /// The pass: computes every live element's force correction at `u` and
+    /// Bytes the pass streams: the blocks' rest data, forces and rotations
+    /// (besides the displacements and vertex forces the step counts).
+    pub fn bytes(&self) -> usize {
+        fn of<S: Scalar, const N: usize>(set: &LaneSet<S, N>) -> usize {
+            set.blocks.len()
+                * (std::mem::size_of::<Block<S, N>>()
+                    + std::mem::size_of::<BlockForces<S, N>>()
+                    + std::mem::size_of::<Q<S, N>>())
+        }
+        match &self.lanes {
+            Lanes::F64(set) => of(set),
+            Lanes::F32(set) => of(set),
+        }
+    }
+
+    /// The pass: computes every live element's force correction (or whole
+    /// force, see [`LargeStrain::computing_whole_forces`]) at `u` and
     /// writes their sums into `out` at the touched vertices (overwritten;
     /// other vertices are left as they are). Runs on the current rayon
     /// pool's threads when called inside one.
