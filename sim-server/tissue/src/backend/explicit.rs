@@ -45,6 +45,12 @@ impl<S: Storage> Backend for Explicit<S> {
     fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
         Explicit::large_strain(self).map(|l| l.last())
     }
+    fn nonlinear_force_n(
+        &self,
+        v: VertexId,
+    ) -> Option<crate::tensor_mass::large_strain::VertexForce> {
+        Explicit::nonlinear_force_n(self, v)
+    }
     fn integrates_contact(&self) -> bool {
         true
     }

@@ -84,6 +84,16 @@ pub trait Backend {
     fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
         None
     }
+    /// The nonlinear elements' force at vertex `v` after the last step, for
+    /// a backend running nonlinear materials (the reaction a tool feels
+    /// adds it); `None` otherwise.
+    fn nonlinear_force_n(
+        &self,
+        v: VertexId,
+    ) -> Option<crate::tensor_mass::large_strain::VertexForce> {
+        let _ = v;
+        None
+    }
     /// Whether the backend integrates inertia (false: quasi-static).
     fn dynamic(&self) -> bool {
         true

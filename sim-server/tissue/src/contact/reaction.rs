@@ -10,12 +10,14 @@ use crate::backend::Backend;
 use crate::ids::VertexId;
 use crate::math::{Mat3, Vec3, outer};
 use crate::tensor_mass::ElasticModel;
+use crate::tensor_mass::large_strain::VertexForce;
 
 /// Force and stiffness one tool feels after a step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Reaction {
     /// Force the tissue exerts on the tool (N): the sum over the constrained
-    /// vertices of their elastic forces F_i = -(K U)_i. A tool pressing into
+    /// vertices of their elastic forces F_i = -(K U)_i (plus the nonlinear
+    /// elements' part in a nonlinear model). A tool pressing into
     /// tissue is pushed back out of it.
     pub force_n: Vec3,
     /// Contact stiffness (N/m), symmetric positive semidefinite: how the
@@ -66,6 +68,20 @@ pub(crate) fn elastic_force_n(
     -ku
 }
 
+/// The whole elastic force at vertex `v` (N): the linear -(K U)_v plus, in
+/// a nonlinear model, the nonlinear pass's correction there (or its whole
+/// force, when the step keeps no linear tensors). The pass saw the state at
+/// the start of the last sub-step.
+pub(crate) fn vertex_force_n<B: Backend + ?Sized>(sim: &B, adj: &Adjacency, v: VertexId) -> Vec3 {
+    match sim.nonlinear_force_n(v) {
+        Some(VertexForce::Whole(f)) => f,
+        Some(VertexForce::Correction(c)) => {
+            elastic_force_n(adj, sim.model(), v, |w| sim.displacement(w)) + c
+        }
+        None => elastic_force_n(adj, sim.model(), v, |w| sim.displacement(w)),
+    }
+}
+
 /// One tool's reaction after a step: `penalty` (the penalty field's force
 /// on the tool and the contact stiffness computed for it), if the tool
 /// uses that law, plus, at every vertex it constrains, the elastic force
@@ -85,7 +101,7 @@ pub(crate) fn tool_reaction<B: Backend + ?Sized>(
     }
     for c in constraints {
         let v = c.vertex;
-        out.force_n += elastic_force_n(adj, model, v, |w| sim.displacement(w));
+        out.force_n += vertex_force_n(sim, adj, v);
         let k = &model.vertex_tensors()[v.idx()];
         out.stiffness_n_per_m += match c.kind {
             ConstraintKind::Tip(n) | ConstraintKind::Shaft(n) => along(k, n),
@@ -93,4 +109,111 @@ pub(crate) fn tool_reaction<B: Backend + ?Sized>(
         };
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::{Elasticity, Isotropic, Material, MaterialModel};
+    use crate::material_map::TetMaterials;
+    use crate::math::Real;
+    use crate::mesh::{BoxSpec, CellSize};
+    use crate::static_newton::{NewtonConfig, solve_static_nonlinear};
+    use crate::static_solve::Dirichlet;
+    use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
+
+    /// A 2 x 1 x 1 cm StVK block, with a linear capsule of zero stiffness
+    /// if `capsule` (the step then keeps the linear tensors and the pass
+    /// gives corrections; without it, whole forces).
+    fn block(capsule: bool) -> ElasticModel {
+        let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
+            .generate()
+            .unwrap();
+        let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
+        let material = Material::new(Elasticity::Isotropic(iso), 1000.0, 0.0)
+            .unwrap()
+            .with_model(MaterialModel::Stvk);
+        let model = ElasticModel::new(
+            mesh.clone(),
+            TetMaterials::uniform(material, mesh.tet_count()),
+        )
+        .unwrap();
+        if capsule {
+            model
+                .with_membrane(0.0, crate::membrane::MembraneModel::Linear)
+                .unwrap()
+        } else {
+            model
+        }
+    }
+
+    /// The force the held vertices feel from a StVK block stretched by 30%
+    /// of its length (one end fixed, the other held where a tool holds it):
+    /// at the static StVK equilibrium, the sum of [`vertex_force_n`] over
+    /// the held end is minus the support force the nonlinear static solver
+    /// reports there, with the step's whole forces and with its
+    /// corrections, in f64 and f32; the linear force alone is far off.
+    #[test]
+    fn a_held_end_feels_the_nonlinear_force() {
+        fn check<S: Storage>(capsule: bool, tol: Real) {
+            let model = block(capsule);
+            let n = model.vertex_count();
+            let p = model.mesh().positions_m().to_vec();
+            let mut bc = Dirichlet::new(n);
+            let stretch = Vec3::new(0.006, 0.001, -0.001);
+            let held: Vec<VertexId> = (0..n as u32)
+                .map(VertexId)
+                .filter(|v| p[v.idx()].x > 0.02 - 1e-9)
+                .collect();
+            for (v, x) in p.iter().enumerate() {
+                if x.x < 1e-9 {
+                    bc.fix(VertexId(v as u32));
+                }
+            }
+            for v in &held {
+                bc.prescribe(*v, stretch);
+            }
+            let statics =
+                solve_static_nonlinear(&model, &bc, &vec![Vec3::ZERO; n], NewtonConfig::default())
+                    .unwrap()
+                    .solution;
+            let support: Vec3 = held.iter().map(|v| statics.force_n[v.idx()]).sum();
+            let adj = Adjacency::new(&model);
+            let mut sim = Explicit::<S>::new(model, ExplicitConfig::new(1e-5)).unwrap();
+            for (v, x) in p.iter().enumerate() {
+                if x.x < 1e-9 {
+                    sim.fix(VertexId(v as u32));
+                }
+            }
+            for v in &held {
+                sim.prescribe(*v, stretch);
+            }
+            sim.set_state(&statics.displacement_m, &statics.displacement_m);
+            sim.step();
+            // The pass saw the equilibrium at the start of the step; the
+            // free vertices barely moved in 10 us.
+            let felt: Vec3 = held.iter().map(|v| vertex_force_n(&sim, &adj, *v)).sum();
+            let linear: Vec3 = held
+                .iter()
+                .map(|v| {
+                    elastic_force_n(&adj, sim.model(), *v, |w| {
+                        Vec3::from(statics.displacement_m[w.idx()])
+                    })
+                })
+                .sum();
+            let scale = support.length();
+            assert!(
+                (felt + support).length() <= tol * scale,
+                "capsule {capsule}: felt {felt} against support {support}"
+            );
+            assert!(
+                (linear + support).length() > 0.05 * scale,
+                "the stretch is nonlinear enough to tell: linear {linear}, support {support}"
+            );
+        }
+        check::<f64>(false, 1e-6);
+        check::<f64>(true, 1e-6);
+        check::<f32>(false, 1e-4);
+        check::<f32>(true, 1e-4);
+    }
 }

@@ -377,7 +377,6 @@ impl ToolContact {
             }
         };
         let plane = Plane::tangent(segment, r, n);
-        let model = sim.model();
         for i in 0..self.hits.len() {
             let v = self.hits[i];
             let target = plane.project(sim.position(v));
@@ -386,8 +385,7 @@ impl ToolContact {
         for i in 0..self.kept.len() {
             let v = self.kept[i];
             let x = sim.position(v);
-            let pushing =
-                reaction::elastic_force_n(adj, model, v, |w| sim.displacement(w)).dot(n) > 0.0;
+            let pushing = reaction::vertex_force_n(sim, adj, v).dot(n) > 0.0;
             if pushing
                 && plane.footprint_distance_m(x, segment) <= r
                 && plane.height_m(x) >= -KEEP_BELOW * r

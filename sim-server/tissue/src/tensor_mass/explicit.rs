@@ -5,7 +5,7 @@
 
 use super::huge_pages::huge_vec;
 use super::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind};
-use super::large_strain::LargeStrain;
+use super::large_strain::{LargeStrain, VertexForce};
 use super::model::{CutChange, CutError, ElasticModel};
 use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
 use crate::ids::{TetId, VertexId};
@@ -671,6 +671,18 @@ impl<S: Storage> Explicit<S> {
     /// The model (tensors, topology, surface).
     pub fn model(&self) -> &ElasticModel {
         &self.model
+    }
+
+    /// The nonlinear elements' force at vertex `v` from the last pass (the
+    /// state at the start of the last sub-step), `None` in a linear model.
+    pub fn nonlinear_force_n(&self, v: VertexId) -> Option<VertexForce> {
+        let large = self.large.as_ref()?;
+        let f = Vec3::from_array(self.fnl[v.idx()]);
+        Some(if large.computes_whole_forces() {
+            VertexForce::Whole(f)
+        } else {
+            VertexForce::Correction(f)
+        })
     }
 
     /// The hot kernel (without elastic tensors when every element is

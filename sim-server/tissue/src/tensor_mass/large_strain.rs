@@ -46,6 +46,16 @@ struct Element {
     geometric_per_pa: Real,
 }
 
+/// The nonlinear pass's force at one vertex after the last pass (N).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VertexForce {
+    /// To be added to the linear force -(K U) there (models with linear
+    /// elements or a linear capsule: the step keeps the linear tensors).
+    Correction(Vec3),
+    /// The whole elastic force there (every element nonlinear).
+    Whole(Vec3),
+}
+
 /// What one pass found, besides the forces.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PassReport {
@@ -161,6 +171,12 @@ impl LargeStrain {
             whole: false,
             last: PassReport::default(),
         })
+    }
+
+    /// Whether the pass computes whole forces (see
+    /// [`LargeStrain::computing_whole_forces`]), not corrections.
+    pub fn computes_whole_forces(&self) -> bool {
+        self.whole
     }
 
     /// Whether every tetrahedron of the model is nonlinear.
