@@ -228,14 +228,10 @@ impl LargeStrain {
         {
             let i = i as usize;
             self.alive[i] = alive;
-            match &mut self.lanes {
-                Lanes::F64(set) => set.store(i, &[[0.0; 3]; 4]),
-                Lanes::F32(set) => set.store(i, &[[0.0; 3]; 4]),
-            }
             self.rotations[i] = DQuat::IDENTITY;
             match &mut self.lanes {
-                Lanes::F64(set) => set.reset_rotation(i),
-                Lanes::F32(set) => set.reset_rotation(i),
+                Lanes::F64(set) => set.forget(i),
+                Lanes::F32(set) => set.forget(i),
             }
         }
     }
@@ -328,6 +324,15 @@ enum Lanes {
 /// One block's corner forces, lane-wise: `[corner][coordinate][lane]`.
 type BlockForces<S, const N: usize> = [[L<S, N>; 3]; 4];
 
+/// One element's four corner forces into lane `l` of its block.
+fn store_lane<S: Scalar, const N: usize>(block: &mut BlockForces<S, N>, l: usize, f: &[V3; 4]) {
+    for (k, fk) in f.iter().enumerate() {
+        for (c, x) in fk.iter().enumerate() {
+            block[k][c][l] = S::of(*x);
+        }
+    }
+}
+
 /// The elements as blocks of N lanes, their forces block by block (the
 /// pass stores each block's forces with a few vector writes; the sweep
 /// reads them in the same order) and the corotational blocks' rotations.
@@ -357,8 +362,9 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
         }
     }
 
-    /// Element `i`'s lane rotation back to the identity.
-    fn reset_rotation(&mut self, i: usize) {
+    /// Element `i`'s lane afresh: zero forces, the identity rotation.
+    fn forget(&mut self, i: usize) {
+        store_lane(&mut self.forces[i / N], i % N, &[[0.0; 3]; 4]);
         let q = &mut self.quats[i / N];
         for (k, c) in q.iter_mut().enumerate() {
             c[i % N] = S::of(if k == 3 { 1.0 } else { 0.0 });
@@ -394,16 +400,6 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
                         o[c] += f[corner][c][l].real();
                     }
                 }
-            }
-        }
-    }
-
-    /// Element `i`'s forces into its lane.
-    fn store(&mut self, i: usize, f: &[V3; 4]) {
-        let block = &mut self.forces[i / N];
-        for (k, fk) in f.iter().enumerate() {
-            for (c, x) in fk.iter().enumerate() {
-                block[k][c][i % N] = S::of(*x);
             }
         }
     }
@@ -580,11 +576,7 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
                         );
                         report = report.join(e);
                     }
-                    for (k, fk) in f.iter().enumerate() {
-                        for (c, x) in fk.iter().enumerate() {
-                            forces[k][c][l] = S::of(*x);
-                        }
-                    }
+                    store_lane(forces, l, &f);
                 }
             }
         }
