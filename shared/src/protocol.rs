@@ -8,6 +8,7 @@
 //! another version is refused at open time; [`check_version`] catches a
 //! mismatch on each payload as a second line of defence.
 
+use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
 use thiserror::Error;
 
@@ -49,7 +50,7 @@ pub fn check_version(stream: &'static str, found: u32) -> Result<(), VersionErro
 
 /// One tool's pose as the device reads it.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.ToolPose.v1")]
 pub struct ToolPose {
     /// Tool tip position (m), scene frame.
@@ -71,7 +72,7 @@ pub const TOOL_PRESENT: u32 = 1;
 
 /// Daemon -> sim: the latest device pose of every tool (haptic rate, latest value).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.PoseMsg.v1")]
 pub struct PoseMsg {
     /// [`PROTOCOL_VERSION`].
@@ -89,7 +90,7 @@ pub struct PoseMsg {
 
 /// One tool's share of a simulation step.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.ToolForce.v1")]
 pub struct ToolForce {
     /// The tool tip position this step used (m).
@@ -115,7 +116,7 @@ pub const CUTTING: u32 = 4;
 
 /// Sim -> daemon: one message per simulation step.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.ForceMsg.v1")]
 pub struct ForceMsg {
     /// [`PROTOCOL_VERSION`].
@@ -145,7 +146,7 @@ pub const LOCAL_COMPLIANCE_LEN: usize = 9 * LOCAL_MAX_VERTICES * LOCAL_MAX_VERTI
 
 /// A tool part of [`LocalContactMsg`]: a capsule (64 bytes).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.LocalPart.v1")]
 pub struct LocalPart {
     /// One end of the segment (m).
@@ -163,7 +164,7 @@ pub struct LocalPart {
 /// vertices `slots` (indices into the message's vertices) at barycentric
 /// `weights`.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.LocalPoint.v1")]
 pub struct LocalPoint {
     /// Barycentric weights (sum 1).
@@ -182,7 +183,7 @@ pub struct LocalPoint {
 /// tissue's compliance at those vertices, for the daemon to solve again at
 /// every tick (the `local-problem` extrapolator).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.LocalContactMsg.v2")]
 pub struct LocalContactMsg {
     /// [`PROTOCOL_VERSION`].
@@ -252,7 +253,7 @@ impl Default for LocalContactMsg {
 /// Sim -> viewer: the user header of the mesh-state slice stream (the slice
 /// holds `vertex_count` positions as `[f32; 3]` in metres).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.MeshHeader.v1")]
 pub struct MeshHeader {
     /// [`PROTOCOL_VERSION`].
@@ -270,7 +271,7 @@ pub struct MeshHeader {
 /// Sim -> viewer: the user header of the topology slice stream (the slice
 /// holds `triangle_count` surface triangles as `[u32; 3]`, outward).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.TopologyHeader.v1")]
 pub struct TopologyHeader {
     /// [`PROTOCOL_VERSION`].
@@ -283,7 +284,7 @@ pub struct TopologyHeader {
 
 /// One declared tool as [`SceneInfo`] describes it (88 bytes).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.ToolInfo.v1")]
 pub struct ToolInfo {
     /// The scene's name for the tool, UTF-8, zero-padded (truncated at a
@@ -314,7 +315,7 @@ pub const TOOL_CAVITRON: u32 = 2;
 /// file needs, published once when the simulation starts (history 1: a
 /// client that joins later gets it).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.SceneInfo.v1")]
 pub struct SceneInfo {
     /// [`PROTOCOL_VERSION`].
@@ -371,7 +372,7 @@ impl ToolInfo {
 /// edge length), all `[f32; 3]`: what a viewer without the scene file
 /// draws before the first mesh frame and as fibres (80 bytes).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.RestHeader.v1")]
 pub struct RestHeader {
     /// [`PROTOCOL_VERSION`].
@@ -420,7 +421,7 @@ impl RestHeader {
 
 /// One haptic tick as the daemon saw it.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.TelemetryTick.v1")]
 pub struct TelemetryTick {
     /// `CLOCK_MONOTONIC` (ns) of the tick.
@@ -443,7 +444,7 @@ pub struct TelemetryTick {
 
 /// Daemon -> recorder/bench: telemetry in batches (haptic rate / `TELEMETRY_BATCH`).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, Pod, Zeroable)]
 #[type_name("hapsim.TelemetryBatch.v1")]
 pub struct TelemetryBatch {
     /// [`PROTOCOL_VERSION`].

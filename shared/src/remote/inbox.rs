@@ -1,0 +1,210 @@
+//! What a client receives: zenoh delivers on its own threads, so each
+//! stream lands in a bounded lock-free queue ([`Inbox`], the newest kept
+//! when full, losses counted) that a real-time thread can drain without
+//! allocating or locking, or in a newest-wins slot for the viewer's slices
+//! ([`SliceInbox`]). Stamps are moved into this host's clock on arrival;
+//! messages of another protocol version or layout are refused and counted.
+
+use super::clock::{ClockMap, Stamped};
+use super::link::declare_error;
+use super::{Link, RemoteError, codec};
+use bytemuck::Pod;
+use crossbeam_queue::ArrayQueue;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use zenoh::Wait;
+
+/// A stream's counters.
+#[derive(Debug, Default)]
+pub struct InboxCounts {
+    /// Messages accepted.
+    pub received: AtomicU64,
+    /// Accepted messages pushed out unread by newer ones.
+    pub lost: AtomicU64,
+    /// Messages refused (another version or layout, or before the clock
+    /// was known).
+    pub refused: AtomicU64,
+    /// The first refusal, for the user.
+    pub first_refusal: Mutex<Option<String>>,
+}
+
+impl InboxCounts {
+    fn refuse(&self, why: impl FnOnce() -> String) {
+        self.refused.fetch_add(1, Ordering::Relaxed);
+        if let Ok(mut first) = self.first_refusal.lock()
+            && first.is_none()
+        {
+            *first = Some(why());
+        }
+    }
+
+    /// The first refusal's reason, if any.
+    pub fn first_refusal(&self) -> Option<String> {
+        self.first_refusal.lock().ok().and_then(|f| f.clone())
+    }
+}
+
+/// A stream's messages, oldest first, at most `capacity` kept.
+pub struct Inbox<T> {
+    queue: Arc<ArrayQueue<T>>,
+    counts: Arc<InboxCounts>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl<T: Pod + Stamped + Send + Sync> Inbox<T> {
+    /// Subscribes to `stream` of `link`'s session.
+    pub fn subscribe(link: &Link, stream: &str, capacity: usize) -> Result<Self, RemoteError> {
+        let key = link.name().service(stream);
+        let queue = Arc::new(ArrayQueue::new(capacity.max(1)));
+        let counts = Arc::new(InboxCounts::default());
+        let (q, c, clock, synced) = (
+            queue.clone(),
+            counts.clone(),
+            link.clock().clone(),
+            link.synced(),
+        );
+        let k = key.clone();
+        let subscriber = link
+            .zenoh()
+            .declare_subscriber(key.clone())
+            .callback(move |sample| {
+                let bytes = sample.payload().to_bytes();
+                match codec::decode::<T>(&k, &bytes) {
+                    Ok(_) if !synced.load(Ordering::Acquire) => {
+                        c.refuse(|| format!("{k}: a message before the clock was known"))
+                    }
+                    Ok(mut msg) => {
+                        msg.map_stamps(|t| clock.to_local(t));
+                        c.received.fetch_add(1, Ordering::Relaxed);
+                        if q.force_push(msg).is_some() {
+                            c.lost.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                    Err(e) => c.refuse(|| e.to_string()),
+                }
+            })
+            .wait()
+            .map_err(|e| declare_error(&key, e))?;
+        Ok(Self {
+            queue,
+            counts,
+            _subscriber: subscriber,
+        })
+    }
+
+    /// The oldest message not yet taken (no allocation, no lock).
+    pub fn pop(&self) -> Option<T> {
+        self.queue.pop()
+    }
+
+    /// The counters.
+    pub fn counts(&self) -> &InboxCounts {
+        &self.counts
+    }
+}
+
+/// A header and its slice.
+type Slot<H, T> = Arc<Mutex<Option<(H, Vec<T>)>>>;
+
+/// The newest header and slice of a stream (mesh frames, topology, rest,
+/// the original surface): a viewer wants the latest, not every one.
+pub struct SliceInbox<H, T> {
+    slot: Slot<H, T>,
+    counts: Arc<InboxCounts>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl<H: Pod + MaybeStamped + Send, T: Pod + Send> SliceInbox<H, T> {
+    /// Subscribes to `stream`, then asks the bridge for the newest message
+    /// (a once-published stream sent before this client joined).
+    pub fn subscribe(link: &Link, stream: &str) -> Result<Self, RemoteError> {
+        let key = link.name().service(stream);
+        let slot: Slot<H, T> = Arc::new(Mutex::new(None));
+        let counts = Arc::new(InboxCounts::default());
+        let accept = {
+            let (slot, counts, clock, k) = (
+                slot.clone(),
+                counts.clone(),
+                link.clock().clone(),
+                key.clone(),
+            );
+            move |bytes: &[u8]| accept_slice(&k, bytes, &slot, &counts, &clock)
+        };
+        let on_sample = accept.clone();
+        let subscriber = link
+            .zenoh()
+            .declare_subscriber(key.clone())
+            .callback(move |s| on_sample(&s.payload().to_bytes()))
+            .wait()
+            .map_err(|e| declare_error(&key, e))?;
+        // The bridge's copy of what was sent before (answered on zenoh's
+        // threads; a newer message arriving meanwhile wins by version).
+        let _ = link
+            .zenoh()
+            .get(key.clone())
+            .callback(move |reply| {
+                if let Ok(s) = reply.result() {
+                    accept(&s.payload().to_bytes());
+                }
+            })
+            .wait();
+        Ok(Self {
+            slot,
+            counts,
+            _subscriber: subscriber,
+        })
+    }
+
+    /// The newest message, if one came since the last call.
+    pub fn take(&self) -> Option<(H, Vec<T>)> {
+        self.slot.lock().ok()?.take()
+    }
+
+    /// The counters.
+    pub fn counts(&self) -> &InboxCounts {
+        &self.counts
+    }
+}
+
+fn accept_slice<H: Pod + MaybeStamped, T: Pod>(
+    key: &str,
+    bytes: &[u8],
+    slot: &Mutex<Option<(H, Vec<T>)>>,
+    counts: &InboxCounts,
+    clock: &ClockMap,
+) {
+    let mut items = Vec::new();
+    match codec::decode_slice::<H, T>(key, bytes, &mut items) {
+        Ok(mut h) => {
+            h.map_stamps_if_any(|t| clock.to_local(t));
+            counts.received.fetch_add(1, Ordering::Relaxed);
+            if let Ok(mut s) = slot.lock()
+                && s.replace((h, items)).is_some()
+            {
+                counts.lost.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        Err(e) => counts.refuse(|| e.to_string()),
+    }
+}
+
+/// A slice header that may carry a stamp (mesh frames do; topology, rest
+/// and the original surface do not).
+pub trait MaybeStamped {
+    /// Applies `f` to the stamps, if any.
+    fn map_stamps_if_any(&mut self, f: impl Fn(u64) -> u64);
+}
+
+impl MaybeStamped for crate::protocol::MeshHeader {
+    fn map_stamps_if_any(&mut self, f: impl Fn(u64) -> u64) {
+        self.map_stamps(f);
+    }
+}
+
+impl MaybeStamped for crate::protocol::TopologyHeader {
+    fn map_stamps_if_any(&mut self, _: impl Fn(u64) -> u64) {}
+}
+
+impl MaybeStamped for crate::protocol::RestHeader {
+    fn map_stamps_if_any(&mut self, _: impl Fn(u64) -> u64) {}
+}
