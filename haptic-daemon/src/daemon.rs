@@ -40,10 +40,9 @@ use crate::rt::LatenessHistogram;
 use crate::safety::{PassivityConfig, PassivityError, Safety, SafetyConfig, SafetyState};
 use crate::slots::{Flags, PoseSlot};
 use crossbeam_queue::ArrayQueue;
-use iceoryx2::port::subscriber::Subscriber;
 use shared::monotonic_ns;
 use shared::protocol::{ForceMsg, PROTOCOL_VERSION, TelemetryTick};
-use shared::services::Ipc;
+use shared::source::Source;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::thread::Thread;
@@ -191,7 +190,7 @@ pub struct RtLoop<D: Device> {
     plausible: Plausible,
     live: LiveGuard,
     method: Method,
-    subscriber: Option<Subscriber<Ipc, ForceMsg, ()>>,
+    subscriber: Option<Source<ForceMsg>>,
     shared: Arc<Shared>,
     last: DeviceState,
     last_sample_t_ns: Option<u64>,
@@ -212,7 +211,7 @@ impl<D: Device> RtLoop<D> {
         device: D,
         method: Method,
         safety: SafetyConfig,
-        subscriber: Option<Subscriber<Ipc, ForceMsg, ()>>,
+        subscriber: Option<Source<ForceMsg>>,
         shared: Arc<Shared>,
     ) -> Self {
         Self::with_chain(
@@ -231,7 +230,7 @@ impl<D: Device> RtLoop<D> {
         method: Method,
         safety: SafetyConfig,
         chain: ChainConfig,
-        subscriber: Option<Subscriber<Ipc, ForceMsg, ()>>,
+        subscriber: Option<Source<ForceMsg>>,
         shared: Arc<Shared>,
     ) -> Self {
         let max_stiffness = chain
@@ -349,7 +348,7 @@ impl<D: Device> RtLoop<D> {
         // samples faster than wall time are not rendered.
         let mut resumed = false;
         if let Some(sub) = &self.subscriber {
-            while let Ok(Some(sample)) = sub.receive() {
+            while let Some(sample) = sub.next() {
                 if sample.version != PROTOCOL_VERSION {
                     self.shared
                         .flags

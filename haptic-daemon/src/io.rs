@@ -13,11 +13,11 @@
 
 use crate::daemon::Shared;
 use crate::rt::LatenessHistogram;
+use crate::transport::{IoPorts, Transport, TransportError};
 use shared::SessionName;
 use shared::protocol::{
     PROTOCOL_VERSION, PoseMsg, TELEMETRY_BATCH, TOOL_PRESENT, TelemetryBatch, TelemetryTick,
 };
-use shared::services::{self, ServiceError};
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -67,7 +67,7 @@ impl Stats {
 pub enum IoError {
     /// A service could not be opened.
     #[error(transparent)]
-    Service(#[from] ServiceError),
+    Transport(#[from] TransportError),
     /// The record file failed.
     #[error("record {file}: {source}")]
     Record {
@@ -150,20 +150,27 @@ impl IoSpin {
     }
 }
 
-/// Runs until the RT thread is done and the queue is drained; `spin`:
-/// poll for poses around their due time instead of waiting to be woken.
-pub fn run_io(
-    shared: Arc<Shared>,
-    session: SessionName,
-    record: Option<PathBuf>,
-    stats: Arc<Mutex<Stats>>,
-    spin: Option<IoSpin>,
-) -> Result<(), IoError> {
-    let node = services::node("haptic-daemon-io")?;
-    let pose_pub = services::publisher(&services::pose_service(&node, &session)?)?;
-    let tele_pub = services::publisher(&services::telemetry_service(&node, &session)?)?;
-    let force_service = services::force_service(&node, &session)?;
-    let pose_ready = services::pose_ready_notifier(&node, &session)?;
+/// Where the I/O thread publishes.
+pub struct IoConfig {
+    /// Shared memory or zenoh.
+    pub transport: Transport,
+    /// The session.
+    pub session: SessionName,
+    /// The record CSV.
+    pub record: Option<PathBuf>,
+    /// Poll for poses around their due time instead of waiting to be woken.
+    pub spin: Option<IoSpin>,
+}
+
+/// Runs until the RT thread is done and the queue is drained.
+pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> Result<(), IoError> {
+    let IoConfig {
+        transport,
+        session,
+        record,
+        spin,
+    } = cfg;
+    let ports = IoPorts::open(&transport, &session)?;
     // From here on the RT thread wakes this thread after each pose.
     let _ = shared.io_thread.set(std::thread::current());
     let mut writer = match &record {
@@ -215,8 +222,7 @@ pub fn run_io(
             msg.tools[0].jaw_opening = p.jaw;
             msg.tools[0].buttons = p.buttons;
             msg.tools[0].flags = TOOL_PRESENT;
-            let _ = pose_pub.send_copy(msg);
-            let _ = pose_ready.notify();
+            ports.send_pose(msg);
         }
         {
             let mut s = stats.lock().expect("stats lock");
@@ -245,7 +251,7 @@ pub fn run_io(
                 if batch.count as usize == TELEMETRY_BATCH {
                     batch.seq = batches;
                     batches += 1;
-                    let _ = tele_pub.send_copy(batch);
+                    ports.send_telemetry(batch);
                     batch.count = 0;
                 }
             }
@@ -272,12 +278,12 @@ pub fn run_io(
             std::process::exit(DEVICE_STALL_EXIT_CODE);
         }
         if now.saturating_sub(peers_checked_ns) >= PEER_CHECK_NS {
-            // Reap dead nodes so a crashed simulation's publisher disappears,
-            // then see whether anyone publishes forces.
+            // Whether anyone publishes forces (dead peers reaped first).
             peers_checked_ns = now;
-            services::reap_dead_nodes(&node);
-            let alive = services::publisher_count(&force_service) > 0;
-            shared.flags.peer_alive.store(alive, Ordering::Relaxed);
+            shared
+                .flags
+                .peer_alive
+                .store(ports.sim_alive(), Ordering::Relaxed);
         }
         if done && shared.telemetry.is_empty() {
             break;
@@ -296,7 +302,7 @@ pub fn run_io(
     }
     if batch.count > 0 {
         batch.seq = batches;
-        let _ = tele_pub.send_copy(batch);
+        ports.send_telemetry(batch);
     }
     if let Some(mut w) = writer {
         w.flush().map_err(record_err)?;

@@ -22,3 +22,4 @@ pub mod record;
 pub mod rt;
 pub mod safety;
 pub mod slots;
+pub mod transport;

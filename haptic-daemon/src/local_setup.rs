@@ -15,9 +15,9 @@
 use crate::daemon::Shared;
 use crate::extrapolate::local_problem::{LocalContactMsg, LocalProblem, LocalProblemError};
 use crate::pose_history::PoseHistory;
+use crate::transport::{Transport, TransportError};
 use shared::SessionName;
 use shared::protocol::PROTOCOL_VERSION;
-use shared::services::{self, ServiceError};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -92,21 +92,18 @@ pub fn catch_up(
 /// another protocol version or malformed is refused and counted).
 pub fn run_local_setup(
     shared: Arc<Shared>,
+    transport: Transport,
     session: SessionName,
     setup: LocalSetup,
     mut input: triple_buffer::Input<LocalProblem>,
-) -> Result<(), ServiceError> {
+) -> Result<(), TransportError> {
     // Best effort: without it the set-up only competes more.
     let _ = crate::rt::lowest_priority();
-    let node = services::node("haptic-daemon-local")?;
-    let sub = services::subscriber_with_buffer(
-        &services::local_contact_service(&node, &session)?,
-        services::FORCE_BUFFER_LATEST,
-    )?;
+    let (sub, _node) = transport.local_contact_source(&session)?;
     let mut poses = Vec::with_capacity(MAX_CATCH_UP);
     while !shared.flags.rt_done.load(Ordering::Acquire) {
         let mut newest = None;
-        while let Ok(Some(sample)) = sub.receive() {
+        while let Some(sample) = sub.next() {
             newest = Some(sample);
         }
         let Some(msg) = newest else {
@@ -133,7 +130,6 @@ pub fn run_local_setup(
         problem.set_time_budget(Some(Duration::from_nanos(
             (setup.tick_ns as f64 * RENDER_SHARE_OF_TICK) as u64,
         )));
-        drop(msg);
         if ok {
             input.publish();
             shared.local_problems.fetch_add(1, Ordering::Relaxed);

@@ -9,7 +9,7 @@ use haptic_daemon::device::{
 };
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
-use haptic_daemon::io::{IoSpin, Stats, run_io};
+use haptic_daemon::io::{IoConfig, IoSpin, Stats, run_io};
 use haptic_daemon::local_setup::{LocalSetup, run_local_setup};
 use haptic_daemon::rt::{LatenessHistogram, Pacer, RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
@@ -23,6 +23,7 @@ use std::time::{Duration, Instant};
 
 mod chain_args;
 mod record_cmd;
+mod remote_args;
 
 /// Prints to stderr, ignoring failures: a closed pipe must never panic the
 /// process while the real-time thread is commanding a device.
@@ -92,6 +93,9 @@ struct RunArgs {
     /// cap, passivity).
     #[command(flatten)]
     chain: ChainArgs,
+    /// Shared memory (default) or a session on another host.
+    #[command(flatten)]
+    remote: remote_args::RemoteArgs,
     /// Session name shared with the simulation.
     #[arg(long, default_value = "default")]
     session: String,
@@ -269,6 +273,7 @@ fn main() -> Result<()> {
     }
     let method = args.extrapolation;
     let session = SessionName::new(&args.session)?;
+    let transport = args.remote.transport(&session)?;
     let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N)?;
     let device_max = device.specs().max_force_n;
     let limit = match args.max_force {
@@ -307,19 +312,20 @@ fn main() -> Result<()> {
         (None, None)
     };
     let io = {
-        let (shared, session, record, stats) = (
-            shared.clone(),
-            session.clone(),
-            args.record.clone(),
-            stats.clone(),
-        );
+        let cfg = IoConfig {
+            transport: transport.clone(),
+            session: session.clone(),
+            record: args.record.clone(),
+            spin: io_spin,
+        };
+        let (shared, stats) = (shared.clone(), stats.clone());
         std::thread::Builder::new()
             .name("haptic-io".into())
-            .spawn(move || run_io(shared, session, record, stats, io_spin))?
+            .spawn(move || run_io(shared, cfg, stats))?
     };
     let local_setup = match local_in {
         Some(input) => {
-            let (shared, session) = (shared.clone(), session.clone());
+            let (shared, session, transport) = (shared.clone(), session.clone(), transport.clone());
             let setup = LocalSetup {
                 tick_ns: period_ns,
                 inertia: !args.quasi_static,
@@ -327,7 +333,7 @@ fn main() -> Result<()> {
             Some(
                 std::thread::Builder::new()
                     .name("haptic-local".into())
-                    .spawn(move || run_local_setup(shared, session, setup, input))?,
+                    .spawn(move || run_local_setup(shared, transport, session, setup, input))?,
             )
         }
         None => None,
@@ -353,9 +359,9 @@ fn main() -> Result<()> {
                     report.affinity = Some(pin_to_cpu(c));
                 }
                 let _ = report_tx.send(report);
-                let node = services::node("haptic-daemon-rt")?;
-                let sub = services::subscriber_with_buffer(
-                    &services::force_service(&node, &session)?,
+                let (sub, _node) = transport.force_source(
+                    "haptic-daemon-rt",
+                    &session,
                     services::FORCE_BUFFER_LATEST,
                 )?;
                 let result = match device {
@@ -559,7 +565,7 @@ fn run_loop<D: Device>(
     method: Method,
     safety: SafetyConfig,
     chain: ChainConfig,
-    sub: iceoryx2::port::subscriber::Subscriber<services::Ipc, shared::protocol::ForceMsg, ()>,
+    sub: shared::source::Source<shared::protocol::ForceMsg>,
     local: Option<triple_buffer::Output<LocalProblem>>,
     shared: Arc<Shared>,
     period_ns: u64,

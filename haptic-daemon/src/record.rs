@@ -10,11 +10,12 @@
 //! still loses nothing.
 
 use crate::io::{RECORD_HEADER, write_row};
+use crate::transport::{Transport, TransportError};
 use serde::Serialize;
 use shared::SessionName;
 use shared::monotonic_ns;
 use shared::protocol::{ForceMsg, MAX_TOOLS, PROTOCOL_VERSION};
-use shared::services::{self, ServiceError};
+use shared::services;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -30,9 +31,9 @@ const FLUSH_EVERY_NS: u64 = 200_000_000;
 /// Why recording failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
-    /// Shared memory.
+    /// Shared memory or zenoh.
     #[error(transparent)]
-    Service(#[from] ServiceError),
+    Transport(#[from] TransportError),
     /// A file.
     #[error("{file}: {source}")]
     File {
@@ -143,10 +144,15 @@ fn force_rows(w: &mut impl Write, m: &ForceMsg) -> std::io::Result<()> {
 }
 
 /// Records until `stop` is set or the duration ends; always flushes.
-pub fn record(cfg: &RecordConfig, stop: &Arc<AtomicBool>) -> Result<RecordSummary, RecordError> {
-    let node = services::node("hapsim-recorder")?;
-    let forces = services::subscriber(&services::force_service(&node, &cfg.session)?)?;
-    let telemetry = services::subscriber(&services::telemetry_service(&node, &cfg.session)?)?;
+/// `transport`: shared memory, or zenoh through a bridge.
+pub fn record(
+    cfg: &RecordConfig,
+    transport: &Transport,
+    stop: &Arc<AtomicBool>,
+) -> Result<RecordSummary, RecordError> {
+    let (forces, _n1) =
+        transport.force_source("hapsim-recorder", &cfg.session, services::FORCE_BUFFER_MAX)?;
+    let (telemetry, _n2) = transport.telemetry_source("hapsim-recorder-t", &cfg.session)?;
     let mut force_out = cfg
         .forces
         .as_deref()
@@ -170,7 +176,7 @@ pub fn record(cfg: &RecordConfig, stop: &Arc<AtomicBool>) -> Result<RecordSummar
             || cfg
                 .duration_s
                 .is_some_and(|d| (now - start) as f64 * 1e-9 >= d);
-        while let Ok(Some(s)) = forces.receive() {
+        while let Some(s) = forces.next() {
             if s.version != PROTOCOL_VERSION {
                 continue;
             }
@@ -179,7 +185,7 @@ pub fn record(cfg: &RecordConfig, stop: &Arc<AtomicBool>) -> Result<RecordSummar
                 force_rows(w, &s).map_err(file_err(&cfg.forces))?;
             }
         }
-        while let Ok(Some(b)) = telemetry.receive() {
+        while let Some(b) = telemetry.next() {
             if b.version != PROTOCOL_VERSION {
                 continue;
             }

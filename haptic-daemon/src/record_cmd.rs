@@ -22,6 +22,8 @@ pub struct RecordArgs {
     /// Write the counts (received, gaps, lost, restarts per stream) as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    #[command(flatten)]
+    remote: crate::remote_args::RemoteArgs,
 }
 
 pub fn record_main(args: RecordArgs) -> Result<()> {
@@ -37,13 +39,15 @@ pub fn record_main(args: RecordArgs) -> Result<()> {
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;
     }
+    let session = SessionName::new(&args.session)?;
+    let transport = args.remote.transport(&session)?;
     let cfg = haptic_daemon::record::RecordConfig {
-        session: SessionName::new(&args.session)?,
+        session,
         forces: args.forces,
         telemetry: args.telemetry,
         duration_s: args.duration_s,
     };
-    let s = haptic_daemon::record::record(&cfg, &stop)?;
+    let s = haptic_daemon::record::record(&cfg, &transport, &stop)?;
     eprintln!(
         "recorded {} force samples ({} gaps, {} lost, {} restarts), {} ticks ({} gaps, {} lost, {} restarts)",
         s.forces.received,

@@ -65,7 +65,7 @@ fn wall_msg(seq: u64, t_ns: u64, sim_time_ns: u64, p: [f64; 3]) -> ForceMsg {
 struct Bench {
     _node: iceoryx2::node::Node<services::Ipc>,
     publisher: iceoryx2::port::publisher::Publisher<services::Ipc, ForceMsg, ()>,
-    subscriber: Option<iceoryx2::port::subscriber::Subscriber<services::Ipc, ForceMsg, ()>>,
+    subscriber: Option<shared::source::Source<ForceMsg>>,
     shared: Arc<Shared>,
 }
 
@@ -74,7 +74,9 @@ fn bench(name: &str) -> Bench {
     let node = services::node("chain-test").unwrap();
     let factory = services::force_service(&node, &session).unwrap();
     let publisher = services::publisher(&factory).unwrap();
-    let subscriber = Some(services::subscriber(&factory).unwrap());
+    let subscriber = Some(shared::source::Source::Shm(
+        services::subscriber(&factory).unwrap(),
+    ));
     let shared = Arc::new(Shared::new(1 << 16));
     shared.flags.peer_alive.store(true, Ordering::Relaxed);
     Bench {

@@ -84,7 +84,7 @@ fn ten_thousand_ticks_allocate_nothing() {
             device,
             method,
             SafetyConfig::new(5.0).unwrap(),
-            Some(sub),
+            Some(shared::source::Source::Shm(sub)),
             shared.clone(),
         );
         // local-problem: contact problems handed over as the I/O thread

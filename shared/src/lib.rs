@@ -19,6 +19,7 @@ pub mod protocol;
 pub mod remote;
 pub mod services;
 mod session;
+pub mod source;
 
 pub use clock::{NS_PER_S, monotonic_ns};
 pub use session::{SessionName, SessionNameError};

@@ -90,6 +90,8 @@ pub type Ipc = ipc::Service;
 pub type IpcNode = Node<Ipc>;
 /// The pose service.
 pub type PoseService = PortFactory<Ipc, PoseMsg, ()>;
+/// The service of a fixed-size stream of `T`.
+pub type PortFactoryOf<T> = PortFactory<Ipc, T, ()>;
 /// A pose subscriber.
 pub type PoseSubscriber = Subscriber<Ipc, PoseMsg, ()>;
 /// A listener on the pose-ready event.

@@ -1,5 +1,6 @@
 //! The `sim-server` command line.
 
+mod bridge;
 mod cli;
 mod server;
 
@@ -107,6 +108,10 @@ enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Carry a session's streams between shared memory and zenoh, for
+    /// viewers, recorders and haptic daemons on other hosts
+    /// (`viewer --connect`, `haptic-daemon run --connect`).
+    Bridge(cli::bridge::BridgeArgs),
     /// Time the explicit tensor-mass step on a generated box or a scene.
     #[command(allow_negative_numbers = true)]
     Bench {
@@ -158,6 +163,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Run(args) => cli::run::run(args)?,
         Command::Demo(args) => cli::demo::run(args)?,
+        Command::Bridge(args) => cli::bridge::bridge(args)?,
         Command::Check { file, json } => cli::check::run(file.as_deref(), json.as_deref())?,
         Command::Solve { scene, out, json } => {
             cli::solve::run(scene.as_deref(), &out, json.as_deref())?

@@ -56,7 +56,10 @@ impl Driver {
             return;
         }
         if self.publisher.is_none() {
-            self.publisher = services::publisher(session.pose_service()).ok();
+            let Some(service) = session.pose_port() else {
+                return;
+            };
+            self.publisher = services::publisher(service).ok();
         }
         let Some(p) = &self.publisher else { return };
         let mut msg = PoseMsg {

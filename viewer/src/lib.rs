@@ -36,5 +36,6 @@ pub mod scene_info;
 pub mod session;
 pub mod show;
 pub mod snapshot;
+pub mod streams;
 #[cfg(feature = "window")]
 pub mod window;

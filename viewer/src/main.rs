@@ -38,6 +38,15 @@ struct Args {
     /// Write what the snapshot showed as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Watch a session on another host through zenoh at this endpoint (its
+    /// `sim-server bridge`, e.g. tcp/10.0.0.5:7447), touching no shared
+    /// memory and reading no file; repeatable.
+    #[arg(long, value_name = "ENDPOINT")]
+    connect: Vec<String>,
+    /// A zenoh configuration file (JSON5: TLS, mutual authentication;
+    /// docs/remote.md); implies a remote session.
+    #[arg(long, value_name = "FILE")]
+    zenoh_config: Option<PathBuf>,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -60,7 +69,16 @@ fn main() -> Result<()> {
         bail!("--wait-s must be a non-negative number of seconds");
     }
     let name = shared::SessionName::new(&args.session)?;
-    let mut session = Session::join(&name)?;
+    let mut session =
+        match shared::remote::RemoteConfig::client(&args.connect, args.zenoh_config.as_deref()) {
+            None => Session::join(&name)?,
+            Some(cfg) => {
+                let wait = std::time::Duration::from_secs_f64(args.wait_s.max(1.0));
+                let link = shared::remote::Link::join(&cfg, &name, wait)?;
+                eprintln!("viewer: {}", link.summary());
+                Session::join_remote(std::sync::Arc::new(link))?
+            }
+        };
     let layers = Layers {
         fibres: args.fibres,
         forces: !args.no_forces,

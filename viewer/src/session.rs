@@ -6,17 +6,13 @@
 //! topology version or vertex count, never as an error.
 
 use crate::scene_info::SceneInfo;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::*;
-use iceoryx2::service::port_factory::PortFactory as _;
-use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use crate::streams::{JoinError, Streams};
 use shared::SessionName;
-use shared::protocol::{
-    ForceMsg, MAX_TOOLS, MeshHeader, PROTOCOL_VERSION, PoseMsg, RestHeader, TelemetryBatch,
-    TopologyHeader,
-};
-use shared::services::{self, Ipc, ServiceError};
+use shared::protocol::{MAX_TOOLS, PROTOCOL_VERSION};
+use shared::remote::Link;
+use shared::services;
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 /// How long (ns) without a mesh frame before the simulation counts as gone.
 const SIM_GONE_NS: u64 = 1_000_000_000;
@@ -53,19 +49,10 @@ pub struct ToolState {
 
 /// The latest state of a session.
 pub struct Session {
-    node: Node<Ipc>,
-    mesh: Subscriber<Ipc, [[f32; 3]], MeshHeader>,
-    topology: Subscriber<Ipc, [[u32; 3]], TopologyHeader>,
-    force: Subscriber<Ipc, ForceMsg, ()>,
-    telemetry: Subscriber<Ipc, TelemetryBatch, ()>,
-    telemetry_factory: PortFactory<Ipc, TelemetryBatch, ()>,
-    scene: services::SceneSubscriber,
-    rest: Subscriber<Ipc, [[f32; 3]], RestHeader>,
-    surface0: Subscriber<Ipc, [[u32; 3]], TopologyHeader>,
+    streams: Streams,
     /// The scene as the simulation published it (empty parts until their
     /// streams arrive).
     pub info: SceneInfo,
-    pose_factory: PortFactory<Ipc, PoseMsg, ()>,
     /// Latest vertex positions (m).
     pub positions_m: Vec<[f32; 3]>,
     /// Latest surface triangles, outward.
@@ -90,33 +77,21 @@ pub struct Session {
 }
 
 impl Session {
-    /// Joins `session` (creating its streams if nobody has yet).
-    pub fn join(session: &SessionName) -> Result<Self, ServiceError> {
-        let node = services::node("viewer")?;
-        let mesh = services::slice_subscriber(&services::mesh_service(&node, session)?)?;
-        let topology = services::slice_subscriber(&services::topology_service(&node, session)?)?;
-        let force = services::subscriber_with_buffer(
-            &services::force_service(&node, session)?,
-            services::FORCE_BUFFER_LATEST,
-        )?;
-        let telemetry_factory = services::telemetry_service(&node, session)?;
-        let telemetry = services::subscriber(&telemetry_factory)?;
-        let scene = services::subscriber(&services::scene_service(&node, session)?)?;
-        let rest = services::slice_subscriber(&services::rest_service(&node, session)?)?;
-        let surface0 = services::slice_subscriber(&services::surface0_service(&node, session)?)?;
-        let pose_factory = services::pose_service(&node, session)?;
-        Ok(Self {
-            node,
-            mesh,
-            topology,
-            force,
-            telemetry,
-            telemetry_factory,
-            scene,
-            rest,
-            surface0,
+    /// Joins `session` in shared memory (creating its streams if nobody
+    /// has yet).
+    pub fn join(session: &SessionName) -> Result<Self, JoinError> {
+        Ok(Self::with(Streams::shm(session)?))
+    }
+
+    /// Joins a session on another host through `link` (`viewer --connect`).
+    pub fn join_remote(link: Arc<Link>) -> Result<Self, JoinError> {
+        Ok(Self::with(Streams::remote(link)?))
+    }
+
+    fn with(streams: Streams) -> Self {
+        Self {
+            streams,
             info: SceneInfo::default(),
-            pose_factory,
             positions_m: Vec::new(),
             triangles: Vec::new(),
             topology_version: 0,
@@ -128,36 +103,37 @@ impl Session {
             force_times: VecDeque::new(),
             ticks: VecDeque::new(),
             scratch: Vec::new(),
-        })
+        }
     }
 
-    /// The node (to publish poses from the same process).
-    pub fn node(&self) -> &Node<Ipc> {
-        &self.node
+    /// The node and the pose stream, to drive a tool from the viewer (on
+    /// the simulation's host only: None through zenoh).
+    pub fn pose_port(&self) -> Option<&services::PoseService> {
+        self.streams.slices.pose_port()
     }
 
-    /// The pose stream (the viewer publishes on it when it drives a tool).
-    pub fn pose_service(&self) -> &PortFactory<Ipc, PoseMsg, ()> {
-        &self.pose_factory
-    }
-
-    /// Pose publishers in the session (a daemon, or this viewer driving).
+    /// Pose publishers in the session (a daemon, or this viewer driving;
+    /// through zenoh unknown, taken as one: the viewer never drives there).
     pub fn pose_publishers(&self) -> usize {
-        self.pose_factory.dynamic_config().number_of_publishers()
+        self.streams.slices.pose_publishers().unwrap_or(1)
     }
 
     /// Whether a haptic daemon runs in the session (it publishes
-    /// telemetry), whether or not a batch has arrived yet.
+    /// telemetry), whether or not a batch has arrived yet (through zenoh:
+    /// telemetry within the last second).
     pub fn daemon_present(&self) -> bool {
-        self.telemetry_factory
-            .dynamic_config()
-            .number_of_publishers()
-            > 0
+        self.streams
+            .slices
+            .daemon_present()
+            .unwrap_or(!self.ticks.is_empty())
     }
 
-    /// Whether a simulation sent a mesh frame within the last second.
+    /// Whether a simulation sent a mesh frame within the last second (and,
+    /// through zenoh, the bridge still reports it).
     pub fn sim_alive(&self, now_ns: u64) -> bool {
-        self.last_frame_ns != 0 && now_ns.saturating_sub(self.last_frame_ns) < SIM_GONE_NS
+        self.last_frame_ns != 0
+            && now_ns.saturating_sub(self.last_frame_ns) < SIM_GONE_NS
+            && self.streams.slices.remote_sim_alive().unwrap_or(true)
     }
 
     /// Whether the latest positions and triangles belong together.
@@ -175,29 +151,29 @@ impl Session {
     /// Messages of another protocol version are skipped.
     pub fn poll(&mut self, now_ns: u64) -> bool {
         let mut changed = false;
-        while let Ok(Some(s)) = self.topology.receive() {
-            let h = *s.user_header();
-            if h.version == PROTOCOL_VERSION && h.triangle_count as usize == s.payload().len() {
+        let slices = &self.streams.slices;
+        slices.topology(&mut |h, tris| {
+            if h.version == PROTOCOL_VERSION && h.triangle_count as usize == tris.len() {
                 self.triangles.clear();
-                self.triangles.extend_from_slice(s.payload());
+                self.triangles.extend_from_slice(tris);
                 self.topology_version = h.topology_version;
                 changed = true;
             }
-        }
-        while let Ok(Some(s)) = self.mesh.receive() {
-            let h = *s.user_header();
-            if h.version == PROTOCOL_VERSION && h.vertex_count as usize == s.payload().len() {
+        });
+        slices.mesh(&mut |h, positions| {
+            if h.version == PROTOCOL_VERSION && h.vertex_count as usize == positions.len() {
                 self.positions_m.clear();
-                self.positions_m.extend_from_slice(s.payload());
+                self.positions_m.extend_from_slice(positions);
                 self.frame_topology_version = h.topology_version;
                 self.frames += 1;
-                // The frame's own stamp (same monotonic clock): frames left in
-                // the buffer by a simulation that has gone do not look fresh.
+                // The frame's own stamp (this host's clock; a remote one is
+                // mapped on arrival): frames left in the buffer by a
+                // simulation that has gone do not look fresh.
                 self.last_frame_ns = h.t_ns.max(1);
                 changed = true;
             }
-        }
-        while let Ok(Some(s)) = self.force.receive() {
+        });
+        while let Some(s) = self.streams.force.next() {
             if s.version != PROTOCOL_VERSION {
                 continue;
             }
@@ -211,7 +187,7 @@ impl Session {
             }));
         }
         changed |= self.poll_scene();
-        while let Ok(Some(b)) = self.telemetry.receive() {
+        while let Some(b) = self.streams.telemetry.next() {
             if b.version != PROTOCOL_VERSION {
                 continue;
             }
@@ -228,25 +204,24 @@ impl Session {
     /// publishes them again); whether any arrived.
     fn poll_scene(&mut self) -> bool {
         let mut changed = false;
-        while let Ok(Some(m)) = self.scene.receive() {
+        while let Some(m) = self.streams.scene.next() {
             if m.version == PROTOCOL_VERSION {
                 self.info.set_tools(&m);
                 changed = true;
             }
         }
-        while let Ok(Some(s)) = self.rest.receive() {
-            let h = *s.user_header();
+        let slices = &self.streams.slices;
+        slices.rest(&mut |h, positions| {
             if h.version == PROTOCOL_VERSION {
-                changed |= self.info.set_rest(&h, s.payload());
+                changed |= self.info.set_rest(h, positions);
             }
-        }
-        while let Ok(Some(s)) = self.surface0.receive() {
-            let h = *s.user_header();
-            if h.version == PROTOCOL_VERSION && h.triangle_count as usize == s.payload().len() {
-                self.info.set_original_surface(s.payload());
+        });
+        slices.surface0(&mut |h, tris| {
+            if h.version == PROTOCOL_VERSION && h.triangle_count as usize == tris.len() {
+                self.info.set_original_surface(tris);
                 changed = true;
             }
-        }
+        });
         changed
     }
 

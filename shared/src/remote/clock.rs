@@ -11,7 +11,10 @@
 //! relays bytes; the mapping is all on the client side.
 
 use crate::monotonic_ns;
-use crate::protocol::{ForceMsg, LocalContactMsg, MeshHeader, PoseMsg, TelemetryBatch};
+use crate::protocol::{
+    ForceMsg, LocalContactMsg, MeshHeader, PoseMsg, RestHeader, SceneInfo, TelemetryBatch,
+    TopologyHeader,
+};
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 
 /// The offset between the simulation host's clock and this one.
@@ -108,6 +111,16 @@ macro_rules! stamped_t_ns {
     )*};
 }
 stamped_t_ns!(ForceMsg, PoseMsg, MeshHeader, LocalContactMsg);
+
+/// Messages without stamps (the scene, topology, rest).
+macro_rules! unstamped {
+    ($($t:ty),*) => {$(
+        impl Stamped for $t {
+            fn map_stamps(&mut self, _: impl Fn(u64) -> u64) {}
+        }
+    )*};
+}
+unstamped!(SceneInfo, TopologyHeader, RestHeader);
 
 impl Stamped for TelemetryBatch {
     fn map_stamps(&mut self, f: impl Fn(u64) -> u64) {

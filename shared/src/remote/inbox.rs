@@ -54,37 +54,55 @@ pub struct Inbox<T> {
 impl<T: Pod + Stamped + Send + Sync> Inbox<T> {
     /// Subscribes to `stream` of `link`'s session.
     pub fn subscribe(link: &Link, stream: &str, capacity: usize) -> Result<Self, RemoteError> {
+        Self::open(link, stream, capacity, false)
+    }
+
+    /// [`Inbox::subscribe`], then asks the bridge for the newest message
+    /// (a once-published stream, `scene`, sent before this client joined).
+    pub fn subscribe_with_query(
+        link: &Link,
+        stream: &str,
+        capacity: usize,
+    ) -> Result<Self, RemoteError> {
+        Self::open(link, stream, capacity, true)
+    }
+
+    fn open(link: &Link, stream: &str, capacity: usize, query: bool) -> Result<Self, RemoteError> {
         let key = link.name().service(stream);
         let queue = Arc::new(ArrayQueue::new(capacity.max(1)));
         let counts = Arc::new(InboxCounts::default());
-        let (q, c, clock, synced) = (
-            queue.clone(),
-            counts.clone(),
-            link.clock().clone(),
-            link.synced(),
-        );
-        let k = key.clone();
+        let accept = {
+            let (q, c, clock, synced, k) = (
+                queue.clone(),
+                counts.clone(),
+                link.clock().clone(),
+                link.synced(),
+                key.clone(),
+            );
+            move |bytes: &[u8]| match codec::decode::<T>(&k, bytes) {
+                Ok(_) if !synced.load(Ordering::Acquire) => {
+                    c.refuse(|| format!("{k}: a message before the clock was known"))
+                }
+                Ok(mut msg) => {
+                    msg.map_stamps(|t| clock.to_local(t));
+                    c.received.fetch_add(1, Ordering::Relaxed);
+                    if q.force_push(msg).is_some() {
+                        c.lost.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Err(e) => c.refuse(|| e.to_string()),
+            }
+        };
+        let on_sample = accept.clone();
         let subscriber = link
             .zenoh()
             .declare_subscriber(key.clone())
-            .callback(move |sample| {
-                let bytes = sample.payload().to_bytes();
-                match codec::decode::<T>(&k, &bytes) {
-                    Ok(_) if !synced.load(Ordering::Acquire) => {
-                        c.refuse(|| format!("{k}: a message before the clock was known"))
-                    }
-                    Ok(mut msg) => {
-                        msg.map_stamps(|t| clock.to_local(t));
-                        c.received.fetch_add(1, Ordering::Relaxed);
-                        if q.force_push(msg).is_some() {
-                            c.lost.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
-                    Err(e) => c.refuse(|| e.to_string()),
-                }
-            })
+            .callback(move |sample| on_sample(&sample.payload().to_bytes()))
             .wait()
             .map_err(|e| declare_error(&key, e))?;
+        if query {
+            ask_bridge(link, &key, accept);
+        }
         Ok(Self {
             queue,
             counts,
@@ -114,7 +132,7 @@ pub struct SliceInbox<H, T> {
     _subscriber: zenoh::pubsub::Subscriber<()>,
 }
 
-impl<H: Pod + MaybeStamped + Send, T: Pod + Send> SliceInbox<H, T> {
+impl<H: Pod + Stamped + Send, T: Pod + Send> SliceInbox<H, T> {
     /// Subscribes to `stream`, then asks the bridge for the newest message
     /// (a once-published stream sent before this client joined).
     pub fn subscribe(link: &Link, stream: &str) -> Result<Self, RemoteError> {
@@ -137,17 +155,7 @@ impl<H: Pod + MaybeStamped + Send, T: Pod + Send> SliceInbox<H, T> {
             .callback(move |s| on_sample(&s.payload().to_bytes()))
             .wait()
             .map_err(|e| declare_error(&key, e))?;
-        // The bridge's copy of what was sent before (answered on zenoh's
-        // threads; a newer message arriving meanwhile wins by version).
-        let _ = link
-            .zenoh()
-            .get(key.clone())
-            .callback(move |reply| {
-                if let Ok(s) = reply.result() {
-                    accept(&s.payload().to_bytes());
-                }
-            })
-            .wait();
+        ask_bridge(link, &key, accept);
         Ok(Self {
             slot,
             counts,
@@ -166,7 +174,21 @@ impl<H: Pod + MaybeStamped + Send, T: Pod + Send> SliceInbox<H, T> {
     }
 }
 
-fn accept_slice<H: Pod + MaybeStamped, T: Pod>(
+/// Asks the bridge for its copy of what `key` carried before this client
+/// joined; `accept` takes the answer on zenoh's threads.
+fn ask_bridge(link: &Link, key: &str, accept: impl Fn(&[u8]) + Send + Sync + 'static) {
+    let _ = link
+        .zenoh()
+        .get(key.to_string())
+        .callback(move |reply| {
+            if let Ok(s) = reply.result() {
+                accept(&s.payload().to_bytes());
+            }
+        })
+        .wait();
+}
+
+fn accept_slice<H: Pod + Stamped, T: Pod>(
     key: &str,
     bytes: &[u8],
     slot: &Mutex<Option<(H, Vec<T>)>>,
@@ -176,7 +198,7 @@ fn accept_slice<H: Pod + MaybeStamped, T: Pod>(
     let mut items = Vec::new();
     match codec::decode_slice::<H, T>(key, bytes, &mut items) {
         Ok(mut h) => {
-            h.map_stamps_if_any(|t| clock.to_local(t));
+            h.map_stamps(|t| clock.to_local(t));
             counts.received.fetch_add(1, Ordering::Relaxed);
             if let Ok(mut s) = slot.lock()
                 && s.replace((h, items)).is_some()
@@ -186,25 +208,4 @@ fn accept_slice<H: Pod + MaybeStamped, T: Pod>(
         }
         Err(e) => counts.refuse(|| e.to_string()),
     }
-}
-
-/// A slice header that may carry a stamp (mesh frames do; topology, rest
-/// and the original surface do not).
-pub trait MaybeStamped {
-    /// Applies `f` to the stamps, if any.
-    fn map_stamps_if_any(&mut self, f: impl Fn(u64) -> u64);
-}
-
-impl MaybeStamped for crate::protocol::MeshHeader {
-    fn map_stamps_if_any(&mut self, f: impl Fn(u64) -> u64) {
-        self.map_stamps(f);
-    }
-}
-
-impl MaybeStamped for crate::protocol::TopologyHeader {
-    fn map_stamps_if_any(&mut self, _: impl Fn(u64) -> u64) {}
-}
-
-impl MaybeStamped for crate::protocol::RestHeader {
-    fn map_stamps_if_any(&mut self, _: impl Fn(u64) -> u64) {}
 }

@@ -96,6 +96,29 @@ impl Link {
         Ok(())
     }
 
+    /// [`Link::connect`], then [`Link::wait_for_bridge`]: a link a bridge
+    /// answered within `timeout`, or why not.
+    pub fn join(
+        config: &RemoteConfig,
+        name: &SessionName,
+        timeout: Duration,
+    ) -> Result<Self, RemoteError> {
+        let link = Self::connect(config, name)?;
+        link.wait_for_bridge(timeout)?;
+        Ok(link)
+    }
+
+    /// One line for the user: the session, the endpoints and the clock.
+    pub fn summary(&self) -> String {
+        format!(
+            "session {} through zenoh ({}); clock offset {:+.3} ms +- {:.3} ms",
+            self.name.as_str(),
+            self.what,
+            self.clock.offset_ns() as f64 * 1e-6,
+            self.clock.rtt_ns() as f64 * 0.5e-6
+        )
+    }
+
     /// Waits up to `timeout` for the clock (the bridge's first answer).
     pub fn wait_for_bridge(&self, timeout: Duration) -> Result<(), RemoteError> {
         let start = std::time::Instant::now();

@@ -22,11 +22,13 @@
 //! poses, so the bridge withdraws its local pose publisher when it goes.
 //!
 //! ```no_run
-//! use shared::remote::{Link, RemoteConfig};
+//! use shared::remote::{Inbox, Link, RemoteConfig};
 //! use shared::SessionName;
+//! use std::time::Duration;
 //! let session = SessionName::new("station-2").unwrap();
-//! let link = Link::connect(&RemoteConfig::connect_to("tcp/10.0.0.5:7447"), &session).unwrap();
-//! let forces = link.inbox::<shared::protocol::ForceMsg>("force", 4).unwrap();
+//! let config = RemoteConfig::connect_to("tcp/10.0.0.5:7447");
+//! let link = Link::join(&config, &session, Duration::from_secs(5)).unwrap();
+//! let forces = Inbox::<shared::protocol::ForceMsg>::subscribe(&link, "force", 4).unwrap();
 //! while let Some(sample) = forces.pop() {
 //!     println!("{:?}", sample.tools[0].force_n); // stamps already in this host's clock
 //! }
@@ -39,11 +41,15 @@ mod link;
 
 pub use clock::{ClockMap, Probe, Stamped};
 pub use codec::DecodeError;
-pub use inbox::{Inbox, InboxCounts, MaybeStamped, SliceInbox};
+pub use inbox::{Inbox, InboxCounts, SliceInbox};
 pub use link::{Link, RemotePublisher};
 
 use std::path::PathBuf;
 use thiserror::Error;
+
+/// A liveliness token: held, it says "here"; dropped (or its host's link
+/// lost), peers see it go.
+pub type Token = zenoh::liveliness::LivelinessToken;
 
 /// The bridge's default endpoint: loopback only (listening elsewhere is
 /// the user's explicit choice).
@@ -77,6 +83,16 @@ impl RemoteConfig {
             connect: vec![endpoint.to_string()],
             ..Self::default()
         }
+    }
+
+    /// A client's configuration from its `--connect` endpoints and
+    /// `--zenoh-config` file: None when neither is given (shared memory).
+    pub fn client(connect: &[String], config_file: Option<&std::path::Path>) -> Option<Self> {
+        (!connect.is_empty() || config_file.is_some()).then(|| Self {
+            listen: Vec::new(),
+            connect: connect.to_vec(),
+            config_file: config_file.map(std::path::Path::to_path_buf),
+        })
     }
 
     /// A server listening at `endpoint`.

@@ -1,6 +1,7 @@
 //! Subcommand implementations of the `sim-server` binary (the clap
 //! definitions are in main.rs).
 
+pub mod bridge;
 pub mod check;
 pub mod demo;
 pub mod run;

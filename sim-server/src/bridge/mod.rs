@@ -1,0 +1,157 @@
+//! `sim-server bridge`: a session's shared-memory streams on zenoh, for
+//! viewers, recorders and haptic daemons on other hosts.
+//!
+//! One loop on one thread: it waits for a remote pose (zenoh delivers it
+//! to a channel; the wait ends as it arrives, so a pose goes into shared
+//! memory and wakes the simulation one thread hop after the network) or
+//! for the poll period, then relays every stream both ways
+//! ([`outbound`], [`inbound`]). It answers clock probes and late joiners'
+//! queries and holds the session's `alive/sim` token while a simulation
+//! publishes (see `shared::remote` for the keys). It holds no state of
+//! the simulation's: kill it and restart it at any time; the daemons on
+//! the far side see the token go and ramp their force to zero.
+
+mod inbound;
+mod outbound;
+
+use inbound::{InCounts, Inbound};
+use outbound::{Kept, OutCounts, Outbound};
+use shared::SessionName;
+use shared::remote::{ALIVE_SIM, RemoteConfig, RemoteError, clock};
+use shared::services::{self, ServiceError};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use zenoh::Wait;
+
+/// How often peers are checked (dead nodes reaped, the simulation's
+/// presence, remote interest in contact problems, a remote daemon's token).
+const PEER_CHECK: Duration = Duration::from_millis(20);
+
+/// What `sim-server bridge` runs.
+#[derive(Clone, Debug)]
+pub struct BridgeConfig {
+    /// The session.
+    pub session: SessionName,
+    /// Where zenoh listens and connects.
+    pub remote: RemoteConfig,
+    /// How long the loop waits for a remote pose before it polls shared
+    /// memory again: the most a force sample waits in the bridge.
+    pub poll: Duration,
+    /// Stop after this long (None: until SIGINT/SIGTERM).
+    pub duration: Option<Duration>,
+}
+
+/// Why the bridge stopped.
+#[derive(Debug, Error)]
+pub enum BridgeError {
+    /// A shared-memory service.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// The zenoh session.
+    #[error(transparent)]
+    Remote(#[from] RemoteError),
+    /// A zenoh declaration.
+    #[error("zenoh {key}: {reason}")]
+    Zenoh {
+        /// The key.
+        key: String,
+        /// zenoh's message.
+        reason: String,
+    },
+}
+
+/// What the bridge did.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct BridgeSummary {
+    /// The session.
+    pub session: String,
+    /// Where it listened and connected.
+    pub endpoints: String,
+    /// Seconds it ran.
+    pub duration_s: f64,
+    /// Shared memory -> zenoh.
+    pub outbound: OutCounts,
+    /// zenoh -> shared memory.
+    pub inbound: InCounts,
+    /// Times a simulation appeared in the session.
+    pub sim_arrivals: u64,
+}
+
+/// Answers late joiners' queries on the once-published streams.
+fn serve_kept(
+    z: &zenoh::Session,
+    session: &SessionName,
+    kept: &Kept,
+) -> Result<Vec<zenoh::query::Queryable<()>>, BridgeError> {
+    use services::stream::{REST, SCENE, SURFACE0, TOPOLOGY};
+    [SCENE, REST, SURFACE0, TOPOLOGY]
+        .into_iter()
+        .map(|stream| {
+            let key = session.service(stream);
+            let kept = kept.clone();
+            let k = key.clone();
+            z.declare_queryable(key.clone())
+                .callback(move |q| {
+                    let bytes = kept.lock().ok().and_then(|m| m.get(&k).cloned());
+                    if let Some(b) = bytes {
+                        let _ = q.reply(q.key_expr().clone(), b).wait();
+                    }
+                })
+                .wait()
+                .map_err(|e| BridgeError::Zenoh {
+                    key,
+                    reason: e.to_string(),
+                })
+        })
+        .collect()
+}
+
+/// Runs the bridge until `stop` (or the configured duration).
+pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, BridgeError> {
+    let z = cfg.remote.open()?;
+    let node = services::node("hapsim-bridge")?;
+    let _clock = clock::serve(&z, &cfg.session)?;
+    let mut outbound = Outbound::new(&node, &cfg.session, &z)?;
+    let mut inbound = Inbound::new(&node, &cfg.session, &z)?;
+    let _kept = serve_kept(&z, &cfg.session, &outbound.kept)?;
+    let alive_key = cfg.session.service(ALIVE_SIM);
+    let mut sim_token: Option<zenoh::liveliness::LivelinessToken> = None;
+    let mut summary = BridgeSummary {
+        session: cfg.session.as_str().to_string(),
+        endpoints: cfg.remote.describe(),
+        ..BridgeSummary::default()
+    };
+    let start = Instant::now();
+    let mut checked = start - PEER_CHECK;
+    while !stop.load(Ordering::Relaxed) && cfg.duration.is_none_or(|d| start.elapsed() < d) {
+        inbound.wait_and_pump(cfg.poll)?;
+        outbound.pump(inbound.own_telemetry());
+        if checked.elapsed() >= PEER_CHECK {
+            checked = Instant::now();
+            services::reap_dead_nodes(&node);
+            match (outbound.sim_present(), sim_token.is_some()) {
+                (true, false) => {
+                    let token = z
+                        .liveliness()
+                        .declare_token(alive_key.clone())
+                        .wait()
+                        .map_err(|e| BridgeError::Zenoh {
+                            key: alive_key.clone(),
+                            reason: e.to_string(),
+                        })?;
+                    sim_token = Some(token);
+                    summary.sim_arrivals += 1;
+                }
+                (false, true) => sim_token = None,
+                _ => {}
+            }
+            outbound.follow_local_contact_interest()?;
+            inbound.follow_daemon();
+        }
+    }
+    summary.duration_s = start.elapsed().as_secs_f64();
+    summary.outbound = outbound.counts();
+    summary.inbound = inbound.counts().clone();
+    Ok(summary)
+}

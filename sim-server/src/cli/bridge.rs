@@ -1,0 +1,102 @@
+//! `sim-server bridge`: the session's streams on zenoh for other hosts.
+
+use super::write_json;
+use crate::bridge::{BridgeConfig, run};
+use anyhow::{Result, bail};
+use shared::SessionName;
+use shared::remote::{DEFAULT_LISTEN, RemoteConfig};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+/// Flags of `sim-server bridge`.
+#[derive(clap::Args)]
+pub struct BridgeArgs {
+    /// The session to carry.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Listen here (zenoh endpoint: tcp/ADDR:PORT, or tls/ADDR:PORT with a
+    /// --zenoh-config giving the certificates); repeatable. Default
+    /// tcp/127.0.0.1:7447 (loopback only) unless --connect or a
+    /// --zenoh-config with endpoints is given.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Connect to a zenoh router or peer here instead of (or besides)
+    /// listening; repeatable.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// A zenoh configuration file (JSON5): TLS, mutual authentication,
+    /// access control (docs/remote.md). --listen and --connect override
+    /// its endpoints.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+    /// The longest a force sample waits in the bridge (us): shared memory
+    /// is polled this often (a remote pose wakes the loop at once).
+    #[arg(long, default_value_t = 50)]
+    pub poll_us: u64,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Write the summary as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Runs the bridge until SIGINT/SIGTERM or --duration-s.
+pub fn bridge(args: BridgeArgs) -> Result<()> {
+    let session = SessionName::new(&args.session)?;
+    if !(1..=100_000).contains(&args.poll_us) {
+        bail!("--poll-us must lie in 1..=100000, got {}", args.poll_us);
+    }
+    let duration = match args.duration_s {
+        Some(d) if !(d.is_finite() && d > 0.0) => {
+            bail!("--duration-s must be a positive number of seconds, got {d}")
+        }
+        d => d.map(Duration::from_secs_f64),
+    };
+    let mut remote = RemoteConfig {
+        listen: args.listen,
+        connect: args.connect,
+        config_file: args.zenoh_config,
+    };
+    if remote.listen.is_empty() && remote.connect.is_empty() && remote.config_file.is_none() {
+        remote.listen.push(DEFAULT_LISTEN.to_string());
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    let cfg = BridgeConfig {
+        session,
+        remote,
+        poll: Duration::from_micros(args.poll_us),
+        duration,
+    };
+    eprintln!(
+        "sim-server bridge: session {} on zenoh ({})",
+        cfg.session.as_str(),
+        cfg.remote.describe()
+    );
+    let summary = run(&cfg, &stop)?;
+    let o = &summary.outbound;
+    println!(
+        "bridge {}: {:.1} s | out: {} force samples ({} missed), {} mesh frames, {} scene messages, {} contact problems, {} telemetry batches | in: {} poses, {} telemetry batches, {} refused | simulation arrived {} times",
+        summary.session,
+        summary.duration_s,
+        o.force,
+        o.force_gaps,
+        o.mesh,
+        o.scene_streams,
+        o.local_contact,
+        o.telemetry,
+        summary.inbound.poses,
+        summary.inbound.telemetry,
+        summary.inbound.refused,
+        summary.sim_arrivals
+    );
+    if let Some(path) = &args.json {
+        write_json(path, &summary)?;
+    }
+    Ok(())
+}
