@@ -347,8 +347,8 @@ impl<D: Device> RtLoop<D> {
         // 3. Force samples: drain, newest wins (the extrapolator keeps two);
         // samples faster than wall time are not rendered.
         let mut resumed = false;
-        if let Some(sub) = &self.subscriber {
-            while let Some(sample) = sub.next() {
+        if let Some(sub) = &mut self.subscriber {
+            while let Some(sample) = sub.pop() {
                 if sample.version != PROTOCOL_VERSION {
                     self.shared
                         .flags

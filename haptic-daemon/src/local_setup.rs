@@ -99,11 +99,11 @@ pub fn run_local_setup(
 ) -> Result<(), TransportError> {
     // Best effort: without it the set-up only competes more.
     let _ = crate::rt::lowest_priority();
-    let (sub, _node) = transport.local_contact_source(&session)?;
+    let (mut sub, _node) = transport.local_contact_source(&session)?;
     let mut poses = Vec::with_capacity(MAX_CATCH_UP);
     while !shared.flags.rt_done.load(Ordering::Acquire) {
         let mut newest = None;
-        while let Some(sample) = sub.next() {
+        while let Some(sample) = sub.pop() {
             newest = Some(sample);
         }
         let Some(msg) = newest else {

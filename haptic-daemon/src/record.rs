@@ -150,9 +150,9 @@ pub fn record(
     transport: &Transport,
     stop: &Arc<AtomicBool>,
 ) -> Result<RecordSummary, RecordError> {
-    let (forces, _n1) =
+    let (mut forces, _n1) =
         transport.force_source("hapsim-recorder", &cfg.session, services::FORCE_BUFFER_MAX)?;
-    let (telemetry, _n2) = transport.telemetry_source("hapsim-recorder-t", &cfg.session)?;
+    let (mut telemetry, _n2) = transport.telemetry_source("hapsim-recorder-t", &cfg.session)?;
     let mut force_out = cfg
         .forces
         .as_deref()
@@ -176,7 +176,7 @@ pub fn record(
             || cfg
                 .duration_s
                 .is_some_and(|d| (now - start) as f64 * 1e-9 >= d);
-        while let Some(s) = forces.next() {
+        while let Some(s) = forces.pop() {
             if s.version != PROTOCOL_VERSION {
                 continue;
             }
@@ -185,7 +185,7 @@ pub fn record(
                 force_rows(w, &s).map_err(file_err(&cfg.forces))?;
             }
         }
-        while let Some(b) = telemetry.next() {
+        while let Some(b) = telemetry.pop() {
             if b.version != PROTOCOL_VERSION {
                 continue;
             }

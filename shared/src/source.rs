@@ -1,7 +1,7 @@
 //! Where a client's messages come from: shared memory on the simulation's
 //! host, or zenoh through a bridge (`--connect`). A closed set matched on
 //! the real-time thread's every tick, hence an enum; both arms hand out
-//! copies without allocating or locking.
+//! copies without allocating, locking or waiting for a writer.
 
 use crate::remote::{Inbox, Stamped};
 use crate::services::{Ipc, ZeroCopySend};
@@ -18,7 +18,7 @@ pub enum Source<T: std::fmt::Debug + ZeroCopySend + 'static> {
 
 impl<T: std::fmt::Debug + ZeroCopySend + Pod + Stamped + Send + Sync> Source<T> {
     /// The oldest message not yet taken.
-    pub fn next(&self) -> Option<T> {
+    pub fn pop(&mut self) -> Option<T> {
         match self {
             Source::Shm(s) => s.receive().ok().flatten().map(|m| *m),
             Source::Remote(i) => i.pop(),

@@ -1,9 +1,13 @@
 //! A remote station (issue 19's acceptance): the simulation (embedded
 //! liver, real time) and `sim-server bridge` run on this host; a viewer
-//! snapshot and a haptic daemon replaying a press run in a private mount
-//! namespace (`unshare -m`) with their own empty `/dev/shm` and `/tmp`, so
-//! no shared memory of the session is reachable, and join through zenoh
-//! over TCP on loopback. The snapshot shows the organ (its scene, rest
+//! snapshot, a haptic daemon replaying a press and a recorder run in a
+//! private mount namespace (`unshare -m`) with their own empty `/dev/shm`
+//! and `/tmp`, so no shared memory of the session is reachable, and join
+//! through zenoh over TCP on loopback. The station also has its own time
+//! namespace whose `CLOCK_MONOTONIC` runs 1000 s ahead of this host's, as
+//! another machine's would: every stamp must be mapped between the clocks
+//! (a daemon that compared the simulation's stamps with its own clock
+//! would find every sample 1000 s old and render nothing). The snapshot shows the organ (its scene, rest
 //! shape and surface came from the streams: the viewer reads no file), the
 //! daemon renders the contact force within the device limit, the press
 //! reaches the simulation (its force samples on this host show contact),
@@ -40,13 +44,19 @@ mount -t tmpfs none /tmp
 mount -t tmpfs none /dev/shm
 /mnt/bin/viewer --connect {endpoint} --session {session} --snapshot /mnt/work/remote.png \
   --json /mnt/work/snapshot.json --view top --wait-s 20 >/dev/null
+/mnt/bin/haptic-daemon record --connect {endpoint} --session {session} --duration-s 5 \
+  --forces /mnt/work/recorded.csv --json /mnt/work/recorded.json 2>/dev/null &
 /mnt/bin/haptic-daemon run --quiet --rt-priority 0 --connect {endpoint} --session {session} \
   --device replay:/mnt/work/press.csv --duration-s 7 --record /mnt/work/daemon.csv \
   --json /mnt/work/daemon.json >/dev/null
+wait
 echo "shm=$(ls -A /dev/shm | wc -l) tmp=$(ls -A /tmp | wc -l)"
 "#
     )
 }
+
+/// How far the station's monotonic clock runs ahead of this host's (s).
+const STATION_AHEAD_S: u64 = 1000;
 
 /// (t_ns, |force| N) of each tick in the daemon's record.
 fn record_forces(csv: &str) -> Vec<(u64, f64)> {
@@ -83,7 +93,16 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
     let forces = services::subscriber(&services::force_service(&node, &name).unwrap()).unwrap();
     let bin = binary("haptic-daemon").parent().unwrap().to_path_buf();
     let station = Command::new("unshare")
-        .args(["-m", "sh", "-c", &station_script(&endpoint, &session)])
+        .args([
+            "--fork",
+            "--mount",
+            "--time",
+            "--monotonic",
+            &STATION_AHEAD_S.to_string(),
+            "sh",
+            "-c",
+            &station_script(&endpoint, &session),
+        ])
         .env("BIN", &bin)
         .env("WORK", &dir)
         .stdout(Stdio::piped())
@@ -136,7 +155,48 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
         summary["max_force_n"].as_f64().unwrap() <= limit + 1e-9,
         "{summary}"
     );
-    let ticks = record_forces(&std::fs::read_to_string(dir.join("daemon.csv")).unwrap());
+    // The daemon's stamps are the station's clock: back to this host's.
+    let ahead_ns = STATION_AHEAD_S * 1_000_000_000;
+    let ticks: Vec<(u64, f64)> =
+        record_forces(&std::fs::read_to_string(dir.join("daemon.csv")).unwrap())
+            .into_iter()
+            .map(|(t, f)| (t - ahead_ns, f))
+            .collect();
+    // The recorder on the station, until the bridge died (about 2 s): the
+    // simulation's samples, stamped in the station's clock,
+    // and the station daemon's telemetry (which only the bridge can pass
+    // from one zenoh client to another).
+    let recorded = read_json(&dir.join("recorded.json"));
+    assert!(
+        recorded["forces"]["received"].as_u64().unwrap() > 500,
+        "{recorded}"
+    );
+    assert!(
+        recorded["telemetry"]["received"].as_u64().unwrap() > 200,
+        "{recorded}"
+    );
+    // Force samples go best-effort (dropped, not queued, under congestion,
+    // and counted): a loaded machine may lose a few, never many.
+    let lost = recorded["forces"]["lost"].as_u64().unwrap();
+    assert!(
+        lost * 100 <= recorded["forces"]["received"].as_u64().unwrap(),
+        "{recorded}"
+    );
+    let rows = std::fs::read_to_string(dir.join("recorded.csv")).unwrap();
+    let first_t: u64 = rows
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let lag_s = (first_t as f64 - killed_ns as f64) * 1e-9;
+    assert!(
+        (STATION_AHEAD_S as f64 - 10.0..STATION_AHEAD_S as f64).contains(&lag_s),
+        "a recorded stamp {lag_s:.3} s from this host's clock, not in the station's"
+    );
     let held: Vec<f64> = ticks
         .iter()
         .filter(|(t, _)| (killed_ns - 300_000_000..killed_ns).contains(t))

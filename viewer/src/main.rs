@@ -73,7 +73,7 @@ fn main() -> Result<()> {
         match shared::remote::RemoteConfig::client(&args.connect, args.zenoh_config.as_deref()) {
             None => Session::join(&name)?,
             Some(cfg) => {
-                let wait = std::time::Duration::from_secs_f64(args.wait_s.max(1.0));
+                let wait = std::time::Duration::from_secs_f64(args.wait_s.clamp(1.0, 86_400.0));
                 let link = shared::remote::Link::join(&cfg, &name, wait)?;
                 eprintln!("viewer: {}", link.summary());
                 Session::join_remote(std::sync::Arc::new(link))?

@@ -173,7 +173,7 @@ impl Session {
                 changed = true;
             }
         });
-        while let Some(s) = self.streams.force.next() {
+        while let Some(s) = self.streams.force.pop() {
             if s.version != PROTOCOL_VERSION {
                 continue;
             }
@@ -187,7 +187,7 @@ impl Session {
             }));
         }
         changed |= self.poll_scene();
-        while let Some(b) = self.streams.telemetry.next() {
+        while let Some(b) = self.streams.telemetry.pop() {
             if b.version != PROTOCOL_VERSION {
                 continue;
             }
@@ -204,7 +204,7 @@ impl Session {
     /// publishes them again); whether any arrived.
     fn poll_scene(&mut self) -> bool {
         let mut changed = false;
-        while let Some(m) = self.streams.scene.next() {
+        while let Some(m) = self.streams.scene.pop() {
             if m.version == PROTOCOL_VERSION {
                 self.info.set_tools(&m);
                 changed = true;

@@ -99,13 +99,11 @@ impl Streams {
     /// Subscribes through `link` (a bridge answered it).
     pub fn remote(link: Arc<Link>) -> Result<Self, JoinError> {
         use services::stream;
-        let inbox = |s| shared::remote::Inbox::subscribe(&link, s, 64);
+        let inbox = |s| shared::remote::Inbox::subscribe(&link, s, 128);
         Ok(Self {
-            force: Source::Remote(shared::remote::Inbox::subscribe(
-                &link,
-                stream::FORCE,
-                services::FORCE_BUFFER_LATEST,
-            )?),
+            // A frame's worth and more at 1 kHz: a full inbox refuses the
+            // newest, so it must outlast the viewer's frame interval.
+            force: Source::Remote(shared::remote::Inbox::subscribe(&link, stream::FORCE, 128)?),
             telemetry: Source::Remote(inbox(stream::TELEMETRY)?),
             scene: Source::Remote(shared::remote::Inbox::subscribe_with_query(
                 &link,

@@ -1,16 +1,20 @@
 //! What a client receives: zenoh delivers on its own threads, so each
-//! stream lands in a bounded lock-free queue ([`Inbox`], the newest kept
-//! when full, losses counted) that a real-time thread can drain without
-//! allocating or locking, or in a newest-wins slot for the viewer's slices
-//! ([`SliceInbox`]). Stamps are moved into this host's clock on arrival;
-//! messages of another protocol version or layout are refused and counted.
+//! stream lands in a bounded wait-free ring ([`Inbox`]: rtrb's single
+//! producer, single consumer queue; zenoh's threads take turns at the
+//! producer end behind a mutex the consumer never touches) that a
+//! real-time thread drains without allocating, locking or waiting for a
+//! producer mid-write, or in a newest-wins slot for the viewer's slices
+//! ([`SliceInbox`]). A full ring refuses the newest message (counted as
+//! lost): only the consumer may take from it, and one drained every tick
+//! fills only while its thread stalls. Stamps are moved into this host's
+//! clock on arrival; messages of another protocol version or layout are
+//! refused and counted.
 
 use super::clock::{ClockMap, Stamped};
 use super::link::declare_error;
 use super::{Link, RemoteError, codec};
 use bytemuck::Pod;
-use crossbeam_queue::ArrayQueue;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use zenoh::Wait;
 
@@ -19,7 +23,9 @@ use zenoh::Wait;
 pub struct InboxCounts {
     /// Messages accepted.
     pub received: AtomicU64,
-    /// Accepted messages pushed out unread by newer ones.
+    /// Messages dropped because the reader had not taken the ones before
+    /// (an [`Inbox`]: the newest refused; a [`SliceInbox`]: the older
+    /// replaced).
     pub lost: AtomicU64,
     /// Messages refused (another version or layout, or before the clock
     /// was known).
@@ -46,7 +52,7 @@ impl InboxCounts {
 
 /// A stream's messages, oldest first, at most `capacity` kept.
 pub struct Inbox<T> {
-    queue: Arc<ArrayQueue<T>>,
+    queue: rtrb::Consumer<T>,
     counts: Arc<InboxCounts>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
 }
@@ -69,11 +75,12 @@ impl<T: Pod + Stamped + Send + Sync> Inbox<T> {
 
     fn open(link: &Link, stream: &str, capacity: usize, query: bool) -> Result<Self, RemoteError> {
         let key = link.name().service(stream);
-        let queue = Arc::new(ArrayQueue::new(capacity.max(1)));
+        let (producer, queue) = rtrb::RingBuffer::new(capacity.max(1));
+        let producer = Arc::new(Mutex::new(producer));
         let counts = Arc::new(InboxCounts::default());
         let accept = {
             let (q, c, clock, synced, k) = (
-                queue.clone(),
+                producer,
                 counts.clone(),
                 link.clock().clone(),
                 link.synced(),
@@ -86,7 +93,8 @@ impl<T: Pod + Stamped + Send + Sync> Inbox<T> {
                 Ok(mut msg) => {
                     msg.map_stamps(|t| clock.to_local(t));
                     c.received.fetch_add(1, Ordering::Relaxed);
-                    if q.force_push(msg).is_some() {
+                    let pushed = q.lock().is_ok_and(|mut p| p.push(msg).is_ok());
+                    if !pushed {
                         c.lost.fetch_add(1, Ordering::Relaxed);
                     }
                 }
@@ -110,9 +118,10 @@ impl<T: Pod + Stamped + Send + Sync> Inbox<T> {
         })
     }
 
-    /// The oldest message not yet taken (no allocation, no lock).
-    pub fn pop(&self) -> Option<T> {
-        self.queue.pop()
+    /// The oldest message not yet taken (wait-free: no allocation, no
+    /// lock, no waiting for a producer).
+    pub fn pop(&mut self) -> Option<T> {
+        self.queue.pop().ok()
     }
 
     /// The counters.
@@ -139,6 +148,9 @@ impl<H: Pod + Stamped + Send, T: Pod + Send> SliceInbox<H, T> {
         let key = link.name().service(stream);
         let slot: Slot<H, T> = Arc::new(Mutex::new(None));
         let counts = Arc::new(InboxCounts::default());
+        // A live message wins over the bridge's answer to the join query,
+        // whichever comes first (the answer may be older).
+        let live = Arc::new(AtomicBool::new(false));
         let accept = {
             let (slot, counts, clock, k) = (
                 slot.clone(),
@@ -148,14 +160,21 @@ impl<H: Pod + Stamped + Send, T: Pod + Send> SliceInbox<H, T> {
             );
             move |bytes: &[u8]| accept_slice(&k, bytes, &slot, &counts, &clock)
         };
-        let on_sample = accept.clone();
+        let (on_sample, seen) = (accept.clone(), live.clone());
         let subscriber = link
             .zenoh()
             .declare_subscriber(key.clone())
-            .callback(move |s| on_sample(&s.payload().to_bytes()))
+            .callback(move |s| {
+                seen.store(true, Ordering::Release);
+                on_sample(&s.payload().to_bytes())
+            })
             .wait()
             .map_err(|e| declare_error(&key, e))?;
-        ask_bridge(link, &key, accept);
+        ask_bridge(link, &key, move |bytes| {
+            if !live.load(Ordering::Acquire) {
+                accept(bytes)
+            }
+        });
         Ok(Self {
             slot,
             counts,

@@ -18,6 +18,12 @@ const PROBE_WINDOW: usize = 16;
 const PROBE_EVERY: Duration = Duration::from_millis(500);
 /// How long one probe may take.
 const PROBE_TIMEOUT: Duration = Duration::from_millis(500);
+/// Probes whose estimate is taken as it is; after them the offset slews.
+const DIRECT_PROBES: usize = 4;
+/// The most the offset moves per probe once slewing (ns): a better round
+/// trip does not make consecutive stamps jump (a sample's spacing, 1 ms at
+/// 1 kHz, would be off by the jump).
+const SLEW_NS: i64 = 5_000;
 
 /// A client's link to one session.
 pub struct Link {
@@ -68,6 +74,7 @@ impl Link {
             .name("hapsim-clock".into())
             .spawn(move || {
                 let mut window: Vec<Probe> = Vec::with_capacity(PROBE_WINDOW);
+                let mut taken = 0usize;
                 // Until the link is dropped (the clock with it).
                 while let Some(map) = clock.upgrade() {
                     if let Some(p) = probe(&session, &key) {
@@ -76,7 +83,13 @@ impl Link {
                         }
                         window.push(p);
                         if let Some(best) = Probe::best(window.iter().copied()) {
-                            map.set(best);
+                            let next = if taken < DIRECT_PROBES {
+                                best
+                            } else {
+                                slew(map.offset_ns(), best)
+                            };
+                            map.set(next);
+                            taken += 1;
                             synced.store(true, Ordering::Release);
                         }
                     }
@@ -202,6 +215,20 @@ impl Link {
     }
 }
 
+/// `best`, its offset moved from `current` by at most [`SLEW_NS`] (a step
+/// of more than a millisecond is a real change, a restarted bridge or
+/// host, and is taken at once).
+fn slew(current: i64, best: Probe) -> Probe {
+    let step = best.offset_ns.saturating_sub(current);
+    if step.abs() > 1_000_000 {
+        return best;
+    }
+    Probe {
+        offset_ns: current + step.clamp(-SLEW_NS, SLEW_NS),
+        rtt_ns: best.rtt_ns,
+    }
+}
+
 /// One clock probe (None: no answer in time).
 fn probe(session: &zenoh::Session, key: &str) -> Option<Probe> {
     let sent = crate::monotonic_ns();
@@ -284,8 +311,8 @@ mod tests {
             .wait_for_bridge(Duration::from_millis(300))
             .unwrap_err();
         assert!(e.to_string().contains("no bridge answers"), "{e}");
-        let forces = Inbox::<ForceMsg>::subscribe(&link, "force", 4).unwrap();
-        let spy = Inbox::<ForceMsg>::subscribe(&stranger, "force", 4).unwrap();
+        let mut forces = Inbox::<ForceMsg>::subscribe(&link, "force", 4).unwrap();
+        let mut spy = Inbox::<ForceMsg>::subscribe(&stranger, "force", 4).unwrap();
         let publisher = server
             .declare_publisher(name.service("force"))
             .wait()

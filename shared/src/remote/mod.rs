@@ -15,8 +15,8 @@
 //!   `rest`, `surface0`, `topology`): the newest message, so a client that
 //!   joins late gets what iceoryx2's history gives a local one;
 //! - the token `hapsim/<session>/alive/sim` while a simulation publishes
-//!   force samples in the session (a client that loses its link to the
-//!   bridge sees it go at once).
+//!   force samples in the session (a client sees it go when the bridge's
+//!   process dies, or after zenoh's lease when the link is cut).
 //!
 //! A client declares `hapsim/<session>/alive/daemon` while it publishes
 //! poses, so the bridge withdraws its local pose publisher when it goes.
@@ -28,7 +28,7 @@
 //! let session = SessionName::new("station-2").unwrap();
 //! let config = RemoteConfig::connect_to("tcp/10.0.0.5:7447");
 //! let link = Link::join(&config, &session, Duration::from_secs(5)).unwrap();
-//! let forces = Inbox::<shared::protocol::ForceMsg>::subscribe(&link, "force", 4).unwrap();
+//! let mut forces = Inbox::<shared::protocol::ForceMsg>::subscribe(&link, "force", 4).unwrap();
 //! while let Some(sample) = forces.pop() {
 //!     println!("{:?}", sample.tools[0].force_n); // stamps already in this host's clock
 //! }
@@ -54,6 +54,10 @@ pub type Token = zenoh::liveliness::LivelinessToken;
 /// The bridge's default endpoint: loopback only (listening elsewhere is
 /// the user's explicit choice).
 pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
+
+/// The largest message a peer may send (64 MiB: a mesh frame of a million
+/// vertices is 12 MB).
+const MAX_MESSAGE_BYTES: &str = "67108864";
 
 /// Key of the clock query.
 pub const CLOCK: &str = "clock";
@@ -115,7 +119,10 @@ impl RemoteConfig {
 
     /// The zenoh configuration: a peer that listens only where told (no
     /// default `tcp/[::]:0`), does no multicast scouting (it would answer
-    /// on the LAN), and connects where told.
+    /// on the LAN), takes no message over 64 MiB (zenoh's default is 1 GiB,
+    /// a peer could make it allocate that) and connects where told. A
+    /// configuration file is taken as written (its own listen, scouting and
+    /// size settings: `docs/remote.md` shows them).
     pub fn zenoh_config(&self) -> Result<zenoh::Config, RemoteError> {
         let mut config = match &self.config_file {
             Some(path) => zenoh::Config::from_file(path).map_err(|e| RemoteError::ConfigFile {
@@ -127,6 +134,11 @@ impl RemoteConfig {
                 insert(&mut c, "mode", "\"peer\"")?;
                 insert(&mut c, "scouting/multicast/enabled", "false")?;
                 insert(&mut c, "listen/endpoints", "[]")?;
+                insert(
+                    &mut c,
+                    "transport/link/rx/max_message_size",
+                    MAX_MESSAGE_BYTES,
+                )?;
                 c
             }
         };

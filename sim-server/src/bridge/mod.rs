@@ -1,28 +1,38 @@
 //! `sim-server bridge`: a session's shared-memory streams on zenoh, for
 //! viewers, recorders and haptic daemons on other hosts.
 //!
-//! One loop on one thread: it waits for a remote pose (zenoh delivers it
-//! to a channel; the wait ends as it arrives, so a pose goes into shared
-//! memory and wakes the simulation one thread hop after the network) or
-//! for the poll period, then relays every stream both ways
-//! ([`outbound`], [`inbound`]). It answers clock probes and late joiners'
-//! queries and holds the session's `alive/sim` token while a simulation
-//! publishes (see `shared::remote` for the keys). It holds no state of
-//! the simulation's: kill it and restart it at any time; the daemons on
-//! the far side see the token go and ramp their force to zero.
+//! Two loops on two threads, so that a slow viewer link never holds up a
+//! haptic one. The main loop carries the haptic streams: it waits for a
+//! remote pose (zenoh delivers it to a channel; the wait ends as it
+//! arrives, so a pose goes into shared memory and wakes the simulation one
+//! thread hop after the network) or for the poll period, then relays force
+//! samples and contact problems ([`inbound`], [`outbound::LiveOut`]). The
+//! bulk loop, every millisecond, relays mesh frames, the scene streams and
+//! telemetry ([`outbound::BulkOut`], [`telemetry`]). The bridge answers
+//! clock probes and late joiners' queries and holds the session's
+//! `alive/sim` token while a simulation publishes (see `shared::remote` for
+//! the keys). It holds no state of the simulation's: kill it and restart it
+//! at any time; the daemons on the far side see the token go and ramp their
+//! force to zero.
 
 mod inbound;
 mod outbound;
+mod telemetry;
 
 use inbound::{InCounts, Inbound};
-use outbound::{Kept, OutCounts, Outbound};
+use outbound::{BulkOut, Kept, LiveOut, OutCounts};
 use shared::SessionName;
-use shared::remote::{ALIVE_SIM, RemoteConfig, RemoteError, clock};
+use shared::remote::{ALIVE_DAEMON, ALIVE_SIM, RemoteConfig, RemoteError, clock};
 use shared::services::{self, ServiceError};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+use telemetry::{TelemetryCounts, TelemetryRelay};
 use thiserror::Error;
 use zenoh::Wait;
+
+/// The bulk loop's period.
+const BULK_PERIOD: Duration = Duration::from_millis(1);
 
 /// How often peers are checked (dead nodes reaped, the simulation's
 /// presence, remote interest in contact problems, a remote daemon's token).
@@ -72,8 +82,10 @@ pub struct BridgeSummary {
     pub duration_s: f64,
     /// Shared memory -> zenoh.
     pub outbound: OutCounts,
-    /// zenoh -> shared memory.
+    /// zenoh -> shared memory (poses).
     pub inbound: InCounts,
+    /// Telemetry both ways.
+    pub telemetry: TelemetryCounts,
     /// Times a simulation appeared in the session.
     pub sim_arrivals: u64,
 }
@@ -107,14 +119,78 @@ fn serve_kept(
         .collect()
 }
 
+/// Follows a remote daemon's liveliness token (true while one holds it).
+fn watch_daemon(
+    z: &zenoh::Session,
+    session: &SessionName,
+) -> Result<(Arc<AtomicBool>, zenoh::pubsub::Subscriber<()>), BridgeError> {
+    let alive = Arc::new(AtomicBool::new(false));
+    let flag = alive.clone();
+    let key = session.service(ALIVE_DAEMON);
+    let watch = z
+        .liveliness()
+        .declare_subscriber(&key)
+        .history(true)
+        .callback(move |s| {
+            flag.store(
+                s.kind() == zenoh::sample::SampleKind::Put,
+                Ordering::Relaxed,
+            )
+        })
+        .wait()
+        .map_err(|e| BridgeError::Zenoh {
+            key,
+            reason: e.to_string(),
+        })?;
+    Ok((alive, watch))
+}
+
+/// The bulk loop (its own thread and shared-memory node): until `stop`.
+fn run_bulk(
+    z: zenoh::Session,
+    session: SessionName,
+    kept: Kept,
+    daemon_alive: Arc<AtomicBool>,
+    stop: Arc<AtomicBool>,
+) -> Result<(OutCounts, TelemetryCounts), BridgeError> {
+    let node = services::node("hapsim-bridge-bulk")?;
+    let mut bulk = BulkOut::new(&node, &session, &z, kept)?;
+    let mut telemetry = TelemetryRelay::new(&node, &session, &z, daemon_alive)?;
+    while !stop.load(Ordering::Relaxed) {
+        bulk.pump();
+        telemetry.pump();
+        std::thread::sleep(BULK_PERIOD);
+    }
+    Ok((bulk.counts(), telemetry.counts()))
+}
+
 /// Runs the bridge until `stop` (or the configured duration).
 pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, BridgeError> {
     let z = cfg.remote.open()?;
     let node = services::node("hapsim-bridge")?;
     let _clock = clock::serve(&z, &cfg.session)?;
-    let mut outbound = Outbound::new(&node, &cfg.session, &z)?;
-    let mut inbound = Inbound::new(&node, &cfg.session, &z)?;
-    let _kept = serve_kept(&z, &cfg.session, &outbound.kept)?;
+    let (daemon_alive, _daemon_watch) = watch_daemon(&z, &cfg.session)?;
+    let mut live = LiveOut::new(&node, &cfg.session, &z)?;
+    let mut inbound = Inbound::new(&node, &cfg.session, &z, daemon_alive.clone())?;
+    let kept = Kept::default();
+    let _kept = serve_kept(&z, &cfg.session, &kept)?;
+    let bulk_stop = Arc::new(AtomicBool::new(false));
+    let bulk = {
+        let (z, session, kept, alive, stop) = (
+            z.clone(),
+            cfg.session.clone(),
+            kept.clone(),
+            daemon_alive.clone(),
+            bulk_stop.clone(),
+        );
+        std::thread::Builder::new()
+            .name("bridge-bulk".into())
+            .spawn(move || run_bulk(z, session, kept, alive, stop))
+            .map_err(|e| BridgeError::Zenoh {
+                key: "bridge-bulk".into(),
+                reason: format!("cannot start the bulk thread: {e}"),
+            })?
+    };
     let alive_key = cfg.session.service(ALIVE_SIM);
     let mut sim_token: Option<zenoh::liveliness::LivelinessToken> = None;
     let mut summary = BridgeSummary {
@@ -124,34 +200,41 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
     };
     let start = Instant::now();
     let mut checked = start - PEER_CHECK;
-    while !stop.load(Ordering::Relaxed) && cfg.duration.is_none_or(|d| start.elapsed() < d) {
-        inbound.wait_and_pump(cfg.poll)?;
-        outbound.pump(inbound.own_telemetry());
+    while !stop.load(Ordering::Relaxed)
+        && cfg.duration.is_none_or(|d| start.elapsed() < d)
+        && !bulk.is_finished()
+    {
+        inbound.wait_and_pump(cfg.poll);
+        live.pump();
         if checked.elapsed() >= PEER_CHECK {
             checked = Instant::now();
             services::reap_dead_nodes(&node);
-            match (outbound.sim_present(), sim_token.is_some()) {
+            match (live.sim_present(), sim_token.is_some()) {
                 (true, false) => {
-                    let token = z
-                        .liveliness()
-                        .declare_token(alive_key.clone())
-                        .wait()
-                        .map_err(|e| BridgeError::Zenoh {
-                            key: alive_key.clone(),
-                            reason: e.to_string(),
-                        })?;
-                    sim_token = Some(token);
+                    sim_token = z.liveliness().declare_token(alive_key.clone()).wait().ok();
                     summary.sim_arrivals += 1;
                 }
                 (false, true) => sim_token = None,
                 _ => {}
             }
-            outbound.follow_local_contact_interest()?;
+            live.follow_local_contact_interest();
             inbound.follow_daemon();
         }
     }
+    bulk_stop.store(true, Ordering::Relaxed);
+    let (bulk_counts, telemetry) = bulk.join().map_err(|_| BridgeError::Zenoh {
+        key: "bridge-bulk".into(),
+        reason: "the bulk thread panicked".into(),
+    })??;
     summary.duration_s = start.elapsed().as_secs_f64();
-    summary.outbound = outbound.counts();
+    let l = live.counts();
+    summary.outbound = OutCounts {
+        force: l.force,
+        force_gaps: l.force_gaps,
+        local_contact: l.local_contact,
+        ..bulk_counts
+    };
     summary.inbound = inbound.counts().clone();
+    summary.telemetry = telemetry;
     Ok(summary)
 }

@@ -1,15 +1,17 @@
-//! Shared memory -> zenoh: every stream the simulation (and a local daemon)
-//! publishes, relayed as it arrives. Force samples and the contact problem
-//! go at zenoh's real-time priority and are dropped, not queued, when the
-//! link is congested (a late sample is worth nothing to a haptic loop;
-//! sequence gaps are counted); the once-published streams (`scene`, `rest`,
-//! `surface0`, `topology`) are sent reliably and their newest message is
-//! kept to answer a client that joins later.
+//! Shared memory -> zenoh: every stream the simulation publishes, relayed
+//! as it arrives, in two parts on two threads so that a slow viewer link
+//! never holds up a haptic one. [`LiveOut`] (the bridge's main loop): force
+//! samples and the contact problem, at zenoh's real-time priority, dropped
+//! rather than queued when the link is congested (a late sample is worth
+//! nothing to a haptic loop; sequence gaps are counted). [`BulkOut`] (its
+//! own thread): mesh frames (dropped under congestion) and the
+//! once-published streams (`scene`, `rest`, `surface0`, `topology`), sent
+//! reliably, their newest message kept to answer a client that joins later.
 
 use super::BridgeError;
 use shared::SessionName;
 use shared::protocol::{
-    ForceMsg, LocalContactMsg, MeshHeader, RestHeader, SceneInfo, TelemetryBatch, TopologyHeader,
+    ForceMsg, LocalContactMsg, MeshHeader, RestHeader, SceneInfo, TopologyHeader,
 };
 use shared::remote::codec;
 use shared::services::{self, Ipc, IpcNode, ZeroCopySend};
@@ -28,7 +30,7 @@ pub type Kept = Arc<Mutex<HashMap<String, Vec<u8>>>>;
 
 /// How a stream goes on zenoh.
 #[derive(Clone, Copy)]
-struct Qos {
+pub(super) struct Qos {
     priority: Priority,
     congestion: CongestionControl,
     express: bool,
@@ -41,7 +43,7 @@ const LIVE: Qos = Qos {
     express: true,
 };
 /// Frames and telemetry: dropped under congestion, not hurried.
-const BULK: Qos = Qos {
+pub(super) const BULK: Qos = Qos {
     priority: Priority::Data,
     congestion: CongestionControl::Drop,
     express: false,
@@ -53,7 +55,7 @@ const RELIABLE: Qos = Qos {
     express: false,
 };
 
-fn declare(
+pub(super) fn declare(
     z: &zenoh::Session,
     key: &str,
     qos: Qos,
@@ -70,19 +72,19 @@ fn declare(
 }
 
 /// A relay of one fixed-size stream.
-struct Relay<T: std::fmt::Debug + ZeroCopySend + 'static> {
+pub(super) struct Relay<T: std::fmt::Debug + ZeroCopySend + 'static> {
     subscriber: Subscriber<Ipc, T, ()>,
     publisher: zenoh::pubsub::Publisher<'static>,
     seq_of: Option<fn(&T) -> u64>,
     last_seq: Option<u64>,
     /// Messages relayed.
-    sent: u64,
+    pub sent: u64,
     /// Sequence numbers skipped before the bridge saw them.
-    gaps: u64,
+    pub gaps: u64,
 }
 
 impl<T: std::fmt::Debug + ZeroCopySend + bytemuck::Pod> Relay<T> {
-    fn new(
+    pub(super) fn new(
         factory: &PortFactory<Ipc, T, ()>,
         buffer: usize,
         z: &zenoh::Session,
@@ -101,7 +103,7 @@ impl<T: std::fmt::Debug + ZeroCopySend + bytemuck::Pod> Relay<T> {
 
     /// Relays what arrived, skipping `own`'s messages (the bridge's own
     /// publisher of the remote side's messages); how many went.
-    fn pump(&mut self, own: Option<UniquePublisherId>, kept: Option<&Kept>) -> u64 {
+    pub(super) fn pump(&mut self, own: Option<UniquePublisherId>, kept: Option<&Kept>) -> u64 {
         let mut n = 0;
         while let Ok(Some(sample)) = self.subscriber.receive() {
             if own.is_some_and(|id| sample.origin() == id) {
@@ -127,6 +129,11 @@ impl<T: std::fmt::Debug + ZeroCopySend + bytemuck::Pod> Relay<T> {
         }
         self.sent += n;
         n
+    }
+
+    /// Puts `bytes` (an encoded message from elsewhere) on the stream.
+    pub(super) fn put_bytes(&self, bytes: Vec<u8>) {
+        let _ = self.publisher.put(bytes).wait();
     }
 }
 
@@ -186,48 +193,33 @@ pub struct OutCounts {
     /// Force samples the simulation sent that the bridge never saw (its
     /// buffer overflowed).
     pub force_gaps: u64,
+    /// Contact problems relayed.
+    pub local_contact: u64,
     /// Mesh frames relayed.
     pub mesh: u64,
     /// Topology, scene, rest and original-surface messages relayed.
     pub scene_streams: u64,
-    /// Contact problems relayed.
-    pub local_contact: u64,
-    /// Telemetry batches of a local daemon relayed.
-    pub telemetry: u64,
-    /// Telemetry batches skipped before the bridge saw them.
-    pub telemetry_gaps: u64,
 }
 
-/// Every outbound relay.
-pub struct Outbound {
+/// The haptic streams (the bridge's main loop).
+pub struct LiveOut {
     force_factory: PortFactory<Ipc, ForceMsg, ()>,
     force: Relay<ForceMsg>,
-    scene: Relay<SceneInfo>,
-    telemetry: Relay<TelemetryBatch>,
     local_contact_factory: PortFactory<Ipc, LocalContactMsg, ()>,
     local_contact_publisher: zenoh::pubsub::Publisher<'static>,
     /// Subscribed only while a remote client wants contact problems (the
     /// simulation computes them only while someone subscribes).
     local_contact: Option<Subscriber<Ipc, LocalContactMsg, ()>>,
     local_contact_sent: u64,
-    mesh: SliceRelay<MeshHeader, [f32; 3]>,
-    topology: SliceRelay<TopologyHeader, [u32; 3]>,
-    rest: SliceRelay<RestHeader, [f32; 3]>,
-    surface0: SliceRelay<TopologyHeader, [u32; 3]>,
-    /// The once-published streams' newest bytes.
-    pub kept: Kept,
 }
 
-impl Outbound {
-    /// Opens every stream of `session`.
+impl LiveOut {
+    /// Opens the force and contact-problem streams of `session`.
     pub fn new(
         node: &IpcNode,
         session: &SessionName,
         z: &zenoh::Session,
     ) -> Result<Self, BridgeError> {
-        let local_contact_factory = services::local_contact_service(node, session)?;
-        let local_contact_publisher =
-            declare(z, &session.service(services::stream::LOCAL_CONTACT), LIVE)?;
         let force_factory = services::force_service(node, session)?;
         Ok(Self {
             force: Relay::new(
@@ -237,6 +229,92 @@ impl Outbound {
                 LIVE,
                 Some(|m: &ForceMsg| m.seq),
             )?,
+            force_factory,
+            local_contact_factory: services::local_contact_service(node, session)?,
+            local_contact_publisher: declare(
+                z,
+                &session.service(services::stream::LOCAL_CONTACT),
+                LIVE,
+            )?,
+            local_contact: None,
+            local_contact_sent: 0,
+        })
+    }
+
+    /// Relays what arrived.
+    pub fn pump(&mut self) {
+        self.force.pump(None, None);
+        if let Some(sub) = &self.local_contact {
+            while let Ok(Some(sample)) = sub.receive() {
+                if self
+                    .local_contact_publisher
+                    .put(codec::encode(&*sample))
+                    .wait()
+                    .is_ok()
+                {
+                    self.local_contact_sent += 1;
+                }
+            }
+        }
+    }
+
+    /// Subscribes to the contact problems while a remote client wants them,
+    /// and lets go when none does (a failure is retried at the next check).
+    pub fn follow_local_contact_interest(&mut self) {
+        let wanted = self
+            .local_contact_publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|m| m.matching());
+        match (&self.local_contact, wanted) {
+            (None, true) => {
+                self.local_contact = services::subscriber_with_buffer(
+                    &self.local_contact_factory,
+                    services::FORCE_BUFFER_LATEST,
+                )
+                .ok()
+            }
+            (Some(_), false) => self.local_contact = None,
+            _ => {}
+        }
+    }
+
+    /// Whether a simulation publishes force samples in the session.
+    pub fn sim_present(&self) -> bool {
+        services::publisher_count(&self.force_factory) > 0
+    }
+
+    /// The counters (the bulk ones zero).
+    pub fn counts(&self) -> OutCounts {
+        OutCounts {
+            force: self.force.sent,
+            force_gaps: self.force.gaps,
+            local_contact: self.local_contact_sent,
+            ..OutCounts::default()
+        }
+    }
+}
+
+/// The viewer's streams (a thread of their own).
+pub struct BulkOut {
+    scene: Relay<SceneInfo>,
+    mesh: SliceRelay<MeshHeader, [f32; 3]>,
+    topology: SliceRelay<TopologyHeader, [u32; 3]>,
+    rest: SliceRelay<RestHeader, [f32; 3]>,
+    surface0: SliceRelay<TopologyHeader, [u32; 3]>,
+    /// The once-published streams' newest bytes.
+    pub kept: Kept,
+}
+
+impl BulkOut {
+    /// Opens the scene and mesh streams of `session`.
+    pub fn new(
+        node: &IpcNode,
+        session: &SessionName,
+        z: &zenoh::Session,
+        kept: Kept,
+    ) -> Result<Self, BridgeError> {
+        Ok(Self {
             scene: Relay::new(
                 &services::scene_service(node, session)?,
                 1,
@@ -244,17 +322,6 @@ impl Outbound {
                 RELIABLE,
                 None,
             )?,
-            telemetry: Relay::new(
-                &services::telemetry_service(node, session)?,
-                64,
-                z,
-                BULK,
-                Some(|b: &TelemetryBatch| b.seq),
-            )?,
-            local_contact_factory,
-            local_contact_publisher,
-            local_contact: None,
-            local_contact_sent: 0,
             mesh: SliceRelay::new(&services::mesh_service(node, session)?, z, BULK, false)?,
             topology: SliceRelay::new(
                 &services::topology_service(node, session)?,
@@ -269,76 +336,28 @@ impl Outbound {
                 RELIABLE,
                 true,
             )?,
-            kept: Arc::new(Mutex::new(HashMap::new())),
-            force_factory,
+            kept,
         })
     }
 
-    /// Relays everything that arrived; `own_telemetry`: the bridge's own
-    /// telemetry publisher (a remote daemon's batches, not relayed back).
-    pub fn pump(&mut self, own_telemetry: Option<UniquePublisherId>) -> u64 {
-        let mut n = self.force.pump(None, None);
-        if let Some(sub) = &self.local_contact {
-            while let Ok(Some(sample)) = sub.receive() {
-                if self
-                    .local_contact_publisher
-                    .put(codec::encode(&*sample))
-                    .wait()
-                    .is_ok()
-                {
-                    self.local_contact_sent += 1;
-                    n += 1;
-                }
-            }
-        }
-        n += self.scene.pump(None, Some(&self.kept));
-        n += self.telemetry.pump(own_telemetry, None);
-        n += self.mesh.pump(&self.kept);
-        n += self.topology.pump(&self.kept);
-        n += self.rest.pump(&self.kept);
-        n += self.surface0.pump(&self.kept);
-        n
+    /// Relays what arrived.
+    pub fn pump(&mut self) {
+        self.scene.pump(None, Some(&self.kept));
+        self.mesh.pump(&self.kept);
+        self.topology.pump(&self.kept);
+        self.rest.pump(&self.kept);
+        self.surface0.pump(&self.kept);
     }
 
-    /// Subscribes to the contact problems while a remote client wants them,
-    /// and lets go when none does.
-    pub fn follow_local_contact_interest(&mut self) -> Result<(), BridgeError> {
-        let wanted = self
-            .local_contact_publisher
-            .matching_status()
-            .wait()
-            .is_ok_and(|m| m.matching());
-        match (&self.local_contact, wanted) {
-            (None, true) => {
-                self.local_contact = Some(services::subscriber_with_buffer(
-                    &self.local_contact_factory,
-                    services::FORCE_BUFFER_LATEST,
-                )?)
-            }
-            (Some(_), false) => self.local_contact = None,
-            _ => {}
-        }
-        Ok(())
-    }
-
-    /// Whether a simulation publishes force samples in the session.
-    pub fn sim_present(&self) -> bool {
-        services::publisher_count(&self.force_factory) > 0
-    }
-
-    /// The counters.
+    /// The counters (the live ones zero).
     pub fn counts(&self) -> OutCounts {
         OutCounts {
-            force: self.force.sent,
-            force_gaps: self.force.gaps,
             mesh: self.mesh.sent,
             scene_streams: self.scene.sent
                 + self.topology.sent
                 + self.rest.sent
                 + self.surface0.sent,
-            local_contact: self.local_contact_sent,
-            telemetry: self.telemetry.sent,
-            telemetry_gaps: self.telemetry.gaps,
+            ..OutCounts::default()
         }
     }
 }

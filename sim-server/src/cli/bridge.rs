@@ -50,10 +50,11 @@ pub fn bridge(args: BridgeArgs) -> Result<()> {
         bail!("--poll-us must lie in 1..=100000, got {}", args.poll_us);
     }
     let duration = match args.duration_s {
-        Some(d) if !(d.is_finite() && d > 0.0) => {
-            bail!("--duration-s must be a positive number of seconds, got {d}")
-        }
-        d => d.map(Duration::from_secs_f64),
+        None => None,
+        Some(d) => match Duration::try_from_secs_f64(d) {
+            Ok(t) if d > 0.0 => Some(t),
+            _ => bail!("--duration-s must be a positive number of seconds, got {d}"),
+        },
     };
     let mut remote = RemoteConfig {
         listen: args.listen,
@@ -79,20 +80,20 @@ pub fn bridge(args: BridgeArgs) -> Result<()> {
         cfg.remote.describe()
     );
     let summary = run(&cfg, &stop)?;
-    let o = &summary.outbound;
+    let (o, t) = (&summary.outbound, &summary.telemetry);
     println!(
-        "bridge {}: {:.1} s | out: {} force samples ({} missed), {} mesh frames, {} scene messages, {} contact problems, {} telemetry batches | in: {} poses, {} telemetry batches, {} refused | simulation arrived {} times",
+        "bridge {}: {:.1} s | out: {} force samples ({} missed), {} contact problems, {} mesh frames, {} scene messages, {} telemetry batches | in: {} poses ({} refused), {} telemetry batches | simulation arrived {} times",
         summary.session,
         summary.duration_s,
         o.force,
         o.force_gaps,
+        o.local_contact,
         o.mesh,
         o.scene_streams,
-        o.local_contact,
-        o.telemetry,
+        t.out,
         summary.inbound.poses,
-        summary.inbound.telemetry,
         summary.inbound.refused,
+        t.r#in,
         summary.sim_arrivals
     );
     if let Some(path) = &args.json {

@@ -65,6 +65,11 @@ pub struct Args {
     /// --quasi-static`).
     #[arg(long)]
     pub quasi_static: bool,
+    /// The daemon on the far side of `sim-server bridge` (zenoh over
+    /// loopback TCP, `--connect`), force samples observed where it receives
+    /// them, beside a bare zenoh baseline.
+    #[arg(long)]
+    pub bridge: bool,
 }
 
 /// Flags of the hidden probe publisher (the baseline's other process).
@@ -76,6 +81,9 @@ pub struct ProbeArgs {
     /// Seconds.
     #[arg(long)]
     pub duration_s: f64,
+    /// Publish on zenoh, listening here, instead of on shared memory.
+    #[arg(long)]
+    pub zenoh: Option<String>,
 }
 
 /// Percentiles of one latency (us).
@@ -112,7 +120,15 @@ pub fn stats(v: &mut [f64]) -> Stats {
 #[derive(Serialize)]
 struct Report {
     duration_s: f64,
+    /// The daemon ran through `sim-server bridge` (zenoh, loopback TCP).
+    bridge: bool,
     baseline_iceoryx2_us: Stats,
+    /// Bare zenoh between two processes (with `--bridge`).
+    baseline_zenoh_us: Option<Stats>,
+    /// A bridge client's clock offset estimate and its round trip (us;
+    /// with `--bridge`; the true offset is zero on one host).
+    clock_offset_us: Option<f64>,
+    clock_rtt_us: Option<f64>,
     baseline_sleep_lateness_us: Stats,
     sim_to_daemon_us: Stats,
     daemon_to_sim_us: Stats,
@@ -131,6 +147,9 @@ struct Report {
 
 /// The baseline's publisher: a stamped sample every millisecond.
 pub fn probe(args: &ProbeArgs) -> Result<()> {
+    if let Some(endpoint) = &args.zenoh {
+        return crate::latency_remote::probe(endpoint, args.duration_s);
+    }
     let session = SessionName::new(&args.session)?;
     let node = services::node("hapbench-probe")?;
     let publisher = services::publisher(&services::force_service(&node, &session)?)?;
@@ -232,6 +251,12 @@ pub fn run(args: &Args) -> Result<()> {
         sleep.push(late as f64 * 1e-3);
     }
 
+    let mut bare_zenoh = if args.bridge {
+        Some(crate::latency_remote::bare(d)?)
+    } else {
+        None
+    };
+
     progress.inc(1);
     // The system.
     let session_name = format!("hapbench-lat{pid}");
@@ -262,6 +287,32 @@ pub fn run(args: &Args) -> Result<()> {
     let sim_args: Vec<&str> = sim_args.iter().map(String::as_str).collect();
     let mut sim = spawn(&sim_args, sibling("sim-server")?)?;
     std::thread::sleep(Duration::from_millis(500));
+    // With --bridge: the daemon joins through zenoh, and its force samples
+    // are observed on zenoh, where it receives them.
+    let endpoint = crate::latency_remote::free_endpoint()?;
+    let mut bridge = None;
+    let mut remote_forces = None;
+    let mut clock = None;
+    if args.bridge {
+        bridge = Some(spawn(
+            &[
+                "bridge",
+                "--session",
+                &session_name,
+                "--listen",
+                &endpoint,
+                "--duration-s",
+                &(d + 2.0).to_string(),
+            ],
+            sibling("sim-server")?,
+        )?);
+        std::thread::sleep(Duration::from_millis(300));
+        clock = Some(crate::latency_remote::clock_estimate(&endpoint, &session)?);
+        remote_forces = Some(crate::latency_remote::Observer::connect(
+            &endpoint,
+            &session.service(services::stream::FORCE),
+        )?);
+    }
     let (daemon_for_s, io_spin_us) = ((d + 0.5).to_string(), args.io_spin_us.to_string());
     let mut daemon = spawn(
         &[
@@ -280,6 +331,8 @@ pub fn run(args: &Args) -> Result<()> {
         ]
         .into_iter()
         .chain(args.quasi_static.then_some("--quasi-static"))
+        .chain(args.bridge.then_some("--connect"))
+        .chain(args.bridge.then_some(endpoint.as_str()))
         .collect::<Vec<_>>(),
         sibling("haptic-daemon")?,
     )?;
@@ -300,8 +353,15 @@ pub fn run(args: &Args) -> Result<()> {
             }
             recent.push_back((p.seq, p.t_ns));
         }
-        while let Ok(Some(f)) = forces.receive() {
-            let now = monotonic_ns() as i128;
+        // Shared memory: received by this poll; zenoh: as delivered.
+        let arrived: Vec<(u64, ForceMsg)> = match &remote_forces {
+            Some(o) => o.drain(),
+            None => std::iter::from_fn(|| forces.receive().ok().flatten().map(|f| *f))
+                .map(|f| (monotonic_ns(), f))
+                .collect(),
+        };
+        for (received_ns, f) in arrived {
+            let now = received_ns as i128;
             let transport = now - f.t_ns as i128;
             s2d.push(us(transport));
             // Only the first step that used a pose: later steps reuse it
@@ -322,6 +382,11 @@ pub fn run(args: &Args) -> Result<()> {
         std::thread::sleep(Duration::from_micros(20));
     }
     let _ = daemon.wait();
+    if let Some(mut b) = bridge {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
+        let _ = b.wait();
+    }
     // SIGTERM: the simulation stops and writes its summary.
     // SAFETY: kill(2) on our own child's pid.
     unsafe { libc::kill(sim.id() as libc::pid_t, libc::SIGTERM) };
@@ -337,7 +402,7 @@ pub fn run(args: &Args) -> Result<()> {
         "no traffic between sim-server and haptic-daemon"
     );
 
-    let curves: Vec<(&str, &str, Vec<f64>)> = vec![
+    let mut curves: Vec<(&str, &str, Vec<f64>)> = vec![
         ("iceoryx2 bare", "#7f7f7f", bare.clone()),
         ("sleep lateness bare", "#bcbd22", sleep.clone()),
         ("sim -> daemon", "#1f77b4", s2d.clone()),
@@ -345,9 +410,16 @@ pub fn run(args: &Args) -> Result<()> {
         ("device -> force", "#d62728", dev2f.clone()),
         ("tick lateness", "#2ca02c", ticks.clone()),
     ];
+    if let Some(z) = &bare_zenoh {
+        curves.push(("zenoh bare", "#8c564b", z.clone()));
+    }
     let report = Report {
         duration_s: d,
+        bridge: args.bridge,
         baseline_iceoryx2_us: stats(&mut bare),
+        baseline_zenoh_us: bare_zenoh.as_mut().map(|v| stats(v)),
+        clock_offset_us: clock.map(|c| c.0),
+        clock_rtt_us: clock.map(|c| c.1),
         baseline_sleep_lateness_us: stats(&mut sleep),
         sim_to_daemon_us: stats(&mut s2d),
         daemon_to_sim_us: stats(&mut d2s),
@@ -362,14 +434,15 @@ pub fn run(args: &Args) -> Result<()> {
         "{:<22} {:>8} {:>10} {:>10} {:>10} {:>10}",
         "latency (us)", "count", "p50", "p99", "p99.9", "max"
     );
-    for (name, s) in [
+    let zenoh_bare = report.baseline_zenoh_us.map(|z| ("zenoh (bare)", z));
+    for (name, s) in zenoh_bare.iter().map(|(n, z)| (*n, z)).chain([
         ("iceoryx2 (bare)", &report.baseline_iceoryx2_us),
         ("sleep lateness (bare)", &report.baseline_sleep_lateness_us),
         ("sim -> daemon", &report.sim_to_daemon_us),
         ("daemon -> sim", &report.daemon_to_sim_us),
         ("device -> force", &report.device_to_force_us),
         ("tick lateness", &report.tick_lateness_us),
-    ] {
+    ]) {
         println!(
             "{name:<22} {:>8} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
             s.count, s.p50, s.p99, s.p999, s.max
@@ -387,6 +460,11 @@ pub fn run(args: &Args) -> Result<()> {
             at("p99"),
             at("p999"),
             at("max")
+        );
+    }
+    if let (Some(o), Some(r)) = (report.clock_offset_us, report.clock_rtt_us) {
+        println!(
+            "bridge client's clock offset estimate {o:+.1} us (round trip {r:.1} us; true offset 0)"
         );
     }
     if let Some(path) = &args.json {

@@ -4,6 +4,7 @@
 
 mod extrapolation;
 mod latency;
+mod latency_remote;
 mod local_render;
 mod phases;
 mod plot;

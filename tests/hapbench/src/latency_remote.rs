@@ -1,0 +1,151 @@
+//! `hapbench latency --bridge`: the same measurements with the daemon on
+//! the far side of `sim-server bridge` (zenoh over loopback TCP), beside a
+//! bare zenoh baseline measured in the same run (a child process puts a
+//! stamped sample every millisecond, this process receives it).
+//!
+//! Receipt is stamped in zenoh's delivery callback, so the figures are the
+//! transport's and the processes' own. Everything runs on one host, so
+//! stamps compare directly; the daemon still maps its pose stamps by its
+//! clock estimate (Cristian's algorithm against the bridge), whose error
+//! here is the measured offset (true offset zero), reported beside.
+
+use anyhow::{Context, Result};
+use haptic_daemon::rt::Pacer;
+use shared::protocol::{ForceMsg, PROTOCOL_VERSION};
+use shared::remote::{Link, RemoteConfig, codec};
+use shared::{SessionName, monotonic_ns};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use zenoh::Wait;
+
+/// The bare baseline's key.
+const PROBE_KEY: &str = "hapbench/probe";
+
+/// A loopback endpoint on a port free now.
+pub fn free_endpoint() -> Result<String> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port();
+    Ok(format!("tcp/127.0.0.1:{port}"))
+}
+
+/// Force messages received on a zenoh key, with their receipt time.
+pub struct Observer {
+    got: Arc<Mutex<Vec<(u64, ForceMsg)>>>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    _session: zenoh::Session,
+}
+
+impl Observer {
+    /// Connects to `endpoint` and subscribes to `key`.
+    pub fn connect(endpoint: &str, key: &str) -> Result<Self> {
+        let session = RemoteConfig::connect_to(endpoint).open()?;
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let sink = got.clone();
+        let k = key.to_string();
+        let subscriber = session
+            .declare_subscriber(key.to_string())
+            .callback(move |s| {
+                let now = monotonic_ns();
+                if let Ok(m) = codec::decode::<ForceMsg>(&k, &s.payload().to_bytes())
+                    && let Ok(mut v) = sink.lock()
+                {
+                    v.push((now, m));
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribe {key}: {e}"))?;
+        Ok(Self {
+            got,
+            _subscriber: subscriber,
+            _session: session,
+        })
+    }
+
+    /// What arrived since the last call.
+    pub fn drain(&self) -> Vec<(u64, ForceMsg)> {
+        self.got
+            .lock()
+            .map(|mut v| std::mem::take(&mut *v))
+            .unwrap_or_default()
+    }
+}
+
+/// The baseline's publisher (child process): listens on `endpoint` and puts
+/// a stamped sample every millisecond for `duration_s`.
+pub fn probe(endpoint: &str, duration_s: f64) -> Result<()> {
+    let session = RemoteConfig::listen_on(endpoint).open()?;
+    let publisher = session
+        .declare_publisher(PROBE_KEY)
+        .priority(zenoh::qos::Priority::RealTime)
+        .congestion_control(zenoh::qos::CongestionControl::Drop)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declare {PROBE_KEY}: {e}"))?;
+    let mut pacer = Pacer::new(1_000_000, monotonic_ns());
+    let end = monotonic_ns() + (duration_s * 1e9) as u64;
+    let mut seq = 0;
+    while monotonic_ns() < end {
+        pacer.wait();
+        let msg = ForceMsg {
+            version: PROTOCOL_VERSION,
+            seq,
+            t_ns: monotonic_ns(),
+            ..ForceMsg::default()
+        };
+        let _ = publisher.put(codec::encode(&msg)).wait();
+        seq += 1;
+    }
+    Ok(())
+}
+
+/// Bare zenoh one-way latencies (us) over loopback TCP between two
+/// processes, for `duration_s`.
+pub fn bare(duration_s: f64) -> Result<Vec<f64>> {
+    let endpoint = free_endpoint()?;
+    let mut child = std::process::Command::new(std::env::current_exe()?)
+        .args([
+            "probe",
+            "--session",
+            "unused",
+            "--duration-s",
+            &(duration_s + 0.5).to_string(),
+            "--zenoh",
+            &endpoint,
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .context("cannot start the zenoh probe")?;
+    // The child listens once started: retry the connection briefly.
+    std::thread::sleep(Duration::from_millis(300));
+    let observer = Observer::connect(&endpoint, PROBE_KEY)?;
+    let mut out = Vec::new();
+    let end = monotonic_ns() + ((duration_s + 0.5) * 1e9) as u64;
+    while monotonic_ns() < end {
+        std::thread::sleep(Duration::from_millis(20));
+        for (now, m) in observer.drain() {
+            out.push((now as i128 - m.t_ns as i128) as f64 * 1e-3);
+        }
+    }
+    let _ = child.wait();
+    // The first messages wait for the subscription to reach the publisher.
+    let skip = out.len().min(100);
+    Ok(out.split_off(skip))
+}
+
+/// The clock estimate a client of the bridge at `endpoint` makes (us):
+/// (offset, round trip); on one host the true offset is zero.
+pub fn clock_estimate(endpoint: &str, session: &SessionName) -> Result<(f64, f64)> {
+    let link = Link::join(
+        &RemoteConfig::connect_to(endpoint),
+        session,
+        Duration::from_secs(5),
+    )?;
+    // A few probes beyond the first.
+    std::thread::sleep(Duration::from_millis(1500));
+    Ok((
+        link.clock().offset_ns() as f64 * 1e-3,
+        link.clock().rtt_ns() as f64 * 1e-3,
+    ))
+}
