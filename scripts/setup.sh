@@ -3,12 +3,17 @@
 # The build needs a Rust toolchain (>= 1.95) and a C compiler; the viewer's
 # snapshots (and the tests that take them) need Mesa's EGL with its software
 # rasterizer (loaded at run time, no display needed); the Python backend
-# example needs iceoryx2's Python package; the writers' tests need meshio and VTK.
+# example needs iceoryx2's Python package; the writers' tests need meshio and VTK;
+# the remote-session tests need unshare and openssl.
 set -euo pipefail
 need_apt=()
 command -v cc >/dev/null 2>&1 || need_apt+=(gcc)
 command -v pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
 command -v python3 >/dev/null 2>&1 || need_apt+=(python3 python3-pip)
+# The remote-session tests: a private mount and time namespace (unshare) and
+# a lab CA for TLS (openssl).
+command -v unshare >/dev/null 2>&1 || need_apt+=(util-linux)
+command -v openssl >/dev/null 2>&1 || need_apt+=(openssl)
 if ! { ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null; } | grep 'libEGL_mesa\.so\.0' >/dev/null; then
   need_apt+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
 fi
