@@ -159,6 +159,10 @@ struct RtEnd {
 
 #[derive(Serialize)]
 struct Summary {
+    /// With --connect: the clock offset estimate to the simulation's host
+    /// (remote - local, us) and the probe round trip bounding its error.
+    clock_offset_us: Option<f64>,
+    clock_rtt_us: Option<f64>,
     ticks: u64,
     rate_hz: f64,
     target_rate_hz: f64,
@@ -343,6 +347,7 @@ fn main() -> Result<()> {
     let rt = {
         let shared = shared.clone();
         let session = session.clone();
+        let transport = transport.clone();
         let (priority, cpu) = (args.rt_priority, args.cpu);
         std::thread::Builder::new()
             .name("haptic-rt".into())
@@ -482,6 +487,13 @@ fn main() -> Result<()> {
             shared::protocol::PROTOCOL_VERSION
         ));
     }
+    let remote_clock = match &transport {
+        haptic_daemon::transport::Transport::Remote(link) => Some((
+            link.clock().offset_ns() as f64 * 1e-3,
+            link.clock().rtt_ns() as f64 * 1e-3,
+        )),
+        haptic_daemon::transport::Transport::Shm => None,
+    };
     let summary = Summary {
         ticks,
         rate_hz: s.rate_hz(),
@@ -508,6 +520,8 @@ fn main() -> Result<()> {
         overruns,
         recorded_rows: s.recorded,
         warnings,
+        clock_offset_us: remote_clock.map(|c| c.0),
+        clock_rtt_us: remote_clock.map(|c| c.1),
     };
     out!(
         "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples ({} not live) | {} poses rejected ({} new references) | passivity damped {} ticks",

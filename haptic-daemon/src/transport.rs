@@ -12,6 +12,12 @@ use shared::source::Source;
 use std::sync::Arc;
 use thiserror::Error;
 
+/// Force samples a remote daemon's ring holds (64 ms at 1 kHz).
+const REMOTE_FORCE_RING: usize = 64;
+/// Contact problems a remote daemon's ring holds (problems come at most
+/// every 8 ms; the set-up thread, at the lowest priority, takes the newest).
+const REMOTE_PROBLEM_RING: usize = 16;
+
 /// Why a port could not be opened.
 #[derive(Debug, Error)]
 pub enum TransportError {
@@ -51,8 +57,14 @@ impl Transport {
                 )?;
                 (Source::Shm(sub), Some(n))
             }
+            // A full ring refuses the newest: room for a network burst (the
+            // tick drains them all; the newest wins).
             Transport::Remote(link) => (
-                Source::Remote(Inbox::subscribe(link, services::stream::FORCE, buffer)?),
+                Source::Remote(Inbox::subscribe(
+                    link,
+                    services::stream::FORCE,
+                    buffer.max(REMOTE_FORCE_RING),
+                )?),
                 None,
             ),
         })
@@ -73,7 +85,11 @@ impl Transport {
                 (Source::Shm(sub), Some(n))
             }
             Transport::Remote(link) => (
-                Source::Remote(Inbox::subscribe(link, services::stream::LOCAL_CONTACT, 2)?),
+                Source::Remote(Inbox::subscribe(
+                    link,
+                    services::stream::LOCAL_CONTACT,
+                    REMOTE_PROBLEM_RING,
+                )?),
                 None,
             ),
         })

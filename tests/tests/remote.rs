@@ -150,6 +150,10 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
     // The daemon: contact force within the device limit before the kill,
     // zero within 100 ms after it and from then on.
     let summary = read_json(&dir.join("daemon.json"));
+    // Its default extrapolator got the simulation's contact problems
+    // through the bridge (which subscribes to them only while a remote
+    // client wants them).
+    assert!(summary["local_problems"].as_u64().unwrap() > 0, "{summary}");
     let limit = summary["device_max_force_n"].as_f64().unwrap();
     assert!(
         summary["max_force_n"].as_f64().unwrap() <= limit + 1e-9,

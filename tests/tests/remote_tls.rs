@@ -2,9 +2,10 @@
 //! `docs/remote.md` shows (zenoh configuration files given with
 //! `--zenoh-config`): a lab CA (made here with openssl) signs the bridge's
 //! certificate and a station's. The station's viewer, presenting its
-//! certificate, gets a snapshot of the organ; a viewer without a client
-//! certificate, and one speaking plain TCP to the TLS port, get nothing
-//! ("no bridge answers").
+//! certificate, gets a snapshot of the organ; a viewer that trusts the
+//! bridge but presents no certificate, one whose certificate another CA
+//! signed, and one speaking plain TCP to the TLS port get nothing ("no
+//! bridge answers"), and the bridge keeps serving.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -129,7 +130,10 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
         .unwrap()
         .port();
     let d = dir.display();
-    let tls = |side: &str, extra: &str| {
+    let rogue = dir.join("rogue");
+    std::fs::create_dir_all(&rogue).unwrap();
+    certificates(&rogue, &["station"]);
+    let tls_with = |side: &str, mtls: bool, extra: &str| {
         format!(
             r#"{{
   mode: "peer",
@@ -139,13 +143,14 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
     rx: {{ max_message_size: 67108864 }},
     tls: {{
       root_ca_certificate: "{d}/ca.pem",
-      enable_mtls: true,
+      enable_mtls: {mtls},
       {extra}
     }},
   }} }},
 }}"#
         )
     };
+    let tls = |side: &str, extra: &str| tls_with(side, true, extra);
     let write = |name: &str, text: String| {
         let path = dir.join(name);
         std::fs::write(&path, text).unwrap();
@@ -172,9 +177,20 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
             ),
         ),
     );
+    // Trusts the bridge, presents no certificate.
     let stranger_cfg = write(
         "stranger.json5",
-        tls(&connect, "verify_name_on_connect: true,"),
+        tls_with(&connect, false, "verify_name_on_connect: true,"),
+    );
+    // A certificate of another CA.
+    let rogue_cfg = write(
+        "rogue.json5",
+        tls(
+            &connect,
+            &format!(
+                r#"connect_certificate: "{d}/rogue/station.pem", connect_private_key: "{d}/rogue/station-key.pem", verify_name_on_connect: true,"#
+            ),
+        ),
     );
     let mut sim = spawn_sim_server(&session, &[]);
     wait_for(&session, Peer::Simulation);
@@ -204,6 +220,13 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
         "stranger",
         "3",
     );
+    let rogue_out = snapshot(
+        &dir,
+        &session,
+        &["--zenoh-config", &rogue_cfg],
+        "rogue",
+        "3",
+    );
     let plain = snapshot(
         &dir,
         &session,
@@ -211,6 +234,14 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
         "plain",
         "3",
     );
+    let again = snapshot(
+        &dir,
+        &session,
+        &["--zenoh-config", &station_cfg],
+        "again",
+        "10",
+    );
+    let bridge_alive = bridge.try_wait().unwrap().is_none();
     let _ = bridge.kill();
     let _ = bridge.wait();
     let _ = sim.kill();
@@ -222,8 +253,15 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
     );
     let snap = read_json(&dir.join("station.json"));
     assert!(snap["triangles"].as_u64().unwrap() > 1000, "{snap}");
+    assert!(bridge_alive, "the refused peers stopped the bridge");
+    assert!(
+        again.status.success(),
+        "the station after the refusals: {}",
+        String::from_utf8_lossy(&again.stderr)
+    );
     for (who, out) in [
         ("without a certificate", &stranger),
+        ("with another CA's certificate", &rogue_out),
         ("over plain TCP", &plain),
     ] {
         let err = String::from_utf8_lossy(&out.stderr);

@@ -158,7 +158,9 @@ impl<H: Pod + Stamped + Send, T: Pod + Send> SliceInbox<H, T> {
                 link.clock().clone(),
                 key.clone(),
             );
-            move |bytes: &[u8]| accept_slice(&k, bytes, &slot, &counts, &clock)
+            move |bytes: &[u8], unless: Option<&AtomicBool>| {
+                accept_slice(&k, bytes, &slot, &counts, &clock, unless)
+            }
         };
         let (on_sample, seen) = (accept.clone(), live.clone());
         let subscriber = link
@@ -166,15 +168,11 @@ impl<H: Pod + Stamped + Send, T: Pod + Send> SliceInbox<H, T> {
             .declare_subscriber(key.clone())
             .callback(move |s| {
                 seen.store(true, Ordering::Release);
-                on_sample(&s.payload().to_bytes())
+                on_sample(&s.payload().to_bytes(), None)
             })
             .wait()
             .map_err(|e| declare_error(&key, e))?;
-        ask_bridge(link, &key, move |bytes| {
-            if !live.load(Ordering::Acquire) {
-                accept(bytes)
-            }
-        });
+        ask_bridge(link, &key, move |bytes| accept(bytes, Some(&live)));
         Ok(Self {
             slot,
             counts,
@@ -207,21 +205,27 @@ fn ask_bridge(link: &Link, key: &str, accept: impl Fn(&[u8]) + Send + Sync + 'st
         .wait();
 }
 
+/// Decodes a slice message into `slot`; `unless`: skip it when that flag
+/// is set, checked under the slot's lock (a live message, which sets it
+/// before taking the lock, always wins over the join query's answer).
 fn accept_slice<H: Pod + Stamped, T: Pod>(
     key: &str,
     bytes: &[u8],
     slot: &Mutex<Option<(H, Vec<T>)>>,
     counts: &InboxCounts,
     clock: &ClockMap,
+    unless: Option<&AtomicBool>,
 ) {
     let mut items = Vec::new();
     match codec::decode_slice::<H, T>(key, bytes, &mut items) {
         Ok(mut h) => {
             h.map_stamps(|t| clock.to_local(t));
+            let Ok(mut s) = slot.lock() else { return };
+            if unless.is_some_and(|u| u.load(Ordering::Acquire)) {
+                return;
+            }
             counts.received.fetch_add(1, Ordering::Relaxed);
-            if let Ok(mut s) = slot.lock()
-                && s.replace((h, items)).is_some()
-            {
+            if s.replace((h, items)).is_some() {
                 counts.lost.fetch_add(1, Ordering::Relaxed);
             }
         }

@@ -119,23 +119,28 @@ fn serve_kept(
         .collect()
 }
 
-/// Follows a remote daemon's liveliness token (true while one holds it).
+/// Follows the remote daemons' liveliness tokens: true while at least one
+/// is held (zenoh reports each token's arrival and departure).
 fn watch_daemon(
     z: &zenoh::Session,
     session: &SessionName,
 ) -> Result<(Arc<AtomicBool>, zenoh::pubsub::Subscriber<()>), BridgeError> {
     let alive = Arc::new(AtomicBool::new(false));
     let flag = alive.clone();
+    let holders = std::sync::atomic::AtomicI64::new(0);
     let key = session.service(ALIVE_DAEMON);
     let watch = z
         .liveliness()
         .declare_subscriber(&key)
         .history(true)
         .callback(move |s| {
-            flag.store(
-                s.kind() == zenoh::sample::SampleKind::Put,
-                Ordering::Relaxed,
-            )
+            let step = if s.kind() == zenoh::sample::SampleKind::Put {
+                1
+            } else {
+                -1
+            };
+            let now = (holders.fetch_add(step, Ordering::Relaxed) + step).max(0);
+            flag.store(now > 0, Ordering::Relaxed)
         })
         .wait()
         .map_err(|e| BridgeError::Zenoh {
@@ -152,10 +157,14 @@ fn run_bulk(
     kept: Kept,
     daemon_alive: Arc<AtomicBool>,
     stop: Arc<AtomicBool>,
+    ready: std::sync::mpsc::Sender<()>,
 ) -> Result<(OutCounts, TelemetryCounts), BridgeError> {
     let node = services::node("hapsim-bridge-bulk")?;
     let mut bulk = BulkOut::new(&node, &session, &z, kept)?;
     let mut telemetry = TelemetryRelay::new(&node, &session, &z, daemon_alive)?;
+    // The scene streams' history is kept now: clients may join.
+    bulk.pump();
+    let _ = ready.send(());
     while !stop.load(Ordering::Relaxed) {
         bulk.pump();
         telemetry.pump();
@@ -168,13 +177,13 @@ fn run_bulk(
 pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, BridgeError> {
     let z = cfg.remote.open()?;
     let node = services::node("hapsim-bridge")?;
-    let _clock = clock::serve(&z, &cfg.session)?;
     let (daemon_alive, _daemon_watch) = watch_daemon(&z, &cfg.session)?;
     let mut live = LiveOut::new(&node, &cfg.session, &z)?;
     let mut inbound = Inbound::new(&node, &cfg.session, &z, daemon_alive.clone())?;
     let kept = Kept::default();
     let _kept = serve_kept(&z, &cfg.session, &kept)?;
     let bulk_stop = Arc::new(AtomicBool::new(false));
+    let (ready_tx, ready) = std::sync::mpsc::channel();
     let bulk = {
         let (z, session, kept, alive, stop) = (
             z.clone(),
@@ -185,12 +194,17 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
         );
         std::thread::Builder::new()
             .name("bridge-bulk".into())
-            .spawn(move || run_bulk(z, session, kept, alive, stop))
+            .spawn(move || run_bulk(z, session, kept, alive, stop, ready_tx))
             .map_err(|e| BridgeError::Zenoh {
                 key: "bridge-bulk".into(),
                 reason: format!("cannot start the bulk thread: {e}"),
             })?
     };
+    // Clients start joining when the clock answers: not before the bulk
+    // thread holds the scene streams a joiner asks for (an error there
+    // ends the wait and is returned below).
+    let _ = ready.recv();
+    let _clock = clock::serve(&z, &cfg.session)?;
     let alive_key = cfg.session.service(ALIVE_SIM);
     let mut sim_token: Option<zenoh::liveliness::LivelinessToken> = None;
     let mut summary = BridgeSummary {
@@ -214,13 +228,22 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
                     sim_token = z.liveliness().declare_token(alive_key.clone()).wait().ok();
                     summary.sim_arrivals += 1;
                 }
-                (false, true) => sim_token = None,
+                (false, true) => {
+                    // A later simulation publishes its own scene.
+                    sim_token = None;
+                    if let Ok(mut k) = kept.lock() {
+                        k.clear();
+                    }
+                }
                 _ => {}
             }
             live.follow_local_contact_interest();
             inbound.follow_daemon();
         }
     }
+    // Clients see the simulation go before the bulk thread is joined
+    // (which may wait on a congested viewer link).
+    drop(sim_token);
     bulk_stop.store(true, Ordering::Relaxed);
     let (bulk_counts, telemetry) = bulk.join().map_err(|_| BridgeError::Zenoh {
         key: "bridge-bulk".into(),

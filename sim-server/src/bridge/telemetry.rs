@@ -29,6 +29,8 @@ pub struct TelemetryCounts {
     pub r#in: u64,
     /// Remote batches refused (another protocol version or layout).
     pub refused: u64,
+    /// Remote batches dropped because no remote daemon held its token.
+    pub without_daemon: u64,
 }
 
 /// The telemetry relay.
@@ -96,7 +98,7 @@ impl TelemetryRelay {
                     // To the other zenoh clients.
                     self.out.put_bytes(bytes.into_owned());
                 }
-                Ok(_) => {}
+                Ok(_) => self.counts.without_daemon += 1,
                 Err(_) => self.counts.refused += 1,
             }
         }

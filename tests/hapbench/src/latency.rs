@@ -125,10 +125,11 @@ struct Report {
     baseline_iceoryx2_us: Stats,
     /// Bare zenoh between two processes (with `--bridge`).
     baseline_zenoh_us: Option<Stats>,
-    /// A bridge client's clock offset estimate and its round trip (us;
-    /// with `--bridge`; the true offset is zero on one host).
-    clock_offset_us: Option<f64>,
-    clock_rtt_us: Option<f64>,
+    /// The daemon's clock offset estimate at its end and its probe round
+    /// trip (us; with `--bridge`; the true offset is zero on one host). The
+    /// pose figures (daemon -> sim, device -> force) are corrected by it.
+    daemon_clock_offset_us: Option<f64>,
+    daemon_clock_rtt_us: Option<f64>,
     baseline_sleep_lateness_us: Stats,
     sim_to_daemon_us: Stats,
     daemon_to_sim_us: Stats,
@@ -292,7 +293,6 @@ pub fn run(args: &Args) -> Result<()> {
     let endpoint = crate::latency_remote::free_endpoint()?;
     let mut bridge = None;
     let mut remote_forces = None;
-    let mut clock = None;
     if args.bridge {
         bridge = Some(spawn(
             &[
@@ -307,13 +307,14 @@ pub fn run(args: &Args) -> Result<()> {
             sibling("sim-server")?,
         )?);
         std::thread::sleep(Duration::from_millis(300));
-        clock = Some(crate::latency_remote::clock_estimate(&endpoint, &session)?);
         remote_forces = Some(crate::latency_remote::Observer::connect(
             &endpoint,
             &session.service(services::stream::FORCE),
         )?);
     }
     let (daemon_for_s, io_spin_us) = ((d + 0.5).to_string(), args.io_spin_us.to_string());
+    let daemon_json = std::env::temp_dir().join(format!("hapbench-latency-daemon{pid}.json"));
+    let daemon_json_arg = daemon_json.display().to_string();
     let mut daemon = spawn(
         &[
             "run",
@@ -333,6 +334,7 @@ pub fn run(args: &Args) -> Result<()> {
         .chain(args.quasi_static.then_some("--quasi-static"))
         .chain(args.bridge.then_some("--connect"))
         .chain(args.bridge.then_some(endpoint.as_str()))
+        .chain(["--json", daemon_json_arg.as_str()])
         .collect::<Vec<_>>(),
         sibling("haptic-daemon")?,
     )?;
@@ -382,6 +384,22 @@ pub fn run(args: &Args) -> Result<()> {
         std::thread::sleep(Duration::from_micros(20));
     }
     let _ = daemon.wait();
+    let daemon_summary: serde_json::Value = std::fs::read_to_string(&daemon_json)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    let _ = std::fs::remove_file(&daemon_json);
+    // The daemon stamps poses in the simulation host's clock by its offset
+    // estimate; on one host the true offset is zero, so its estimate is the
+    // error those figures carry: take it out.
+    let clock = daemon_summary["clock_offset_us"]
+        .as_f64()
+        .zip(daemon_summary["clock_rtt_us"].as_f64());
+    if let Some((offset_us, _)) = clock {
+        for v in d2s.iter_mut().chain(dev2f.iter_mut()) {
+            *v += offset_us;
+        }
+    }
     if let Some(mut b) = bridge {
         // SAFETY: kill(2) on our own child's pid.
         unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
@@ -418,8 +436,8 @@ pub fn run(args: &Args) -> Result<()> {
         bridge: args.bridge,
         baseline_iceoryx2_us: stats(&mut bare),
         baseline_zenoh_us: bare_zenoh.as_mut().map(|v| stats(v)),
-        clock_offset_us: clock.map(|c| c.0),
-        clock_rtt_us: clock.map(|c| c.1),
+        daemon_clock_offset_us: clock.map(|c| c.0),
+        daemon_clock_rtt_us: clock.map(|c| c.1),
         baseline_sleep_lateness_us: stats(&mut sleep),
         sim_to_daemon_us: stats(&mut s2d),
         daemon_to_sim_us: stats(&mut d2s),
@@ -462,9 +480,9 @@ pub fn run(args: &Args) -> Result<()> {
             at("max")
         );
     }
-    if let (Some(o), Some(r)) = (report.clock_offset_us, report.clock_rtt_us) {
+    if let (Some(o), Some(r)) = (report.daemon_clock_offset_us, report.daemon_clock_rtt_us) {
         println!(
-            "bridge client's clock offset estimate {o:+.1} us (round trip {r:.1} us; true offset 0)"
+            "the daemon's clock offset estimate {o:+.1} us (round trip {r:.1} us; true offset 0; taken out of the pose figures)"
         );
     }
     if let Some(path) = &args.json {

@@ -3,17 +3,18 @@
 //! bare zenoh baseline measured in the same run (a child process puts a
 //! stamped sample every millisecond, this process receives it).
 //!
-//! Receipt is stamped in zenoh's delivery callback, so the figures are the
-//! transport's and the processes' own. Everything runs on one host, so
-//! stamps compare directly; the daemon still maps its pose stamps by its
-//! clock estimate (Cristian's algorithm against the bridge), whose error
-//! here is the measured offset (true offset zero), reported beside.
+//! Force samples are observed by a zenoh client of the bridge (as the
+//! daemon receives them), stamped in zenoh's delivery callback. Everything
+//! runs on one host, so stamps compare directly; the daemon still maps its
+//! pose stamps by its clock estimate (Cristian's algorithm against the
+//! bridge), whose value here is its error (the true offset is zero): the
+//! daemon reports it in its summary and the pose figures are corrected.
 
 use anyhow::{Context, Result};
 use haptic_daemon::rt::Pacer;
+use shared::monotonic_ns;
 use shared::protocol::{ForceMsg, PROTOCOL_VERSION};
-use shared::remote::{Link, RemoteConfig, codec};
-use shared::{SessionName, monotonic_ns};
+use shared::remote::{RemoteConfig, codec};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use zenoh::Wait;
@@ -132,20 +133,4 @@ pub fn bare(duration_s: f64) -> Result<Vec<f64>> {
     // The first messages wait for the subscription to reach the publisher.
     let skip = out.len().min(100);
     Ok(out.split_off(skip))
-}
-
-/// The clock estimate a client of the bridge at `endpoint` makes (us):
-/// (offset, round trip); on one host the true offset is zero.
-pub fn clock_estimate(endpoint: &str, session: &SessionName) -> Result<(f64, f64)> {
-    let link = Link::join(
-        &RemoteConfig::connect_to(endpoint),
-        session,
-        Duration::from_secs(5),
-    )?;
-    // A few probes beyond the first.
-    std::thread::sleep(Duration::from_millis(1500));
-    Ok((
-        link.clock().offset_ns() as f64 * 1e-3,
-        link.clock().rtt_ns() as f64 * 1e-3,
-    ))
 }
