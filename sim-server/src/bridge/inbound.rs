@@ -23,10 +23,9 @@ use shared::services::{self, Ipc, IpcNode, PoseService};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
-use zenoh::Wait;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::pubsub::Subscriber;
-use zenoh::sample::{Locality, Sample};
+use zenoh::sample::Sample;
 
 /// Counters of the inbound side.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -65,16 +64,8 @@ impl Inbound {
         daemon_alive: Arc<AtomicBool>,
     ) -> Result<Self, BridgeError> {
         let pose_key = session.service(services::stream::POSE);
-        let poses = z
-            .declare_subscriber(pose_key.clone())
-            .allowed_origin(Locality::Remote)
-            .wait()
-            .map_err(|e| BridgeError::Zenoh {
-                key: pose_key.clone(),
-                reason: e.to_string(),
-            })?;
         Ok(Self {
-            poses,
+            poses: super::subscribe_remote(z, &pose_key)?,
             pose_factory: services::pose_service(node, session)?,
             pose_publisher: None,
             ready: services::pose_ready_notifier(node, session)?,

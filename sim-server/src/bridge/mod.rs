@@ -119,6 +119,24 @@ fn serve_kept(
         .collect()
 }
 
+/// A subscriber to what other hosts put on `key` (the bridge's own puts
+/// must not come back), delivered to a channel.
+fn subscribe_remote(
+    z: &zenoh::Session,
+    key: &str,
+) -> Result<
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    BridgeError,
+> {
+    z.declare_subscriber(key.to_string())
+        .allowed_origin(zenoh::sample::Locality::Remote)
+        .wait()
+        .map_err(|e| BridgeError::Zenoh {
+            key: key.to_string(),
+            reason: e.to_string(),
+        })
+}
+
 /// Follows the remote daemons' liveliness tokens: true while at least one
 /// is held (zenoh reports each token's arrival and departure).
 fn watch_daemon(

@@ -13,10 +13,9 @@ use shared::remote::codec;
 use shared::services::{self, Ipc, IpcNode};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use zenoh::Wait;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::pubsub::Subscriber;
-use zenoh::sample::{Locality, Sample};
+use zenoh::sample::Sample;
 
 /// Counters of the telemetry relay.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
@@ -54,15 +53,7 @@ impl TelemetryRelay {
     ) -> Result<Self, BridgeError> {
         let factory = services::telemetry_service(node, session)?;
         let key = session.service(services::stream::TELEMETRY);
-        // Only what other hosts put: the bridge's own puts must not return.
-        let remote = z
-            .declare_subscriber(key.clone())
-            .allowed_origin(Locality::Remote)
-            .wait()
-            .map_err(|e| BridgeError::Zenoh {
-                key: key.clone(),
-                reason: e.to_string(),
-            })?;
+        let remote = super::subscribe_remote(z, &key)?;
         Ok(Self {
             out: Relay::new(&factory, 64, z, BULK, Some(|b: &TelemetryBatch| b.seq))?,
             remote,

@@ -154,21 +154,28 @@ pub fn probe(args: &ProbeArgs) -> Result<()> {
     let session = SessionName::new(&args.session)?;
     let node = services::node("hapbench-probe")?;
     let publisher = services::publisher(&services::force_service(&node, &session)?)?;
+    every_ms(args.duration_s, |msg| {
+        publisher.send_copy(msg).ok();
+    });
+    Ok(())
+}
+
+/// Calls `send` with a sample stamped now, every millisecond for
+/// `duration_s` (the baselines' publishers).
+pub fn every_ms(duration_s: f64, mut send: impl FnMut(ForceMsg)) {
     let mut pacer = Pacer::new(1_000_000, monotonic_ns());
-    let end = monotonic_ns() + (args.duration_s * 1e9) as u64;
+    let end = monotonic_ns() + (duration_s * 1e9) as u64;
     let mut seq = 0;
     while monotonic_ns() < end {
         pacer.wait();
-        let msg = ForceMsg {
+        send(ForceMsg {
             version: PROTOCOL_VERSION,
             seq,
             t_ns: monotonic_ns(),
             ..ForceMsg::default()
-        };
-        publisher.send_copy(msg).ok();
+        });
         seq += 1;
     }
-    Ok(())
 }
 
 fn spawn(args: &[&str], bin: PathBuf) -> Result<Child> {

@@ -11,9 +11,8 @@
 //! daemon reports it in its summary and the pose figures are corrected.
 
 use anyhow::{Context, Result};
-use haptic_daemon::rt::Pacer;
 use shared::monotonic_ns;
-use shared::protocol::{ForceMsg, PROTOCOL_VERSION};
+use shared::protocol::ForceMsg;
 use shared::remote::{RemoteConfig, codec};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -83,20 +82,9 @@ pub fn probe(endpoint: &str, duration_s: f64) -> Result<()> {
         .express(true)
         .wait()
         .map_err(|e| anyhow::anyhow!("declare {PROBE_KEY}: {e}"))?;
-    let mut pacer = Pacer::new(1_000_000, monotonic_ns());
-    let end = monotonic_ns() + (duration_s * 1e9) as u64;
-    let mut seq = 0;
-    while monotonic_ns() < end {
-        pacer.wait();
-        let msg = ForceMsg {
-            version: PROTOCOL_VERSION,
-            seq,
-            t_ns: monotonic_ns(),
-            ..ForceMsg::default()
-        };
+    crate::latency::every_ms(duration_s, |msg| {
         let _ = publisher.put(codec::encode(&msg)).wait();
-        seq += 1;
-    }
+    });
     Ok(())
 }
 
