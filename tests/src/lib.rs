@@ -43,11 +43,44 @@ pub fn binary(name: &str) -> PathBuf {
 }
 
 /// A fresh directory under the system temp dir, unique to this process and `tag`.
+/// The scratch directories of test processes that ended over an hour ago
+/// are removed first (a failed run's stay to be looked at), so runs do not
+/// pile them up in the temp dir (gigabytes of saved frames over weeks).
 pub fn scratch_dir(tag: &str) -> PathBuf {
+    remove_dead_scratch();
     let dir = std::env::temp_dir().join(format!("hapsim-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("create scratch dir");
     dir
+}
+
+/// Removes `hapsim-<tag>-<pid>` directories in the temp dir whose process
+/// is gone, last changed over an hour ago.
+fn remove_dead_scratch() {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let Some(pid) = name
+            .strip_prefix("hapsim-")
+            .and_then(|rest| rest.rsplit_once('-'))
+            .and_then(|(_, pid)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = std::path::Path::new(&format!("/proc/{pid}")).exists();
+        let old = e
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age.as_secs() > 3600);
+        if !alive && old && e.file_type().is_ok_and(|t| t.is_dir()) {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
 }
 
 /// A force sample as a simulation would send it: tool 0 in contact with
