@@ -25,3 +25,38 @@ impl<T: std::fmt::Debug + ZeroCopySend + Pod + Stamped + Send + Sync> Source<T> 
         }
     }
 }
+
+/// A stream of headers with slices (mesh frames, topology, rest shape):
+/// every message on shared memory, the newest through zenoh (a viewer
+/// wants the latest).
+pub enum SliceSource<
+    H: std::fmt::Debug + ZeroCopySend + 'static,
+    T: std::fmt::Debug + ZeroCopySend + 'static,
+> {
+    /// An iceoryx2 slice subscriber (same host).
+    Shm(Subscriber<Ipc, [T], H>),
+    /// A zenoh newest-wins slot (stamps already in this host's clock).
+    Remote(crate::remote::SliceInbox<H, T>),
+}
+
+impl<H, T> SliceSource<H, T>
+where
+    H: std::fmt::Debug + ZeroCopySend + Pod + Stamped + Send,
+    T: std::fmt::Debug + ZeroCopySend + Pod + Send,
+{
+    /// Hands `f` each message that arrived since the last call.
+    pub fn drain(&self, mut f: impl FnMut(&H, &[T])) {
+        match self {
+            SliceSource::Shm(s) => {
+                while let Ok(Some(m)) = s.receive() {
+                    f(m.user_header(), m.payload());
+                }
+            }
+            SliceSource::Remote(r) => {
+                if let Some((h, v)) = r.take() {
+                    f(&h, &v);
+                }
+            }
+        }
+    }
+}

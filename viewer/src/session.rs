@@ -109,13 +109,13 @@ impl Session {
     /// The node and the pose stream, to drive a tool from the viewer (on
     /// the simulation's host only: None through zenoh).
     pub fn pose_port(&self) -> Option<&services::PoseService> {
-        self.streams.slices.pose_port()
+        self.streams.peers.pose_port()
     }
 
     /// Pose publishers in the session (a daemon, or this viewer driving;
     /// through zenoh unknown, taken as one: the viewer never drives there).
     pub fn pose_publishers(&self) -> usize {
-        self.streams.slices.pose_publishers().unwrap_or(1)
+        self.streams.peers.pose_publishers().unwrap_or(1)
     }
 
     /// Whether a haptic daemon runs in the session (it publishes
@@ -123,7 +123,7 @@ impl Session {
     /// telemetry within the last second).
     pub fn daemon_present(&self) -> bool {
         self.streams
-            .slices
+            .peers
             .daemon_present()
             .unwrap_or(!self.ticks.is_empty())
     }
@@ -133,7 +133,7 @@ impl Session {
     pub fn sim_alive(&self, now_ns: u64) -> bool {
         self.last_frame_ns != 0
             && now_ns.saturating_sub(self.last_frame_ns) < SIM_GONE_NS
-            && self.streams.slices.remote_sim_alive().unwrap_or(true)
+            && self.streams.peers.remote_sim_alive().unwrap_or(true)
     }
 
     /// Whether the latest positions and triangles belong together.
@@ -151,8 +151,7 @@ impl Session {
     /// Messages of another protocol version are skipped.
     pub fn poll(&mut self, now_ns: u64) -> bool {
         let mut changed = false;
-        let slices = &self.streams.slices;
-        slices.topology(&mut |h, tris| {
+        self.streams.topology.drain(|h, tris| {
             if h.version == PROTOCOL_VERSION && h.triangle_count as usize == tris.len() {
                 self.triangles.clear();
                 self.triangles.extend_from_slice(tris);
@@ -160,7 +159,7 @@ impl Session {
                 changed = true;
             }
         });
-        slices.mesh(&mut |h, positions| {
+        self.streams.mesh.drain(|h, positions| {
             if h.version == PROTOCOL_VERSION && h.vertex_count as usize == positions.len() {
                 self.positions_m.clear();
                 self.positions_m.extend_from_slice(positions);
@@ -210,13 +209,12 @@ impl Session {
                 changed = true;
             }
         }
-        let slices = &self.streams.slices;
-        slices.rest(&mut |h, positions| {
+        self.streams.rest.drain(|h, positions| {
             if h.version == PROTOCOL_VERSION {
                 changed |= self.info.set_rest(h, positions);
             }
         });
-        slices.surface0(&mut |h, tris| {
+        self.streams.surface0.drain(|h, tris| {
             if h.version == PROTOCOL_VERSION && h.triangle_count as usize == tris.len() {
                 self.info.set_original_surface(tris);
                 changed = true;
