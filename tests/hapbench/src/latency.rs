@@ -23,7 +23,7 @@
 use anyhow::{Context, Result};
 use haptic_daemon::rt::Pacer;
 use serde::Serialize;
-use shared::protocol::{ForceMsg, PROTOCOL_VERSION};
+use shared::protocol::ForceMsg;
 use shared::{SessionName, monotonic_ns, services};
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -70,20 +70,6 @@ pub struct Args {
     /// them, beside a bare zenoh baseline.
     #[arg(long)]
     pub bridge: bool,
-}
-
-/// Flags of the hidden probe publisher (the baseline's other process).
-#[derive(clap::Args)]
-pub struct ProbeArgs {
-    /// Session whose force stream the probe publishes on.
-    #[arg(long)]
-    pub session: String,
-    /// Seconds.
-    #[arg(long)]
-    pub duration_s: f64,
-    /// Publish on zenoh, listening here, instead of on shared memory.
-    #[arg(long)]
-    pub zenoh: Option<String>,
 }
 
 /// Percentiles of one latency (us).
@@ -146,39 +132,7 @@ struct Report {
     sim_steps: u64,
 }
 
-/// The baseline's publisher: a stamped sample every millisecond.
-pub fn probe(args: &ProbeArgs) -> Result<()> {
-    if let Some(endpoint) = &args.zenoh {
-        return crate::latency_remote::probe(endpoint, args.duration_s);
-    }
-    let session = SessionName::new(&args.session)?;
-    let node = services::node("hapbench-probe")?;
-    let publisher = services::publisher(&services::force_service(&node, &session)?)?;
-    every_ms(args.duration_s, |msg| {
-        publisher.send_copy(msg).ok();
-    });
-    Ok(())
-}
-
-/// Calls `send` with a sample stamped now, every millisecond for
-/// `duration_s` (the baselines' publishers).
-pub fn every_ms(duration_s: f64, mut send: impl FnMut(ForceMsg)) {
-    let mut pacer = Pacer::new(1_000_000, monotonic_ns());
-    let end = monotonic_ns() + (duration_s * 1e9) as u64;
-    let mut seq = 0;
-    while monotonic_ns() < end {
-        pacer.wait();
-        send(ForceMsg {
-            version: PROTOCOL_VERSION,
-            seq,
-            t_ns: monotonic_ns(),
-            ..ForceMsg::default()
-        });
-        seq += 1;
-    }
-}
-
-fn spawn(args: &[&str], bin: PathBuf) -> Result<Child> {
+pub(crate) fn spawn(args: &[&str], bin: PathBuf) -> Result<Child> {
     Command::new(&bin)
         .args(args)
         .stdout(Stdio::null())
@@ -297,28 +251,18 @@ pub fn run(args: &Args) -> Result<()> {
     std::thread::sleep(Duration::from_millis(500));
     // With --bridge: the daemon joins through zenoh, and its force samples
     // are observed on zenoh, where it receives them.
-    let endpoint = crate::latency_remote::free_endpoint()?;
-    let mut bridge = None;
-    let mut remote_forces = None;
-    if args.bridge {
-        bridge = Some(spawn(
-            &[
-                "bridge",
-                "--session",
-                &session_name,
-                "--listen",
-                &endpoint,
-                "--duration-s",
-                &(d + 2.0).to_string(),
-            ],
-            sibling("sim-server")?,
-        )?);
-        std::thread::sleep(Duration::from_millis(300));
-        remote_forces = Some(crate::latency_remote::Observer::connect(
-            &endpoint,
-            &session.service(services::stream::FORCE),
-        )?);
-    }
+    let bridged = match args.bridge {
+        true => Some(crate::latency_remote::Bridged::start(
+            &session,
+            d + 2.0,
+            &sibling("sim-server")?,
+        )?),
+        false => None,
+    };
+    let endpoint = bridged
+        .as_ref()
+        .map(|b| b.endpoint.clone())
+        .unwrap_or_default();
     let (daemon_for_s, io_spin_us) = ((d + 0.5).to_string(), args.io_spin_us.to_string());
     let daemon_json = std::env::temp_dir().join(format!("hapbench-latency-daemon{pid}.json"));
     let daemon_json_arg = daemon_json.display().to_string();
@@ -363,8 +307,8 @@ pub fn run(args: &Args) -> Result<()> {
             recent.push_back((p.seq, p.t_ns));
         }
         // Shared memory: received by this poll; zenoh: as delivered.
-        let arrived: Vec<(u64, ForceMsg)> = match &remote_forces {
-            Some(o) => o.drain(),
+        let arrived: Vec<(u64, ForceMsg)> = match &bridged {
+            Some(b) => b.observer.drain(),
             None => std::iter::from_fn(|| forces.receive().ok().flatten().map(|f| *f))
                 .map(|f| (monotonic_ns(), f))
                 .collect(),
@@ -407,10 +351,8 @@ pub fn run(args: &Args) -> Result<()> {
             *v += offset_us;
         }
     }
-    if let Some(mut b) = bridge {
-        // SAFETY: kill(2) on our own child's pid.
-        unsafe { libc::kill(b.id() as libc::pid_t, libc::SIGTERM) };
-        let _ = b.wait();
+    if let Some(b) = bridged {
+        b.stop();
     }
     // SIGTERM: the simulation stops and writes its summary.
     // SAFETY: kill(2) on our own child's pid.

@@ -11,9 +11,9 @@
 //! daemon reports it in its summary and the pose figures are corrected.
 
 use anyhow::{Context, Result};
-use shared::monotonic_ns;
 use shared::protocol::ForceMsg;
 use shared::remote::{RemoteConfig, codec};
+use shared::{SessionName, monotonic_ns, services};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use zenoh::Wait;
@@ -71,6 +71,49 @@ impl Observer {
     }
 }
 
+/// `sim-server bridge` for a session on a free loopback port, and a zenoh
+/// client of it observing the force samples as a remote daemon gets them.
+pub struct Bridged {
+    bridge: std::process::Child,
+    /// Where the bridge listens.
+    pub endpoint: String,
+    /// The force samples, with their receipt times.
+    pub observer: Observer,
+}
+
+impl Bridged {
+    /// Starts the bridge (`sim_server`'s) for `run_s` seconds.
+    pub fn start(session: &SessionName, run_s: f64, sim_server: &std::path::Path) -> Result<Self> {
+        let endpoint = free_endpoint()?;
+        let bridge = crate::latency::spawn(
+            &[
+                "bridge",
+                "--session",
+                session.as_str(),
+                "--listen",
+                &endpoint,
+                "--duration-s",
+                &run_s.to_string(),
+            ],
+            sim_server.to_path_buf(),
+        )?;
+        std::thread::sleep(Duration::from_millis(300));
+        let observer = Observer::connect(&endpoint, &session.service(services::stream::FORCE))?;
+        Ok(Self {
+            bridge,
+            endpoint,
+            observer,
+        })
+    }
+
+    /// SIGTERM, then waits.
+    pub fn stop(mut self) {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(self.bridge.id() as libc::pid_t, libc::SIGTERM) };
+        let _ = self.bridge.wait();
+    }
+}
+
 /// The baseline's publisher (child process): listens on `endpoint` and puts
 /// a stamped sample every millisecond for `duration_s`.
 pub fn probe(endpoint: &str, duration_s: f64) -> Result<()> {
@@ -82,7 +125,7 @@ pub fn probe(endpoint: &str, duration_s: f64) -> Result<()> {
         .express(true)
         .wait()
         .map_err(|e| anyhow::anyhow!("declare {PROBE_KEY}: {e}"))?;
-    crate::latency::every_ms(duration_s, |msg| {
+    crate::latency_probe::every_ms(duration_s, |msg| {
         let _ = publisher.put(codec::encode(&msg)).wait();
     });
     Ok(())

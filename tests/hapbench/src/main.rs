@@ -4,6 +4,7 @@
 
 mod extrapolation;
 mod latency;
+mod latency_probe;
 mod latency_remote;
 mod local_render;
 mod phases;
@@ -48,7 +49,7 @@ enum Command {
     /// The latency baseline's publisher process (started by `latency`).
     #[command(hide = true)]
     #[command(allow_negative_numbers = true)]
-    Probe(latency::ProbeArgs),
+    Probe(latency_probe::ProbeArgs),
 }
 
 fn main() -> Result<()> {
@@ -57,6 +58,6 @@ fn main() -> Result<()> {
         Command::Stability(args) => stability::run(&args),
         Command::Latency(args) => latency::run(&args),
         Command::Tradeoff(args) => tradeoff::run(&args),
-        Command::Probe(args) => latency::probe(&args),
+        Command::Probe(args) => latency_probe::probe(&args),
     }
 }
