@@ -152,7 +152,7 @@ pub fn serve(
                 .wait();
         })
         .wait()
-        .map_err(|e| super::link::declare_error(&key, e))
+        .map_err(|e| super::RemoteError::declare(&key, e))
 }
 
 /// The remote clock from a probe's answer (None: not eight bytes).

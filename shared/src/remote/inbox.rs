@@ -11,7 +11,6 @@
 //! refused and counted.
 
 use super::clock::{ClockMap, Stamped};
-use super::link::declare_error;
 use super::{Link, RemoteError, codec};
 use bytemuck::Pod;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -107,7 +106,7 @@ impl<T: Pod + Stamped + Send + Sync> Inbox<T> {
             .declare_subscriber(key.clone())
             .callback(move |sample| on_sample(&sample.payload().to_bytes()))
             .wait()
-            .map_err(|e| declare_error(&key, e))?;
+            .map_err(|e| RemoteError::declare(&key, e))?;
         if query {
             ask_bridge(link, &key, accept);
         }
@@ -171,7 +170,7 @@ impl<H: Pod + Stamped + Send, T: Pod + Send> SliceInbox<H, T> {
                 on_sample(&s.payload().to_bytes(), None)
             })
             .wait()
-            .map_err(|e| declare_error(&key, e))?;
+            .map_err(|e| RemoteError::declare(&key, e))?;
         ask_bridge(link, &key, move |bytes| accept(bytes, Some(&live)));
         Ok(Self {
             slot,

@@ -52,7 +52,7 @@ impl Link {
             .history(true)
             .callback(move |s| alive.store(s.kind() == SampleKind::Put, Ordering::Relaxed))
             .wait()
-            .map_err(|e| declare_error(&key, e))?;
+            .map_err(|e| RemoteError::declare(&key, e))?;
         let link = Self {
             session,
             name: name.clone(),
@@ -196,7 +196,7 @@ impl Link {
             .priority(zenoh::qos::Priority::RealTime)
             .express(true)
             .wait()
-            .map_err(|e| declare_error(&key, e))?;
+            .map_err(|e| RemoteError::declare(&key, e))?;
         Ok(RemotePublisher {
             publisher,
             clock: self.clock.clone(),
@@ -212,7 +212,7 @@ impl Link {
             .liveliness()
             .declare_token(&key)
             .wait()
-            .map_err(|e| declare_error(&key, e))
+            .map_err(|e| RemoteError::declare(&key, e))
     }
 }
 
@@ -238,13 +238,6 @@ fn probe(session: &zenoh::Session, key: &str) -> Option<Probe> {
     let received = crate::monotonic_ns();
     let remote = read_answer(&reply.result().ok()?.payload().to_bytes())?;
     Some(Probe::of(sent, remote, received))
-}
-
-pub(super) fn declare_error(key: &str, e: impl std::fmt::Display) -> RemoteError {
-    RemoteError::Declare {
-        key: key.to_string(),
-        reason: e.to_string(),
-    }
 }
 
 /// Publishes messages of one stream, stamps moved to the simulation host's

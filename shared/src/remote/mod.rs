@@ -228,6 +228,17 @@ pub enum RemoteError {
     },
 }
 
+impl RemoteError {
+    /// zenoh refused to declare something on `key` (a publisher,
+    /// subscriber, queryable or token).
+    pub fn declare(key: &str, e: impl std::fmt::Display) -> Self {
+        Self::Declare {
+            key: key.to_string(),
+            reason: e.to_string(),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

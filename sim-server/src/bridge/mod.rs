@@ -61,14 +61,9 @@ pub enum BridgeError {
     /// The zenoh session.
     #[error(transparent)]
     Remote(#[from] RemoteError),
-    /// A zenoh declaration.
-    #[error("zenoh {key}: {reason}")]
-    Zenoh {
-        /// The key.
-        key: String,
-        /// zenoh's message.
-        reason: String,
-    },
+    /// The bulk thread could not start or panicked.
+    #[error("the bridge's bulk thread {0}")]
+    Thread(String),
 }
 
 /// What the bridge did.
@@ -111,10 +106,7 @@ fn serve_kept(
                     }
                 })
                 .wait()
-                .map_err(|e| BridgeError::Zenoh {
-                    key,
-                    reason: e.to_string(),
-                })
+                .map_err(|e| RemoteError::declare(&key, e).into())
         })
         .collect()
 }
@@ -131,10 +123,7 @@ fn subscribe_remote(
     z.declare_subscriber(key.to_string())
         .allowed_origin(zenoh::sample::Locality::Remote)
         .wait()
-        .map_err(|e| BridgeError::Zenoh {
-            key: key.to_string(),
-            reason: e.to_string(),
-        })
+        .map_err(|e| RemoteError::declare(key, e).into())
 }
 
 /// Follows the remote daemons' liveliness tokens: true while at least one
@@ -161,10 +150,7 @@ fn watch_daemon(
             flag.store(now > 0, Ordering::Relaxed)
         })
         .wait()
-        .map_err(|e| BridgeError::Zenoh {
-            key,
-            reason: e.to_string(),
-        })?;
+        .map_err(|e| RemoteError::declare(&key, e))?;
     Ok((alive, watch))
 }
 
@@ -213,10 +199,7 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
         std::thread::Builder::new()
             .name("bridge-bulk".into())
             .spawn(move || run_bulk(z, session, kept, alive, stop, ready_tx))
-            .map_err(|e| BridgeError::Zenoh {
-                key: "bridge-bulk".into(),
-                reason: format!("cannot start the bulk thread: {e}"),
-            })?
+            .map_err(|e| BridgeError::Thread(format!("could not start: {e}")))?
     };
     // Clients start joining when the clock answers: not before the bulk
     // thread holds the scene streams a joiner asks for (an error there
@@ -263,10 +246,9 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
     // (which may wait on a congested viewer link).
     drop(sim_token);
     bulk_stop.store(true, Ordering::Relaxed);
-    let (bulk_counts, telemetry) = bulk.join().map_err(|_| BridgeError::Zenoh {
-        key: "bridge-bulk".into(),
-        reason: "the bulk thread panicked".into(),
-    })??;
+    let (bulk_counts, telemetry) = bulk
+        .join()
+        .map_err(|_| BridgeError::Thread("panicked".into()))??;
     summary.duration_s = start.elapsed().as_secs_f64();
     let l = live.counts();
     summary.outbound = OutCounts {

@@ -65,10 +65,7 @@ pub(super) fn declare(
         .congestion_control(qos.congestion)
         .express(qos.express)
         .wait()
-        .map_err(|e| BridgeError::Zenoh {
-            key: key.to_string(),
-            reason: e.to_string(),
-        })
+        .map_err(|e| shared::remote::RemoteError::declare(key, e).into())
 }
 
 /// A relay of one fixed-size stream.
