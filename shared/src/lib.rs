@@ -16,6 +16,7 @@
 pub mod alloc_count;
 mod clock;
 pub mod protocol;
+pub mod reaper;
 pub mod remote;
 pub mod services;
 mod session;

@@ -120,6 +120,11 @@ pub struct RunSummary {
     /// to its force sample sent (us): pose intake and the tools' update,
     /// the step, the sample; the simulation's share of device -> force.
     pub turnaround_us: StepPercentiles,
+    /// From a pose's device read (its `t_ns`) to the loop waking for the
+    /// step that takes it, over the steps that took a new pose: the pose's
+    /// transport plus the loop's wake-up, or the step in progress it waited
+    /// for.
+    pub pose_wait_us: StepPercentiles,
     /// Simulated time dropped after stalls instead of fast-forwarded (s):
     /// simulated time ends this far behind wall time.
     pub dropped_time_s: Real,

@@ -10,6 +10,7 @@
 
 use super::RunError;
 use shared::protocol::PoseMsg;
+use shared::reaper::Reaper;
 use shared::services::{self, IpcNode, PoseReadyListener, PoseService, PoseSubscriber};
 use shared::{SessionName, monotonic_ns};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -17,8 +18,9 @@ use std::time::Duration;
 
 /// The default pose timeout (ns): 50 ms.
 pub const DEFAULT_POSE_TIMEOUT_NS: u64 = 50_000_000;
-/// How often the pose publishers are counted (ns).
-const PUBLISHER_CHECK_NS: u64 = 20_000_000;
+/// How often dead processes' ports are removed (by [`Reaper`], off the
+/// loop), after which the pose publishers are counted again.
+const PUBLISHER_CHECK: Duration = Duration::from_millis(20);
 
 /// Whether a pose read at `pose_t_ns` may still drive a tool at `now_ns`.
 pub fn is_fresh(pose_t_ns: u64, now_ns: u64, timeout_ns: u64) -> bool {
@@ -45,7 +47,9 @@ pub struct PoseIntake {
     timeout_ns: u64,
     latest: Option<PoseMsg>,
     publishers: usize,
-    checked_ns: u64,
+    reaper: Reaper,
+    /// The reaper's passes at the last count.
+    counted_after: u64,
     was_active: bool,
     /// Pose messages received.
     pub received: u64,
@@ -65,14 +69,16 @@ impl PoseIntake {
                 eprintln!("sim-server: no pose-ready event ({e}); stepping on the clock only")
             })
             .ok();
+        let reaper = Reaper::spawn("sim-server-reaper", PUBLISHER_CHECK)?;
         Ok(Self {
             publishers: services::publisher_count(&factory),
+            counted_after: reaper.passes(),
+            reaper,
             factory,
             subscriber,
             listener,
             timeout_ns,
             latest: None,
-            checked_ns: monotonic_ns(),
             was_active: false,
             received: 0,
             timeouts: 0,
@@ -93,15 +99,15 @@ impl PoseIntake {
         Ok(())
     }
 
-    /// Every 20 ms: removes what dead processes left (their publishers
-    /// among it) and counts the pose publishers; with none, the last pose
-    /// is forgotten.
-    pub fn check_publishers(&mut self, node: &IpcNode, now_ns: u64) {
-        if now_ns.saturating_sub(self.checked_ns) < PUBLISHER_CHECK_NS {
+    /// After each pass of the reaper (every 20 ms, on its own thread:
+    /// what dead processes left removed, their publishers among it):
+    /// counts the pose publishers; with none, the last pose is forgotten.
+    pub fn check_publishers(&mut self) {
+        let passes = self.reaper.passes();
+        if passes == self.counted_after {
             return;
         }
-        self.checked_ns = now_ns;
-        services::reap_dead_nodes(node);
+        self.counted_after = passes;
         self.publishers = services::publisher_count(&self.factory);
         if self.publishers == 0 {
             self.latest = None;

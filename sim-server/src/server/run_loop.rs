@@ -41,7 +41,8 @@ pub struct RunLoop<'a, B: Backend> {
     sim: B,
     contacts: Tools,
     dt_s: Real,
-    node: IpcNode,
+    /// The node of every port below, kept as long as they are.
+    _node: IpcNode,
     poses: PoseIntake,
     force_pub: ForcePublisher,
     local_out: LocalOut,
@@ -51,6 +52,10 @@ pub struct RunLoop<'a, B: Backend> {
     step_times: StepHistogram,
     /// From the loop's wake-up to its force sample sent.
     turnaround_times: StepHistogram,
+    /// From a new pose's device read to the loop's wake-up for it.
+    pose_wait_times: StepHistogram,
+    /// The last pose taken (its seq), to time only new ones.
+    last_pose_seq: Option<u64>,
     /// When the loop woke for this step (ns).
     woke_ns: u64,
     start_ns: u64,
@@ -127,7 +132,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             sim,
             contacts,
             dt_s,
-            node,
+            _node: node,
             poses,
             force_pub,
             local_out,
@@ -136,6 +141,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             summary,
             step_times: StepHistogram::new(),
             turnaround_times: StepHistogram::new(),
+            pose_wait_times: StepHistogram::new(),
+            last_pose_seq: None,
             woke_ns: 0,
             start_ns,
             stalls_told: 0,
@@ -165,6 +172,13 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         self.poses.drain()?;
         let t0 = monotonic_ns();
         let pose = self.poses.active(t0);
+        if let Some(p) = pose
+            && self.last_pose_seq != Some(p.seq)
+        {
+            self.last_pose_seq = Some(p.seq);
+            self.pose_wait_times
+                .record(self.woke_ns.saturating_sub(p.t_ns));
+        }
         let sim_t_s = self.summary.steps as Real * self.dt_s;
         let inputs = outputs::tool_inputs(self.contacts.len(), &self.cfg.scripts, pose, sim_t_s);
         self.contacts.update(&mut self.sim, &inputs);
@@ -276,7 +290,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             now,
             pose.map_or(now, |p| p.t_ns),
         );
-        self.poses.check_publishers(&self.node, monotonic_ns());
+        self.poses.check_publishers();
         // Viewer: topology when it changed, positions at the viewer rate.
         if s.steps.is_multiple_of(self.frame_every) {
             self.mesh_out
@@ -355,6 +369,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             match self.poses.wait(earliest, until, &self.stop) {
                 WaitEnd::Pose => {
                     self.summary.steps_on_pose += 1;
+                    self.pacing.started_on_pose(steps, monotonic_ns());
                     break;
                 }
                 WaitEnd::Due if until < due => self.local_out.publish_ready(&mut self.contacts),
@@ -377,6 +392,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.pose_timeouts = self.poses.timeouts;
         summary.step_us = self.step_times.percentiles_us();
         summary.turnaround_us = self.turnaround_times.percentiles_us();
+        summary.pose_wait_us = self.pose_wait_times.percentiles_us();
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
         summary.local_problems = self.local_out.published;

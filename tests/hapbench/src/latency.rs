@@ -126,6 +126,9 @@ struct Report {
     /// The simulation's turnaround, wake-up to sample sent (its run
     /// summary's `turnaround_us`).
     sim_turnaround_us: serde_json::Value,
+    /// From a pose's device read to the simulation waking for the step
+    /// that takes it (its run summary's `pose_wait_us`).
+    sim_pose_wait_us: serde_json::Value,
     /// Steps the simulation started early on a fresh pose.
     sim_steps_on_pose: u64,
     /// Steps the simulation took.
@@ -394,6 +397,7 @@ pub fn run(args: &Args) -> Result<()> {
         tick_lateness_us: stats(&mut ticks),
         sim_step_us: sim_summary["step_us"].clone(),
         sim_turnaround_us: sim_summary["turnaround_us"].clone(),
+        sim_pose_wait_us: sim_summary["pose_wait_us"].clone(),
         sim_steps_on_pose: sim_summary["steps_on_pose"].as_u64().unwrap_or(0),
         sim_steps: sim_summary["steps"].as_u64().unwrap_or(0),
     };
@@ -418,6 +422,7 @@ pub fn run(args: &Args) -> Result<()> {
     for (name, v) in [
         ("sim step", &report.sim_step_us),
         ("sim turnaround", &report.sim_turnaround_us),
+        ("device -> sim wake", &report.sim_pose_wait_us),
     ] {
         let at = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
         println!(

@@ -93,6 +93,12 @@ impl PartSweep {
 /// total force stays smooth (C1) as points enter contact one by one.
 pub const ONSET_OF_RADIUS: Real = 0.02;
 
+/// A triangle's points are skipped together only when its bounding sphere
+/// clears the capsule by this fraction of the radius: far above the
+/// rounding of the distances, so exactly the points that point-by-point
+/// tests would find out of contact are skipped.
+const CLEAR_MARGIN: Real = 1e-9;
+
 /// The reported force is the mean over this last part of a step (s): one
 /// period of a 1 kHz haptic loop.
 pub const REPORT_WINDOW_S: Real = 1e-3;
@@ -387,62 +393,102 @@ impl ContactField {
         let alpha = self.damping_s_per_m;
         let damped = alpha > 0.0 && !masses_kg.is_empty();
         let mut most_damping: Real = 0.0;
-        for (i, p) in self.points.iter().enumerate() {
-            self.acting[i] = None;
-            let sweep = &self.parts[p.part as usize];
+        let count = self.points.len();
+        let mut first = 0;
+        while first < count {
+            // One triangle's points facing one part (consecutive, as
+            // selected): its corners are read once, and when its bounding
+            // sphere is clear of the part's capsule none of its points can
+            // touch (each lies within the sphere), which is most triangles
+            // of a selection at most sub-steps.
+            let head = self.points[first];
+            let end = first
+                + self.points[first..]
+                    .iter()
+                    .position(|p| p.vertices != head.vertices || p.part != head.part)
+                    .unwrap_or(count - first);
+            let run = first..end;
+            first = end;
+            let sweep = &self.parts[head.part as usize];
             let seg = sweep.at(s);
-            let mut x = Vec3::ZERO;
-            let mut vel = Vec3::ZERO;
-            for k in 0..3 {
-                let j = p.vertices[k] as usize;
-                let (uj, pj) = (Vec3::from_array(u[j]), Vec3::from_array(u_prev[j]));
-                x += p.weights[k] * (rest_m[j] + uj);
-                vel += p.weights[k] * (uj - pj) / h_s;
-            }
-            let (c, t) = seg.closest_m(x);
-            let gap = x - c;
-            let dist = gap.length();
-            let depth = sweep.radius_m - dist;
-            if depth <= 0.0 || dist <= 1e-12 * sweep.radius_m {
-                self.penetration_m[i] = 0.0;
-                if advance {
-                    // Out of contact: it sticks afresh when it comes back.
-                    self.sticks[i] = Stick::default();
+            let corners = head.vertices.map(|j| {
+                let j = j as usize;
+                rest_m[j] + Vec3::from_array(u[j])
+            });
+            let centre = (corners[0] + corners[1] + corners[2]) / 3.0;
+            let extent = corners
+                .iter()
+                .map(|c| c.distance(centre))
+                .fold(0.0, Real::max);
+            if seg.distance_m(centre) - extent > sweep.radius_m * (1.0 + CLEAR_MARGIN) {
+                for i in run {
+                    self.acting[i] = None;
+                    self.penetration_m[i] = 0.0;
+                    if advance {
+                        self.sticks[i] = Stick::default();
+                    }
                 }
                 continue;
             }
-            self.penetration_m[i] = depth;
-            let n = gap / dist;
-            let turn = Mat3::IDENTITY - outer(n, n);
-            let axis = (seg.b_m - seg.a_m).normalize_or_zero();
-            let turn = if t > 0.0 && t < 1.0 {
-                turn - outer(axis, axis)
-            } else {
-                turn
-            };
-            let (spring, slope) = spring(p.stiffness_n_per_m, depth, sweep.radius_m);
-            self.spring_hessians[i] = outer(n, n) * slope;
-            self.hessians[i] = self.spring_hessians[i] - turn * (spring / dist);
-            let tool_vel = ((sweep.to.a_m - sweep.from.a_m)
-                + ((sweep.to.b_m - sweep.from.b_m) - (sweep.to.a_m - sweep.from.a_m)) * t)
-                / step_s;
-            let rate = (tool_vel - vel).dot(n);
-            self.acting[i] = Some(Acting {
-                n,
-                spring,
-                rate,
-                slip_m: (vel - tool_vel) * h_s,
-            });
-            if damped {
-                // Gershgorin row of the damping matrix (sum_p c_p w_vp w^T)
-                // over the mass, with c_p = alpha k_p d the point's linear
-                // damping coefficient.
+            for i in run {
+                let p = &self.points[i];
+                self.acting[i] = None;
+                let mut x = Vec3::ZERO;
+                for k in 0..3 {
+                    x += p.weights[k] * corners[k];
+                }
+                let (c, t) = seg.closest_m(x);
+                let gap = x - c;
+                let dist = gap.length();
+                let depth = sweep.radius_m - dist;
+                if depth <= 0.0 || dist <= 1e-12 * sweep.radius_m {
+                    self.penetration_m[i] = 0.0;
+                    if advance {
+                        // Out of contact: it sticks afresh when it comes back.
+                        self.sticks[i] = Stick::default();
+                    }
+                    continue;
+                }
+                // The point's velocity only where it acts.
+                let mut vel = Vec3::ZERO;
                 for k in 0..3 {
                     let j = p.vertices[k] as usize;
-                    let d = &mut self.damping_sum[j];
-                    *d += p.weights[k] * alpha * spring;
-                    if masses_kg[j] > 0.0 {
-                        most_damping = most_damping.max(*d * h_s / masses_kg[j]);
+                    let (uj, pj) = (Vec3::from_array(u[j]), Vec3::from_array(u_prev[j]));
+                    vel += p.weights[k] * (uj - pj) / h_s;
+                }
+                self.penetration_m[i] = depth;
+                let n = gap / dist;
+                let turn = Mat3::IDENTITY - outer(n, n);
+                let axis = (seg.b_m - seg.a_m).normalize_or_zero();
+                let turn = if t > 0.0 && t < 1.0 {
+                    turn - outer(axis, axis)
+                } else {
+                    turn
+                };
+                let (spring, slope) = spring(p.stiffness_n_per_m, depth, sweep.radius_m);
+                self.spring_hessians[i] = outer(n, n) * slope;
+                self.hessians[i] = self.spring_hessians[i] - turn * (spring / dist);
+                let tool_vel = ((sweep.to.a_m - sweep.from.a_m)
+                    + ((sweep.to.b_m - sweep.from.b_m) - (sweep.to.a_m - sweep.from.a_m)) * t)
+                    / step_s;
+                let rate = (tool_vel - vel).dot(n);
+                self.acting[i] = Some(Acting {
+                    n,
+                    spring,
+                    rate,
+                    slip_m: (vel - tool_vel) * h_s,
+                });
+                if damped {
+                    // Gershgorin row of the damping matrix (sum_p c_p w_vp w^T)
+                    // over the mass, with c_p = alpha k_p d the point's linear
+                    // damping coefficient.
+                    for k in 0..3 {
+                        let j = p.vertices[k] as usize;
+                        let d = &mut self.damping_sum[j];
+                        *d += p.weights[k] * alpha * spring;
+                        if masses_kg[j] > 0.0 {
+                            most_damping = most_damping.max(*d * h_s / masses_kg[j]);
+                        }
                     }
                 }
             }

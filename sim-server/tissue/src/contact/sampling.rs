@@ -112,18 +112,41 @@ impl Sampler {
             let to = SegmentQuery::new(&sweep.to);
             let keep_m = step_keep_m(&sweep);
             let keep2 = keep_m * keep_m;
-            for p in self.cache.points_of(part) {
-                // Positions from the slices: this runs over every kept
-                // point every step.
-                let x = (0..3).fold(Vec3::ZERO, |x, k| {
-                    let v = p.vertices[k] as usize;
-                    x + (rest[v] + Vec3::from_array(u[v])) * p.weights[k]
-                });
-                if to.distance2(x) < keep2 {
-                    field.push(ContactPoint {
-                        part: part as u16,
-                        ..*p
-                    });
+            let points = self.cache.points_of(part);
+            let mut start = 0;
+            while start < points.len() {
+                // One triangle's points (consecutive, as selected): decided
+                // together where its bounding sphere lies clearly inside or
+                // outside the reach (the distance to a segment moves no
+                // faster than the point), point by point where it straddles.
+                let ids = points[start].vertices;
+                let end = start
+                    + points[start..]
+                        .iter()
+                        .position(|p| p.vertices != ids)
+                        .unwrap_or(points.len() - start);
+                // Positions from the slices: this runs every step.
+                let x = ids.map(|v| rest[v as usize] + Vec3::from_array(u[v as usize]));
+                let centre = (x[0] + x[1] + x[2]) / 3.0;
+                let radius = x.iter().map(|p| p.distance(centre)).fold(0.0, Real::max);
+                let d = to.distance2(centre).sqrt();
+                let run = &points[start..end];
+                start = end;
+                if d - radius > keep_m * (1.0 + WHOLE_TRIANGLE_MARGIN) {
+                    continue;
+                }
+                let all = d + radius < keep_m * (1.0 - WHOLE_TRIANGLE_MARGIN);
+                for p in run {
+                    let inside = all || {
+                        let xp = (0..3).fold(Vec3::ZERO, |xp, k| xp + x[k] * p.weights[k]);
+                        to.distance2(xp) < keep2
+                    };
+                    if inside {
+                        field.push(ContactPoint {
+                            part: part as u16,
+                            ..*p
+                        });
+                    }
                 }
             }
         }
@@ -304,6 +327,12 @@ fn step_reach_m(sweep: &PartSweep) -> Real {
 fn step_keep_m(sweep: &PartSweep) -> Real {
     step_reach_m(sweep) + 2.0 * sweep.motion_m()
 }
+
+/// A triangle's points are taken or left together only when its bounding
+/// sphere is inside or outside the reach by this fraction of it: far more
+/// than the rounding of the distances, so the points are exactly those
+/// that point-by-point tests take.
+const WHOLE_TRIANGLE_MARGIN: Real = 1e-9;
 
 /// A segment ready for many distance queries.
 struct SegmentQuery {
