@@ -434,8 +434,8 @@ impl ContactField {
                 let p = &self.points[i];
                 self.acting[i] = None;
                 let mut x = Vec3::ZERO;
-                for k in 0..3 {
-                    x += p.weights[k] * corners[k];
+                for (w, c) in p.weights.iter().zip(&corners) {
+                    x += *w * *c;
                 }
                 let (c, t) = seg.closest_m(x);
                 let gap = x - c;
