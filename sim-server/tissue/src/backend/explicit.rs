@@ -15,6 +15,9 @@ impl<S: Storage> Backend for Explicit<S> {
     fn step(&mut self) {
         Explicit::step(self);
     }
+    fn prepare_step(&mut self) {
+        Explicit::prepare_step(self);
+    }
     fn dt_s(&self) -> Real {
         Explicit::dt_s(self)
     }

@@ -103,6 +103,11 @@ pub trait Backend {
     fn integrates_contact(&self) -> bool {
         false
     }
+    /// Does now what the next step can do before its tools are known (the
+    /// explicit backend: the first sub-step's elastic forces), so that the
+    /// step answers a pose sooner; the step's result is unchanged. A loop
+    /// calls it while it waits for the next pose. Others: nothing.
+    fn prepare_step(&mut self) {}
     /// Makes the coming steps stable with contact springs adding up to
     /// `omega2` (rad^2/s^2) to omega_max^2 (sub-stepping as needed).
     /// Backends that do not integrate contact ignore it.

@@ -175,6 +175,11 @@ pub struct Explicit<S: Storage> {
     /// Times the sub-step count changed.
     resubsteps: u64,
     steps: u64,
+    /// K U(t) of the next step's first sub-step, computed ahead by
+    /// [`Explicit::prepare_step`] while the loop waits for a pose (valid
+    /// while `ku_ready`).
+    ku_ahead: Vec<V3>,
+    ku_ready: bool,
 }
 
 impl<S: Storage> Explicit<S> {
@@ -276,6 +281,8 @@ impl<S: Storage> Explicit<S> {
             substep_factor: 1,
             resubsteps: 0,
             steps: 0,
+            ku_ahead: Vec::new(),
+            ku_ready: false,
             model,
         };
         for v in 0..n {
@@ -525,7 +532,82 @@ impl<S: Storage> Explicit<S> {
         }
     }
 
+    /// Computes K U(t) for the next step's first sub-step now, so that the
+    /// step, when it comes, only integrates that sub-step: the elastic
+    /// forces at the start of a step do not depend on the tools, so a
+    /// server loop can spend its wait for the next pose on them and answer
+    /// the pose a kernel pass sooner (a third of the liver's three
+    /// sub-steps). The same arithmetic as in the step (the kernel's
+    /// deferred-row path): the result is identical to the bit. One part
+    /// only (with worker threads it does nothing); a cut or
+    /// [`Explicit::set_state`] before the step discards it. The first call
+    /// allocates one array.
+    pub fn prepare_step(&mut self) {
+        if self.plans.len() != 1 || self.ku_ready {
+            return;
+        }
+        let n = self.u.len();
+        if self.ku_ahead.len() != n {
+            self.ku_ahead = huge_vec(n, [0.0; 3]);
+        }
+        let Self {
+            kernel,
+            u,
+            next,
+            coef,
+            kind,
+            target,
+            fext,
+            fmem,
+            fnl,
+            buffers,
+            ku_ahead,
+            ..
+        } = self;
+        let inputs = StepInputs {
+            u,
+            coef,
+            kind,
+            target,
+            fext,
+            fmem,
+            fnl,
+        };
+        let b = &mut buffers[0];
+        // Every row deferred: K U lands in `ku_ahead`, nothing is integrated
+        // and `next` is not written.
+        kernel.run_part(
+            &inputs,
+            Part {
+                start: 0,
+                end: n,
+                deferred_end: n,
+                ring: &mut b.ring,
+                deferred: ku_ahead,
+                next,
+                spill: &mut b.spill,
+            },
+        );
+        self.ku_ready = true;
+    }
+
     fn kernel_step(&mut self) {
+        if std::mem::take(&mut self.ku_ready) {
+            let inputs = StepInputs {
+                u: &self.u,
+                coef: &self.coef,
+                kind: &self.kind,
+                target: &self.target,
+                fext: &self.fext,
+                fmem: &self.fmem,
+                fnl: &self.fnl,
+            };
+            for (i, (ku, next)) in self.ku_ahead.iter().zip(self.next.iter_mut()).enumerate() {
+                inputs.integrate(i, *ku, next);
+            }
+            std::mem::swap(&mut self.u, &mut self.next);
+            return;
+        }
         let Self {
             kernel,
             u,
@@ -618,6 +700,7 @@ impl<S: Storage> Explicit<S> {
     /// Sets U(t) and U(t-1) (m), e.g. to start with an initial velocity
     /// (U(t) - U(t-1)) / dt.
     pub fn set_state(&mut self, u_m: &[Vec3], u_prev_m: &[Vec3]) {
+        self.ku_ready = false;
         for (d, s) in self.u.iter_mut().zip(u_m) {
             *d = s.to_array();
         }
@@ -647,6 +730,7 @@ impl<S: Storage> Explicit<S> {
     }
 
     fn after_cut(&mut self, change: &CutChange) {
+        self.ku_ready = false;
         self.kernel.update(&self.model, change);
         for v in change.vertices {
             self.refresh_vertex(v.idx());

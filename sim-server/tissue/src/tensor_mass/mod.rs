@@ -14,6 +14,8 @@ mod lanes;
 pub mod large_strain;
 pub mod model;
 pub mod nonlinear;
+#[cfg(test)]
+mod prepared_step_tests;
 pub mod stability;
 mod stvk_lanes;
 pub mod submodel;

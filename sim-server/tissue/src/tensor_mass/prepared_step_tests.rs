@@ -1,0 +1,104 @@
+//! [`Explicit::prepare_step`]: the first sub-step's K U computed ahead
+//! changes nothing in the step, and what changes the model or the state
+//! between the two discards it.
+
+use super::*;
+use crate::ids::{TetId, VertexId};
+use crate::material::{Elasticity, Isotropic, Material};
+use crate::material_map::TetMaterials;
+use crate::math::Vec3;
+use crate::mesh::{BoxSpec, CellSize};
+
+/// A 2 x 1 x 1 cm block held at x = 0, pulled and pushed at x = 2 cm,
+/// stepped at 3 ms (several sub-steps).
+fn block<S: Storage>() -> Explicit<S> {
+    let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let iso = Isotropic::from_young_poisson(4500.0, 0.4).unwrap();
+    let material = Material::new(Elasticity::Isotropic(iso), 1000.0, 5.0).unwrap();
+    let mats = TetMaterials::uniform(material, mesh.tet_count());
+    let model = ElasticModel::new(mesh, mats).unwrap();
+    let rest: Vec<Vec3> = model.mesh().positions_m().to_vec();
+    let mut sim = Explicit::<S>::new(model, ExplicitConfig::new(3e-3)).unwrap();
+    assert!(sim.substeps() > 1, "the test wants several sub-steps");
+    for (v, x) in rest.iter().enumerate() {
+        if x.x < 1e-9 {
+            sim.fix(VertexId::from(v));
+        } else if x.x > 0.02 - 1e-9 {
+            sim.set_external_force(VertexId::from(v), Vec3::new(0.002, -0.001, -0.003));
+        }
+    }
+    sim
+}
+
+fn same<S: Storage>(a: &Explicit<S>, b: &Explicit<S>, when: &str) {
+    let bits = |s: &Explicit<S>| -> Vec<u64> {
+        s.displacements()
+            .iter()
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect()
+    };
+    assert!(bits(a) == bits(b), "states differ {when}");
+    let moved = a.displacements().iter().flatten().any(|x| *x != 0.0);
+    assert!(moved, "nothing moved {when}: the comparison would be empty");
+}
+
+fn prepared_steps_equal_plain_ones<S: Storage>() {
+    let (mut plain, mut prepared) = (block::<S>(), block::<S>());
+    for k in 0..20 {
+        plain.step();
+        prepared.prepare_step();
+        prepared.step();
+        same(&plain, &prepared, &format!("after step {k}"));
+    }
+    // A cut after the preparation: the step uses the new kernel.
+    prepared.prepare_step();
+    for sim in [&mut plain, &mut prepared] {
+        sim.remove_tet(TetId(5)).unwrap();
+        sim.step();
+    }
+    same(&plain, &prepared, "after a cut");
+    // A new state after the preparation: K U of the new state.
+    prepared.prepare_step();
+    let u: Vec<Vec3> = plain
+        .displacements()
+        .iter()
+        .map(|d| Vec3::from_array(*d) * 0.5)
+        .collect();
+    for sim in [&mut plain, &mut prepared] {
+        sim.set_state(&u, &u);
+        sim.step();
+    }
+    same(&plain, &prepared, "after set_state");
+    // Preparing twice is preparing once.
+    prepared.prepare_step();
+    prepared.prepare_step();
+    plain.step();
+    prepared.step();
+    same(&plain, &prepared, "after a double preparation");
+}
+
+#[test]
+fn a_prepared_step_is_the_plain_step_to_the_bit() {
+    prepared_steps_equal_plain_ones::<f32>();
+    prepared_steps_equal_plain_ones::<f64>();
+}
+
+#[test]
+fn a_preparation_the_step_does_not_use_is_forgotten() {
+    // Prepared, then not used for the step it was for (a cut): the next
+    // step must not pick up the stale K U.
+    let (mut plain, mut prepared) = (block::<f32>(), block::<f32>());
+    for sim in [&mut plain, &mut prepared] {
+        sim.step();
+    }
+    prepared.prepare_step();
+    for sim in [&mut plain, &mut prepared] {
+        sim.remove_tet(TetId(9)).unwrap();
+        sim.step();
+        sim.step();
+    }
+    same(&plain, &prepared, "two steps after the cut");
+}
