@@ -5,10 +5,11 @@
 //! topology when cuts change it. It keeps running when the daemon or the
 //! viewer disappear and serves them again when they come back.
 //!
-//! Real time ([`pacing`]): a step starts when it is due, or up to one step
+//! Real time ([`pacing`]): a step starts when it is due, or up to two steps
 //! (at most 2 ms) earlier when a fresh pose arrives ([`poses`]: the daemon
 //! notifies the `pose-ready` event after each pose, which wakes the wait),
-//! so a pose gets its force one step after it arrives. After a stall the
+//! so a pose gets its force one step after it arrives; the grid's phase
+//! follows the poses' so that they arrive mid-window. After a stall the
 //! missed time is dropped, not fast-forwarded. A pose older than
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 

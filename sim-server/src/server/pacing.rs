@@ -18,7 +18,8 @@
 //!   it opened and waited up to half a millisecond for it (measured on the
 //!   liver; with two steps the 90th percentile of a pose's wait from the
 //!   device read to the step fell from 250-590 to 180-230 us).
-//! - The grid locks onto the poses' phase: when a step starts on a pose,
+//! - The grid locks onto the poses' phase (steps up to 1 ms, where the
+//!   window is two whole steps): when a step starts on a pose,
 //!   the grid is shifted a little (at most [`PHASE_SLEW_OF_EARLY`] of the
 //!   early window per step) towards the phase at which poses arrive in the
 //!   middle of the early window. Otherwise a daemon whose poses arrive just
@@ -87,6 +88,12 @@ impl Pacing {
     /// arrived then: moves the grid's phase towards the one at which
     /// poses arrive in the middle of the early window.
     pub fn started_on_pose(&mut self, steps: u64, now_ns: u64) {
+        if self.early_ns < 2 * self.step_ns {
+            // Steps over 1 ms (the window capped below two steps): poses
+            // come several to a step, there is no one phase to follow, and
+            // a wrap of a long step could pass for a stall.
+            return;
+        }
         let target = self.due(steps) as i64 - (self.early_ns / 2) as i64;
         let error = now_ns as i64 - target;
         let slew = (self.early_ns as f64 * PHASE_SLEW_OF_EARLY) as i64;
@@ -329,5 +336,18 @@ mod tests {
         let (t, _, _) = *out.last().unwrap();
         let k = out.len() as u64 - 1;
         assert!((t as i64 - (k * MS) as i64).unsigned_abs() <= 5 * MS / 2);
+    }
+
+    #[test]
+    fn steps_longer_than_a_millisecond_do_not_follow_the_poses() {
+        let mut p = Pacing::new(0, 33 * MS);
+        p.started_on_pose(3, p.earliest(3));
+        assert_eq!(p.phase_ns(), 0);
+        let mut q = Pacing::new(0, MS);
+        q.started_on_pose(3, q.earliest(3));
+        assert!(
+            q.phase_ns() < 0,
+            "a pose at the window's start moves the grid earlier"
+        );
     }
 }

@@ -41,7 +41,8 @@ pub struct RunLoop<'a, B: Backend> {
     sim: B,
     contacts: Tools,
     dt_s: Real,
-    /// The node of every port below, kept as long as they are.
+    /// The node the ports below were made from (they hold their own
+    /// reference to it; kept so that it lives as long as the loop).
     _node: IpcNode,
     poses: PoseIntake,
     force_pub: ForcePublisher,
@@ -341,8 +342,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
     }
 
     /// Real time: the next step starts when it is due, or on a fresh pose
-    /// up to one step earlier; after a stall the missed time is dropped
-    /// (the grid re-anchored to now), never run fast. Headless: no wait.
+    /// up to two steps (at most 2 ms) earlier, the grid's phase following
+    /// the poses' ([`Pacing::started_on_pose`]); after a stall the missed
+    /// time is dropped (the grid re-anchored to now), never run fast.
+    /// Headless: no wait.
     pub fn pace(&mut self) {
         if self.cfg.headless {
             return;

@@ -98,6 +98,9 @@ pub const ONSET_OF_RADIUS: Real = 0.02;
 /// rounding of the distances, so exactly the points that point-by-point
 /// tests would find out of contact are skipped.
 const CLEAR_MARGIN: Real = 1e-9;
+/// ... plus this much (m), for a radius so small that its relative margin
+/// would fall below the rounding of coordinates (~1e-16 m per metre).
+const CLEAR_MARGIN_M: Real = 1e-12;
 
 /// The reported force is the mean over this last part of a step (s): one
 /// period of a 1 kHz haptic loop.
@@ -420,7 +423,9 @@ impl ContactField {
                 .iter()
                 .map(|c| c.distance(centre))
                 .fold(0.0, Real::max);
-            if seg.distance_m(centre) - extent > sweep.radius_m * (1.0 + CLEAR_MARGIN) {
+            if seg.distance_m(centre) - extent
+                > sweep.radius_m * (1.0 + CLEAR_MARGIN) + CLEAR_MARGIN_M
+            {
                 for i in run {
                     self.acting[i] = None;
                     self.penetration_m[i] = 0.0;

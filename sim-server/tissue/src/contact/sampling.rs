@@ -132,10 +132,11 @@ impl Sampler {
                 let d = to.distance2(centre).sqrt();
                 let run = &points[start..end];
                 start = end;
-                if d - radius > keep_m * (1.0 + WHOLE_TRIANGLE_MARGIN) {
+                let margin = keep_m * WHOLE_TRIANGLE_MARGIN + WHOLE_TRIANGLE_MARGIN_M;
+                if d - radius > keep_m + margin {
                     continue;
                 }
-                let all = d + radius < keep_m * (1.0 - WHOLE_TRIANGLE_MARGIN);
+                let all = d + radius < keep_m - margin;
                 for p in run {
                     let inside = all || {
                         let xp = (0..3).fold(Vec3::ZERO, |xp, k| xp + x[k] * p.weights[k]);
@@ -333,6 +334,9 @@ fn step_keep_m(sweep: &PartSweep) -> Real {
 /// than the rounding of the distances, so the points are exactly those
 /// that point-by-point tests take.
 const WHOLE_TRIANGLE_MARGIN: Real = 1e-9;
+/// ... plus this much (m), for a reach so short that its relative margin
+/// would fall below the rounding of coordinates (~1e-16 m per metre).
+const WHOLE_TRIANGLE_MARGIN_M: Real = 1e-12;
 
 /// A segment ready for many distance queries.
 struct SegmentQuery {
