@@ -82,7 +82,7 @@
 //! quasi-static stiffness; it is what a local-model extrapolator needs to
 //! stay stiff enough on contact, not an exact compliance.
 
-mod adjacency;
+pub(crate) mod adjacency;
 mod claims;
 mod config;
 mod decl;
@@ -92,7 +92,7 @@ mod geometry;
 pub mod implicit;
 mod local;
 mod proxy;
-mod reaction;
+pub(crate) mod reaction;
 mod sampling;
 mod selection;
 mod stiffness;

@@ -336,6 +336,31 @@ impl Backend for Hybrid {
     fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
         self.tm.large_strain().map(|l| l.last())
     }
+    /// The tensor-mass part's nonlinear force at `v` (its elements are the
+    /// only nonlinear ones: the precomputed part is refused otherwise). A
+    /// correction is the same in the whole body's terms; a whole force
+    /// covers the tensor-mass elements only, so at a vertex shared with
+    /// the precomputed part that part's force there is added (at a fixed
+    /// one, which the precomputed part does not report, `None`: the
+    /// linear force). Before, a hybrid gave `None` everywhere and a tool
+    /// holding nonlinear tissue felt the linear -(K U).
+    fn nonlinear_force_n(
+        &self,
+        v: VertexId,
+    ) -> Option<crate::tensor_mass::large_strain::VertexForce> {
+        use crate::tensor_mass::large_strain::VertexForce;
+        let l = *self.tm_of.get(v.idx())?;
+        if l == NONE {
+            return None;
+        }
+        match self.tm.nonlinear_force_n(VertexId(l))? {
+            VertexForce::Whole(f) if self.part_of[v.idx()] != NONE => {
+                let i = self.shared_tm.iter().position(|&s| s == l)?;
+                Some(VertexForce::Whole(f + self.f_shared[i]))
+            }
+            force => Some(force),
+        }
+    }
     fn model(&self) -> &ElasticModel {
         &self.full
     }

@@ -314,3 +314,84 @@ fn parts_joined_only_at_fixed_vertices_settle_independently() {
         "{err} m off (scale {scale} m)"
     );
 }
+
+/// A hybrid whose tensor-mass half is StVK, its free end held stretched
+/// by a fifth of the body's length: the held end feels the nonlinear
+/// force (a hybrid gave the linear -(K U) there before), the same as the
+/// tensor-mass part's own view of it, and at the free vertices shared with
+/// the precomputed part the whole elastic force balances once settled
+/// (the precomputed part's share is in it: the StVK elements' alone do
+/// not balance).
+#[test]
+fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
+    use crate::contact::adjacency::Adjacency;
+    use crate::contact::reaction::{elastic_force_n, vertex_force_n};
+    use crate::material::MaterialModel;
+    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let linear = Material::isotropic(5000.0, 0.45, 1000.0, 40.0).unwrap();
+    let n = mesh.tet_count();
+    let plain = ElasticModel::new(mesh.clone(), TetMaterials::uniform(linear, n)).unwrap();
+    let tm_tets = select(&plain, |c| c.x > 0.02);
+    let mut mats = TetMaterials::uniform(linear, n);
+    let stvk = mats.add(linear.with_model(MaterialModel::Stvk)).unwrap();
+    for t in &tm_tets {
+        mats.assign(*t, stvk).unwrap();
+    }
+    let m = ElasticModel::new(mesh, mats).unwrap();
+    let fixed = vertices(&m, |p| p.x < 1e-9);
+    let held = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
+    let dt = 0.9 * element_bound(&m).dt_max_s;
+    let mut sim = Hybrid::new(
+        m.clone(),
+        &fixed,
+        &tm_tets,
+        HybridConfig::new(dt),
+        |_, _| {},
+    )
+    .unwrap();
+    // Pulled out over half a second (an instant 8 mm jump of the end's
+    // vertices would invert the StVK elements there), then held.
+    let stretch = Vec3::new(0.008, 0.0, -0.002);
+    let ramp = (0.5 / sim.dt_s()).ceil() as usize;
+    for k in 1..=ramp {
+        for v in &held {
+            sim.prescribe(*v, stretch * (k as Real / ramp as Real));
+        }
+        sim.step();
+    }
+    settle(&mut sim, 2.0);
+    let adj = Adjacency::new(&m);
+    let felt: Vec3 = held.iter().map(|v| vertex_force_n(&sim, &adj, *v)).sum();
+    let linear_only: Vec3 = held
+        .iter()
+        .map(|v| elastic_force_n(&adj, &m, *v, |w| sim.displacement(w)))
+        .sum();
+    let scale = felt.length();
+    assert!(
+        (felt - linear_only).length() > 0.05 * scale,
+        "nonlinear enough to tell: felt {felt}, linear {linear_only}"
+    );
+    let adj_tm = Adjacency::new(sim.tm.model());
+    let own: Vec3 = held
+        .iter()
+        .map(|v| vertex_force_n(&sim.tm, &adj_tm, VertexId(sim.tm_of[v.idx()])))
+        .sum();
+    assert!(
+        (felt - own).length() < 1e-9 * scale,
+        "felt {felt}, the tensor-mass part's own {own}"
+    );
+    let per_vertex = scale / held.len() as Real;
+    let mut checked = 0;
+    for &l in &sim.shared_tm {
+        let v = sim.tm_vertices[l as usize];
+        let whole = vertex_force_n(&sim, &adj, v);
+        assert!(
+            whole.length() < 0.02 * per_vertex,
+            "shared vertex {v:?} out of balance by {whole} (held vertices carry {per_vertex} N each)"
+        );
+        checked += 1;
+    }
+    assert!(checked > 0);
+}
