@@ -6,11 +6,16 @@
 
 use shared::SessionName;
 use shared::protocol::{ForceMsg, LocalContactMsg, PoseMsg, TelemetryBatch};
+use shared::reaper::Reaper;
 use shared::remote::{Inbox, Link, RemoteError, RemotePublisher};
 use shared::services::{self, Ipc, IpcNode, ServiceError};
 use shared::source::Source;
 use std::sync::Arc;
+use std::time::Duration;
 use thiserror::Error;
+
+/// How often dead peers' resources are removed (shared memory).
+const REAP_EVERY: Duration = Duration::from_millis(20);
 
 /// Force samples a remote daemon's ring holds (64 ms at 1 kHz).
 const REMOTE_FORCE_RING: usize = 64;
@@ -139,8 +144,12 @@ pub struct RemotePorts {
 
 /// The I/O thread's shared-memory ports.
 pub struct ShmPorts {
-    /// The node (dead peers are reaped through it).
-    node: IpcNode,
+    /// The node the ports were made from.
+    _node: IpcNode,
+    /// Removes dead peers' resources every 20 ms on its own thread (the
+    /// listing takes ~0.7 ms, which on this thread delayed the poses that
+    /// came meanwhile).
+    _reaper: Reaper,
     /// Poses.
     pose: iceoryx2::port::publisher::Publisher<Ipc, PoseMsg, ()>,
     /// The simulation's wake-up.
@@ -162,7 +171,8 @@ impl IoPorts {
                     ready: services::pose_ready_notifier(&node, session)?,
                     telemetry: services::publisher(&services::telemetry_service(&node, session)?)?,
                     force: services::force_service(&node, session)?,
-                    node,
+                    _node: node,
+                    _reaper: Reaper::spawn("haptic-daemon-reaper", REAP_EVERY)?,
                 }))
             }
             Transport::Remote(link) => IoPorts::Remote(Box::new(RemotePorts {
@@ -203,10 +213,9 @@ impl IoPorts {
     /// reaping dead peers; zenoh: the bridge's token, gone with the link).
     pub fn sim_alive(&self) -> bool {
         match self {
-            IoPorts::Shm(p) => {
-                services::reap_dead_nodes(&p.node);
-                services::publisher_count(&p.force) > 0
-            }
+            // A dead simulation's publisher leaves the count when the
+            // reaper's next pass removes it.
+            IoPorts::Shm(p) => services::publisher_count(&p.force) > 0,
             IoPorts::Remote(r) => r.link.sim_alive(),
         }
     }
