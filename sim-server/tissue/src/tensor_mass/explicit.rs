@@ -133,6 +133,18 @@ struct PartBuffers {
     spill: Vec<V3>,
 }
 
+/// What a kernel pass reads ([`StepInputs`]) and, borrowed apart from it,
+/// what it writes.
+struct Pass<'a, S: Storage> {
+    inputs: StepInputs<'a>,
+    kernel: &'a Kernel<S>,
+    next: &'a mut [V3],
+    plans: &'a [PartPlan],
+    buffers: &'a mut [PartBuffers],
+    pool: Option<&'a rayon::ThreadPool>,
+    ku_ahead: &'a mut [V3],
+}
+
 /// The explicit tensor-mass simulation, generic over the kernel's storage precision.
 pub struct Explicit<S: Storage> {
     model: ElasticModel,
@@ -550,64 +562,27 @@ impl<S: Storage> Explicit<S> {
         if self.ku_ahead.len() != n {
             self.ku_ahead = huge_vec(n, [0.0; 3]);
         }
-        let Self {
-            kernel,
-            u,
-            next,
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            fnl,
-            buffers,
-            ku_ahead,
-            ..
-        } = self;
-        let inputs = StepInputs {
-            u,
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            fnl,
-        };
-        let b = &mut buffers[0];
+        let pass = self.pass();
+        let b = &mut pass.buffers[0];
         // Every row deferred: K U lands in `ku_ahead`, nothing is integrated
         // and `next` is not written.
-        kernel.run_part(
-            &inputs,
+        pass.kernel.run_part(
+            &pass.inputs,
             Part {
                 start: 0,
                 end: n,
                 deferred_end: n,
                 ring: &mut b.ring,
-                deferred: ku_ahead,
-                next,
+                deferred: pass.ku_ahead,
+                next: pass.next,
                 spill: &mut b.spill,
             },
         );
         self.ku_ready = true;
     }
 
-    fn kernel_step(&mut self) {
-        if std::mem::take(&mut self.ku_ready) {
-            let inputs = StepInputs {
-                u: &self.u,
-                coef: &self.coef,
-                kind: &self.kind,
-                target: &self.target,
-                fext: &self.fext,
-                fmem: &self.fmem,
-                fnl: &self.fnl,
-            };
-            for (i, (ku, next)) in self.ku_ahead.iter().zip(self.next.iter_mut()).enumerate() {
-                inputs.integrate(i, *ku, next);
-            }
-            std::mem::swap(&mut self.u, &mut self.next);
-            return;
-        }
+    /// The step's inputs, borrowed beside what a kernel pass writes.
+    fn pass(&mut self) -> Pass<'_, S> {
         let Self {
             kernel,
             u,
@@ -621,48 +596,77 @@ impl<S: Storage> Explicit<S> {
             plans,
             buffers,
             pool,
+            ku_ahead,
             ..
         } = self;
-        let inputs = StepInputs {
-            u,
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            fnl,
-        };
-        let mut run = || run_parts(kernel, &inputs, plans, 0, next, buffers);
-        match pool {
-            Some(pool) => pool.install(run),
-            None => run(),
+        Pass {
+            inputs: StepInputs {
+                u,
+                coef,
+                kind,
+                target,
+                fext,
+                fmem,
+                fnl,
+            },
+            kernel,
+            next,
+            plans,
+            buffers,
+            pool: pool.as_ref(),
+            ku_ahead,
         }
-        if plans.len() > 1 {
-            // Rows reached across a part boundary: add the spills to their
-            // deferred K U, then finish them.
-            for p in 0..plans.len() {
-                let (before, after) = buffers.split_at_mut(p + 1);
-                let mut q = 0;
-                for (r, s) in before[p].spill.iter_mut().enumerate() {
-                    let row = plans[p].end + r;
-                    while plans[p + 1 + q].end <= row {
-                        q += 1;
+    }
+
+    fn kernel_step(&mut self) {
+        let ahead = std::mem::take(&mut self.ku_ready);
+        let Pass {
+            inputs,
+            kernel,
+            next,
+            plans,
+            buffers,
+            pool,
+            ku_ahead,
+        } = self.pass();
+        if ahead {
+            // K U was computed by `prepare_step`: only integrate.
+            for (i, (ku, next)) in ku_ahead.iter().zip(next.iter_mut()).enumerate() {
+                inputs.integrate(i, *ku, next);
+            }
+        } else {
+            let mut run = || run_parts(kernel, &inputs, plans, 0, next, buffers);
+            match pool {
+                Some(pool) => pool.install(run),
+                None => run(),
+            }
+            if plans.len() > 1 {
+                // Rows reached across a part boundary: add the spills to
+                // their deferred K U, then finish them.
+                for p in 0..plans.len() {
+                    let (before, after) = buffers.split_at_mut(p + 1);
+                    let mut q = 0;
+                    for (r, s) in before[p].spill.iter_mut().enumerate() {
+                        let row = plans[p].end + r;
+                        while plans[p + 1 + q].end <= row {
+                            q += 1;
+                        }
+                        let d = &mut after[q].deferred[row - plans[p + 1 + q].start];
+                        for k in 0..3 {
+                            d[k] += s[k];
+                        }
+                        *s = [0.0; 3];
                     }
-                    let d = &mut after[q].deferred[row - plans[p + 1 + q].start];
-                    for k in 0..3 {
-                        d[k] += s[k];
+                }
+                for (plan, buf) in plans.iter().zip(buffers.iter_mut()).skip(1) {
+                    for (i, d) in (plan.start..plan.deferred_end).zip(buf.deferred.iter_mut()) {
+                        inputs.integrate(i, *d, &mut next[i]);
+                        *d = [0.0; 3];
                     }
-                    *s = [0.0; 3];
                 }
             }
-            for (plan, buf) in plans.iter().zip(buffers.iter_mut()).skip(1) {
-                for (i, d) in (plan.start..plan.deferred_end).zip(buf.deferred.iter_mut()) {
-                    inputs.integrate(i, *d, &mut next[i]);
-                    *d = [0.0; 3];
-                }
-            }
         }
-        std::mem::swap(u, next);
+        std::mem::swap(&mut self.u, &mut self.next);
     }
 
     /// Fixes vertex `v` at its rest position.
