@@ -82,8 +82,6 @@ pub enum IoError {
 pub const DEVICE_STALL_NS: u64 = 250_000_000;
 /// A gap in this thread's own wake-ups that restarts the stall watch (ns).
 const STALL_IO_GAP_NS: u64 = 50_000_000;
-/// How often dead nodes are reaped and the simulation's presence checked (ns).
-const PEER_CHECK_NS: u64 = 20_000_000;
 /// The exit status after a blocked device.
 pub const DEVICE_STALL_EXIT_CODE: i32 = 3;
 
@@ -200,7 +198,6 @@ pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> R
     let mut pose_msgs = 0u64;
     let mut next_seq = 0u64;
     let mut last_wake_ns = shared::monotonic_ns();
-    let mut peers_checked_ns = 0u64;
     let mut watch_from_ns = last_wake_ns;
     loop {
         let done = shared.flags.rt_done.load(Ordering::Acquire);
@@ -277,14 +274,13 @@ pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> R
             );
             std::process::exit(DEVICE_STALL_EXIT_CODE);
         }
-        if now.saturating_sub(peers_checked_ns) >= PEER_CHECK_NS {
-            // Whether anyone publishes forces (dead peers reaped first).
-            peers_checked_ns = now;
-            shared
-                .flags
-                .peer_alive
-                .store(ports.sim_alive(), Ordering::Relaxed);
-        }
+        // Whether anyone publishes forces: an atomic read either way (a
+        // reaper thread removes dead peers' publishers, shared memory; the
+        // bridge's token, zenoh), so at every wake-up.
+        shared
+            .flags
+            .peer_alive
+            .store(ports.sim_alive(), Ordering::Relaxed);
         if done && shared.telemetry.is_empty() {
             break;
         }

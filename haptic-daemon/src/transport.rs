@@ -209,8 +209,10 @@ impl IoPorts {
         }
     }
 
-    /// Whether a simulation publishes force samples (shared memory: after
-    /// reaping dead peers; zenoh: the bridge's token, gone with the link).
+    /// Whether a simulation publishes force samples (shared memory: its
+    /// publisher, which a dead simulation keeps until the reaper's next
+    /// pass, at most 20 ms later; zenoh: the bridge's token, gone with the
+    /// link).
     pub fn sim_alive(&self) -> bool {
         match self {
             // A dead simulation's publisher leaves the count when the

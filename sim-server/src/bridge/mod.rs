@@ -34,8 +34,9 @@ use zenoh::Wait;
 /// The bulk loop's period.
 const BULK_PERIOD: Duration = Duration::from_millis(1);
 
-/// How often peers are checked (dead nodes reaped, the simulation's
-/// presence, remote interest in contact problems, a remote daemon's token).
+/// How often peers are checked (the simulation's presence, remote interest
+/// in contact problems, a remote daemon's token) and dead nodes reaped (on
+/// a reaper thread; a pass also triggers a check).
 const PEER_CHECK: Duration = Duration::from_millis(20);
 
 /// What `sim-server bridge` runs.
@@ -215,7 +216,8 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
     };
     // Dead peers' resources removed off this loop, which carries the force
     // samples (the listing takes ~0.7 ms).
-    let _reaper = shared::reaper::Reaper::spawn("hapsim-bridge-reaper", PEER_CHECK)?;
+    let reaper = shared::reaper::Reaper::spawn("hapsim-bridge-reaper", PEER_CHECK)?;
+    let mut reaped = reaper.passes();
     let start = Instant::now();
     let mut checked = start - PEER_CHECK;
     while !stop.load(Ordering::Relaxed)
@@ -224,8 +226,11 @@ pub fn run(cfg: &BridgeConfig, stop: &AtomicBool) -> Result<BridgeSummary, Bridg
     {
         inbound.wait_and_pump(cfg.poll);
         live.pump();
-        if checked.elapsed() >= PEER_CHECK {
+        // After each reaper pass (a dead simulation's publisher is gone
+        // then), and at least every PEER_CHECK.
+        if checked.elapsed() >= PEER_CHECK || reaper.passes() != reaped {
             checked = Instant::now();
+            reaped = reaper.passes();
             match (live.sim_present(), sim_token.is_some()) {
                 (true, false) => {
                     sim_token = z.liveliness().declare_token(alive_key.clone()).wait().ok();

@@ -117,6 +117,9 @@ pub struct Hybrid {
     /// Shared (free) vertices: tensor-mass local index, and the external
     /// force the scene puts on them.
     shared_tm: Vec<u32>,
+    /// Per tensor-mass local vertex: its index in `shared_tm` (NONE: not
+    /// shared).
+    shared_of_tm: Vec<u32>,
     shared_fext: Vec<Vec3>,
     u: Vec<[Real; 3]>,
     u_shared: Vec<Vec3>,
@@ -255,10 +258,16 @@ impl Hybrid {
             tm_tet[t.idx()] = l as u32;
         }
         let ni = shared.len();
+        let shared_tm: Vec<u32> = shared.iter().map(|v| tm_of[v.idx()]).collect();
+        let mut shared_of_tm = vec![NONE; tm.vertices.len()];
+        for (i, &l) in shared_tm.iter().enumerate() {
+            shared_of_tm[l as usize] = i as u32;
+        }
         Ok(Self {
             tm: explicit,
             part: static_part,
-            shared_tm: shared.iter().map(|v| tm_of[v.idx()]).collect(),
+            shared_tm,
+            shared_of_tm,
             shared_fext: vec![Vec3::ZERO; ni],
             tm_of,
             part_of,
@@ -355,8 +364,11 @@ impl Backend for Hybrid {
         }
         match self.tm.nonlinear_force_n(VertexId(l))? {
             VertexForce::Whole(f) if self.part_of[v.idx()] != NONE => {
-                let i = self.shared_tm.iter().position(|&s| s == l)?;
-                Some(VertexForce::Whole(f + self.f_shared[i]))
+                let i = self.shared_of_tm[l as usize];
+                if i == NONE {
+                    return None;
+                }
+                Some(VertexForce::Whole(f + self.f_shared[i as usize]))
             }
             force => Some(force),
         }
@@ -417,10 +429,10 @@ impl Backend for Hybrid {
             (NONE, NONE) => {}
             (NONE, p) => self.part.set_force(p as usize, f_n),
             (l, NONE) => self.tm.set_external_force(VertexId(l), f_n),
-            (l, _) => match self.shared_tm.iter().position(|&s| s == l) {
-                Some(i) => self.shared_fext[i] = f_n,
+            (l, _) => match self.shared_of_tm[l as usize] {
                 // A fixed shared vertex: the force goes to the support.
-                None => self.tm.set_external_force(VertexId(l), f_n),
+                NONE => self.tm.set_external_force(VertexId(l), f_n),
+                i => self.shared_fext[i as usize] = f_n,
             },
         }
     }
