@@ -395,3 +395,72 @@ fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
     }
     assert!(checked > 0);
 }
+
+/// A tool gripping the vertices where the StVK tensor-mass half meets the
+/// linear precomputed half, pulled out by 6 mm (the free half follows, the
+/// clamped half stretches): once settled, the force on the grip is minus
+/// the support force the whole body's nonlinear static solution reports
+/// there, so the precomputed part's share is in it and right (without it
+/// the StVK half, nearly unloaded, gives almost nothing).
+#[test]
+fn a_grip_on_the_parts_interface_feels_the_whole_body_s_force() {
+    use crate::contact::adjacency::Adjacency;
+    use crate::contact::reaction::vertex_force_n;
+    use crate::material::MaterialModel;
+    use crate::static_newton::{NewtonConfig, solve_static_nonlinear};
+    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let linear = Material::isotropic(5000.0, 0.45, 1000.0, 40.0).unwrap();
+    let n = mesh.tet_count();
+    let plain = ElasticModel::new(mesh.clone(), TetMaterials::uniform(linear, n)).unwrap();
+    let tm_tets = select(&plain, |c| c.x > 0.02);
+    let mut mats = TetMaterials::uniform(linear, n);
+    let stvk = mats.add(linear.with_model(MaterialModel::Stvk)).unwrap();
+    for t in &tm_tets {
+        mats.assign(*t, stvk).unwrap();
+    }
+    let m = ElasticModel::new(mesh, mats).unwrap();
+    let fixed = vertices(&m, |p| p.x < 1e-9);
+    let grip = vertices(&m, |p| (p.x - 0.02).abs() < 1e-9);
+    let pull = Vec3::new(0.006, 0.0, -0.001);
+    let mut bc = Dirichlet::new(m.vertex_count());
+    for v in &fixed {
+        bc.fix(*v);
+    }
+    for v in &grip {
+        bc.prescribe(*v, pull);
+    }
+    let statics = solve_static_nonlinear(
+        &m,
+        &bc,
+        &vec![Vec3::ZERO; m.vertex_count()],
+        NewtonConfig::default(),
+    )
+    .unwrap()
+    .solution;
+    let support: Vec3 = grip.iter().map(|v| statics.force_n[v.idx()]).sum();
+    let dt = 0.9 * element_bound(&m).dt_max_s;
+    let mut sim = Hybrid::new(
+        m.clone(),
+        &fixed,
+        &tm_tets,
+        HybridConfig::new(dt),
+        |_, _| {},
+    )
+    .unwrap();
+    let ramp = (0.5 / sim.dt_s()).ceil() as usize;
+    for k in 1..=ramp {
+        for v in &grip {
+            sim.prescribe(*v, pull * (k as Real / ramp as Real));
+        }
+        sim.step();
+    }
+    settle(&mut sim, 2.0);
+    let adj = Adjacency::new(&m);
+    let felt: Vec3 = grip.iter().map(|v| vertex_force_n(&sim, &adj, *v)).sum();
+    assert!(
+        (felt + support).length() < 0.02 * support.length(),
+        "felt {felt} N against the static support {support} N"
+    );
+}
