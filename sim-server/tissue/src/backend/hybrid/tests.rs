@@ -315,17 +315,9 @@ fn parts_joined_only_at_fixed_vertices_settle_independently() {
     );
 }
 
-/// A hybrid whose tensor-mass half is StVK, its free end held stretched
-/// by a fifth of the body's length: the held end feels the nonlinear
-/// force (a hybrid gave the linear -(K U) there before), the same as the
-/// tensor-mass part's own view of it, and at the free vertices shared with
-/// the precomputed part the whole elastic force balances once settled
-/// (the precomputed part's share is in it: the StVK elements' alone do
-/// not balance).
-#[test]
-fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
-    use crate::contact::adjacency::Adjacency;
-    use crate::contact::reaction::{elastic_force_n, vertex_force_n};
+/// The body with its free half (x > 2 cm) StVK and selected as the
+/// tensor-mass region, the rest linear; the vertices fixed at x = 0.
+fn stvk_half() -> (ElasticModel, Vec<TetId>, Vec<VertexId>) {
     use crate::material::MaterialModel;
     let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
         .generate()
@@ -341,27 +333,46 @@ fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
     }
     let m = ElasticModel::new(mesh, mats).unwrap();
     let fixed = vertices(&m, |p| p.x < 1e-9);
-    let held = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
-    let dt = 0.9 * element_bound(&m).dt_max_s;
-    let mut sim = Hybrid::new(
-        m.clone(),
-        &fixed,
-        &tm_tets,
-        HybridConfig::new(dt),
-        |_, _| {},
-    )
-    .unwrap();
-    // Pulled out over half a second (an instant 8 mm jump of the end's
-    // vertices would invert the StVK elements there), then held.
-    let stretch = Vec3::new(0.008, 0.0, -0.002);
+    (m, tm_tets, fixed)
+}
+
+/// `m` as a hybrid with `held` pulled out by `by` over half a second (a
+/// jump of several millimetres would invert the StVK elements there), then
+/// held for two seconds to settle.
+fn pulled_out(
+    m: &ElasticModel,
+    fixed: &[VertexId],
+    tm_tets: &[TetId],
+    held: &[VertexId],
+    by: Vec3,
+) -> Hybrid {
+    let dt = 0.9 * element_bound(m).dt_max_s;
+    let mut sim = Hybrid::new(m.clone(), fixed, tm_tets, HybridConfig::new(dt), |_, _| {}).unwrap();
     let ramp = (0.5 / sim.dt_s()).ceil() as usize;
     for k in 1..=ramp {
-        for v in &held {
-            sim.prescribe(*v, stretch * (k as Real / ramp as Real));
+        for v in held {
+            sim.prescribe(*v, by * (k as Real / ramp as Real));
         }
         sim.step();
     }
     settle(&mut sim, 2.0);
+    sim
+}
+
+/// A hybrid whose tensor-mass half is StVK, its free end held stretched
+/// by a fifth of the body's length: the held end feels the nonlinear
+/// force (a hybrid gave the linear -(K U) there before), the same as the
+/// tensor-mass part's own view of it, and at the free vertices shared with
+/// the precomputed part the whole elastic force balances once settled
+/// (the precomputed part's share is in it: the StVK elements' alone do
+/// not balance).
+#[test]
+fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
+    use crate::contact::adjacency::Adjacency;
+    use crate::contact::reaction::{elastic_force_n, vertex_force_n};
+    let (m, tm_tets, fixed) = stvk_half();
+    let held = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
+    let sim = pulled_out(&m, &fixed, &tm_tets, &held, Vec3::new(0.008, 0.0, -0.002));
     let adj = Adjacency::new(&m);
     let felt: Vec3 = held.iter().map(|v| vertex_force_n(&sim, &adj, *v)).sum();
     let linear_only: Vec3 = held
@@ -406,22 +417,8 @@ fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
 fn a_grip_on_the_parts_interface_feels_the_whole_body_s_force() {
     use crate::contact::adjacency::Adjacency;
     use crate::contact::reaction::vertex_force_n;
-    use crate::material::MaterialModel;
     use crate::static_newton::{NewtonConfig, solve_static_nonlinear};
-    let mesh = BoxSpec::new(Vec3::from_array(SIZE), CellSize::EdgeM(0.005))
-        .generate()
-        .unwrap();
-    let linear = Material::isotropic(5000.0, 0.45, 1000.0, 40.0).unwrap();
-    let n = mesh.tet_count();
-    let plain = ElasticModel::new(mesh.clone(), TetMaterials::uniform(linear, n)).unwrap();
-    let tm_tets = select(&plain, |c| c.x > 0.02);
-    let mut mats = TetMaterials::uniform(linear, n);
-    let stvk = mats.add(linear.with_model(MaterialModel::Stvk)).unwrap();
-    for t in &tm_tets {
-        mats.assign(*t, stvk).unwrap();
-    }
-    let m = ElasticModel::new(mesh, mats).unwrap();
-    let fixed = vertices(&m, |p| p.x < 1e-9);
+    let (m, tm_tets, fixed) = stvk_half();
     let grip = vertices(&m, |p| (p.x - 0.02).abs() < 1e-9);
     let pull = Vec3::new(0.006, 0.0, -0.001);
     let mut bc = Dirichlet::new(m.vertex_count());
@@ -440,23 +437,7 @@ fn a_grip_on_the_parts_interface_feels_the_whole_body_s_force() {
     .unwrap()
     .solution;
     let support: Vec3 = grip.iter().map(|v| statics.force_n[v.idx()]).sum();
-    let dt = 0.9 * element_bound(&m).dt_max_s;
-    let mut sim = Hybrid::new(
-        m.clone(),
-        &fixed,
-        &tm_tets,
-        HybridConfig::new(dt),
-        |_, _| {},
-    )
-    .unwrap();
-    let ramp = (0.5 / sim.dt_s()).ceil() as usize;
-    for k in 1..=ramp {
-        for v in &grip {
-            sim.prescribe(*v, pull * (k as Real / ramp as Real));
-        }
-        sim.step();
-    }
-    settle(&mut sim, 2.0);
+    let sim = pulled_out(&m, &fixed, &tm_tets, &grip, pull);
     let adj = Adjacency::new(&m);
     let felt: Vec3 = grip.iter().map(|v| vertex_force_n(&sim, &adj, *v)).sum();
     assert!(
