@@ -18,11 +18,10 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, Scalar, abs, add, fma, gradient, lanes, mat, matmul, mul, row_abs, scatter,
-    splat, stress, sub, vec3, zero,
+    L, LaneBlock, M, Scalar, abs, add, fma, gradient, lanes, mat, matmul, mul, raise_live, row_abs,
+    scatter, splat, stress, sub, vec3, zero,
 };
-use super::nonlinear::{ROTATION_MAX_ITER, ROTATION_TOL_RAD};
-use crate::math::Real;
+use super::nonlinear::ROTATION_MAX_ITER;
 
 /// A quaternion per lane: x, y, z, w.
 pub type Q<S, const N: usize> = [L<S, N>; 4];
@@ -204,13 +203,13 @@ fn rotation_step<S: Scalar, const N: usize>(
         select(update, mul(nz, inv), q[2]),
         select(update, mul(nw, inv), q[3]),
     ];
-    mul(update, gt(w, splat(ROTATION_TOL_RAD)))
+    mul(update, gt(w, splat(S::ROTATION_TOL_RAD)))
 }
 
 /// A block of corotational elements' force corrections (whole forces when
 /// `whole`) into `out` (`alive`
-/// masks removed ones), their rotations (lane quaternions) refined in place in `rotation`:
-/// returns the largest tangent bound.
+/// masks removed ones), their rotations (lane quaternions) refined in place in `rotation`,
+/// `bound` raised to the live lanes' tangent bounds.
 #[inline(always)]
 pub fn corotational_block<S: Scalar, const N: usize>(
     b: &LaneBlock<S, N>,
@@ -219,7 +218,8 @@ pub fn corotational_block<S: Scalar, const N: usize>(
     u: &[V3],
     whole: bool,
     out: &mut [[L<S, N>; 3]; 4],
-) -> Real {
+    bound: &mut L<S, N>,
+) {
     let h = gradient(b, alive, u);
     // A local copy the iterations keep in registers, stored back once.
     let mut q = *rotation;
@@ -252,9 +252,6 @@ pub fn corotational_block<S: Scalar, const N: usize>(
     scatter(b, &d, alive, out);
     // The rotated rest tangent plus the rotation's terms (see
     // `large_strain::element`).
-    let bound = fma(mul(splat(2.0), row_abs(&p)), b.geometric, b.rest_lambda);
-    (0..N)
-        .filter(|l| alive[*l])
-        .map(|l| bound[l].real())
-        .fold(0.0, Real::max)
+    let tangent = fma(mul(splat(2.0), row_abs(&p)), b.geometric, b.rest_lambda);
+    raise_live(bound, tangent, alive);
 }

@@ -41,6 +41,14 @@ pub trait Scalar:
     /// 60 steps had passed). A picometre across an element is far below
     /// what f32 resolves of its size; f64 lanes keep every digit.
     const FLUSH_BELOW_M: Real;
+    /// A corotational element's rotation iterations stop after a step
+    /// below this (rad). Newton converges quadratically, so the rotation is
+    /// then accurate to about its square: f64 lanes take the scalar path's
+    /// 1e-6 (1e-12), f32 lanes 1e-4 (1e-8, below what f32 resolves of a
+    /// strain: a rotation error d changes the strain by about d times
+    /// itself). With f64's tolerance the f32 lanes took a second iteration
+    /// nearly every step only to confirm the first.
+    const ROTATION_TOL_RAD: Real;
     /// The smallest positive normal number.
     const MIN_POSITIVE: Self;
     /// Rounds from f64.
@@ -58,9 +66,10 @@ pub trait Scalar:
 }
 
 macro_rules! scalar {
-    ($t:ty, $flush:expr) => {
+    ($t:ty, $flush:expr, $rotation_tol:expr) => {
         impl Scalar for $t {
             const FLUSH_BELOW_M: Real = $flush;
+            const ROTATION_TOL_RAD: Real = $rotation_tol;
             const MIN_POSITIVE: Self = <$t>::MIN_POSITIVE;
             #[inline(always)]
             fn of(x: Real) -> Self {
@@ -89,8 +98,14 @@ macro_rules! scalar {
         }
     };
 }
-scalar!(f64, 0.0);
-scalar!(f32, 1e-12);
+scalar!(f64, 0.0, super::nonlinear::ROTATION_TOL_RAD);
+scalar!(f32, 1e-12, 1e-4);
+
+/// A vertex's force sum `[x, y, z, 0]` (the AVX2 sweep), aligned so that a
+/// 256-bit access never splits a cache line.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(32))]
+pub struct Acc(pub [f64; 4]);
 
 /// N lanes.
 pub type L<S, const N: usize> = [S; N];
@@ -247,6 +262,24 @@ pub fn stress<S: Scalar, const N: usize>(b: &LaneBlock<S, N>, e: &M<S, N>) -> M<
     s
 }
 
+/// `running` raised to `bound` in the live lanes (the pass keeps a lane
+/// vector of the largest bounds and reduces it once, not lane by lane per
+/// block; a NaN bound is dropped, as `Real::max` drops it).
+#[inline(always)]
+pub fn raise_live<S: Scalar, const N: usize>(
+    running: &mut L<S, N>,
+    bound: L<S, N>,
+    alive: [bool; N],
+) {
+    *running = lanes(|i| {
+        if alive[i] {
+            running[i].max(bound[i])
+        } else {
+            running[i]
+        }
+    });
+}
+
 /// Gershgorin's upper bound on the largest eigenvalue (symmetric), lane-wise.
 #[inline(always)]
 pub fn gershgorin<S: Scalar, const N: usize>(m: &M<S, N>) -> L<S, N> {
@@ -291,6 +324,64 @@ pub fn gradient<S: Scalar, const N: usize>(
     alive: [bool; N],
     u: &[V3],
 ) -> M<S, N> {
+    let du = corner_differences(b, alive, u);
+    let mut h = zero();
+    for r in 0..3 {
+        for c in 0..3 {
+            let mut x = splat(0.0);
+            for k in 0..3 {
+                x = fma(du[k][r], b.m[k][c], x);
+            }
+            h[r][c] = x;
+        }
+    }
+    h
+}
+
+/// The eight-f32-lane form of a generic lane type, when it is that
+/// (`S` = f32, `N` = 8): the types are then the same.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub fn as_f32x8<S: Scalar, const N: usize, T, U>(x: &T) -> Option<&U> {
+    (N == 8 && std::any::TypeId::of::<S>() == std::any::TypeId::of::<f32>()).then(|| {
+        debug_assert_eq!(std::mem::size_of::<T>(), std::mem::size_of::<U>());
+        // SAFETY: with S = f32 and N = 8 the caller's T is its U spelled
+        // generically (same type, same layout).
+        unsafe { &*(x as *const T as *const U) }
+    })
+}
+
+/// du[k][c] = u_{k+1}[c] - u_0[c] per live lane (see [`gradient`]): with
+/// AVX2 for eight f32 lanes ([`super::lanes_avx2::corner_differences`],
+/// equal to the bit), else lane by lane.
+#[inline(always)]
+pub(super) fn corner_differences<S: Scalar, const N: usize>(
+    b: &LaneBlock<S, N>,
+    alive: [bool; N],
+    u: &[V3],
+) -> [[L<S, N>; 3]; 3] {
+    #[cfg(target_arch = "x86_64")]
+    if let (Some(vertices), Some(alive8)) = (
+        as_f32x8::<S, N, _, [[u32; 4]; 8]>(&b.vertices),
+        as_f32x8::<S, N, _, [bool; 8]>(&alive),
+    ) && std::arch::is_x86_feature_detected!("avx2")
+    {
+        // SAFETY: AVX2 is present (checked just above).
+        let du = unsafe { super::lanes_avx2::corner_differences(vertices, *alive8, u) };
+        // SAFETY: S = f32 and N = 8 (`as_f32x8` returned them): the same type.
+        return unsafe { std::mem::transmute_copy(&du) };
+    }
+    portable_corner_differences(b, alive, u)
+}
+
+/// [`corner_differences`] lane by lane (every CPU; what the AVX2 form is
+/// tested equal to).
+#[inline(always)]
+pub fn portable_corner_differences<S: Scalar, const N: usize>(
+    b: &LaneBlock<S, N>,
+    alive: [bool; N],
+    u: &[V3],
+) -> [[L<S, N>; 3]; 3] {
     // Written as loops: the closures of a `lanes(|lane| ...)` form were
     // left out of line here (9% of the StVK pass in `perf`).
     let mut du: [[L<S, N>; 3]; 3] = [[[S::default(); N]; 3]; 3];
@@ -317,17 +408,7 @@ pub fn gradient<S: Scalar, const N: usize>(
             });
         }
     }
-    let mut h = zero();
-    for r in 0..3 {
-        for c in 0..3 {
-            let mut x = splat(0.0);
-            for k in 0..3 {
-                x = fma(du[k][r], b.m[k][c], x);
-            }
-            h[r][c] = x;
-        }
-    }
-    h
+    du
 }
 
 /// The nodal forces f_k = -V d m_k (k = 1..3), f_0 = -(f_1 + f_2 + f_3) of

@@ -20,7 +20,11 @@
 use super::corotational_lanes::{Q, corotational_block};
 use super::element::{Geometry, TetElastic};
 use super::kernel::V3;
-use super::lanes::{L, LaneBlock, Scalar};
+#[cfg(target_arch = "x86_64")]
+use super::lanes::as_f32x8;
+use super::lanes::{Acc, L, LaneBlock, Scalar};
+#[cfg(target_arch = "x86_64")]
+use super::lanes_avx2;
 use super::model::ElasticModel;
 use super::nonlinear::{Law, barrier_piola, deformation_gradient, first_piola, in_barrier};
 use super::stvk_lanes::stvk_block;
@@ -344,6 +348,10 @@ struct LaneSet<S: Scalar, const N: usize> {
     /// Per block: the corotational lanes' rotations (x, y, z, w), kept in
     /// lanes between passes (the scalar elements keep theirs as `DQuat`s).
     quats: Vec<Q<S, N>>,
+    /// Per vertex: the sum of its element forces while the AVX2 sweep adds
+    /// them (eight f32 lanes only; empty otherwise).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    acc: Vec<Acc>,
 }
 
 impl<S: Scalar, const N: usize> LaneSet<S, N> {
@@ -355,7 +363,14 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
             [S::default(); N],
             [S::of(1.0); N],
         ];
+        let eight_f32 = N == 8 && std::any::TypeId::of::<S>() == std::any::TypeId::of::<f32>();
+        let vertex_count = elements
+            .iter()
+            .flat_map(|e| e.vertices)
+            .max()
+            .map_or(0, |v| v as usize + 1);
         Self {
+            acc: vec![Acc::default(); if eight_f32 { vertex_count } else { 0 }],
             forces: vec![[[[S::default(); N]; 3]; 4]; blocks.len()],
             quats: vec![identity; blocks.len()],
             blocks,
@@ -383,7 +398,22 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
 
     /// out[v] = the sum of v's element forces (zeroed first for the
     /// `touched` vertices), added in element order.
-    fn add_to_vertices(&self, elements: &[Element], touched: &[u32], out: &mut [V3]) {
+    fn add_to_vertices(&mut self, elements: &[Element], touched: &[u32], out: &mut [V3]) {
+        #[cfg(target_arch = "x86_64")]
+        if N == 8
+            && std::any::TypeId::of::<S>() == std::any::TypeId::of::<f32>()
+            && std::arch::is_x86_feature_detected!("avx2")
+        {
+            // SAFETY: AVX2 is present (checked just above).
+            unsafe { self.add_to_vertices_avx2(elements, touched, out) };
+            return;
+        }
+        self.add_to_vertices_portable(elements, touched, out);
+    }
+
+    /// [`LaneSet::add_to_vertices`] one value at a time (every CPU; what
+    /// the AVX2 sweep is tested equal to).
+    fn add_to_vertices_portable(&self, elements: &[Element], touched: &[u32], out: &mut [V3]) {
         for &v in touched {
             out[v as usize] = [0.0; 3];
         }
@@ -401,6 +431,46 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
                     }
                 }
             }
+        }
+    }
+
+    /// [`LaneSet::add_to_vertices`] for eight f32 lanes: each block's
+    /// forces transposed in registers and added to the aligned per-vertex
+    /// accumulators (`lanes_avx2::add_block`), the same sums to the bit.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn add_to_vertices_avx2(&mut self, elements: &[Element], touched: &[u32], out: &mut [V3]) {
+        let acc = &mut self.acc;
+        for &v in touched {
+            acc[v as usize] = Acc::default();
+        }
+        for (k, (block, f)) in self.blocks.iter().zip(&self.forces).enumerate() {
+            let count = N.min(elements.len() - k * N);
+            match block {
+                Block::Stvk(b) | Block::Corotational(b) => {
+                    let (Some(vertices), Some(f)) = (
+                        as_f32x8::<S, N, _, [[u32; 4]; 8]>(&b.vertices),
+                        as_f32x8::<S, N, _, [[[f32; 8]; 3]; 4]>(f),
+                    ) else {
+                        unreachable!("called for eight f32 lanes only")
+                    };
+                    lanes_avx2::add_block(vertices, count, f, acc);
+                }
+                Block::Scalar => {
+                    for l in 0..count {
+                        for (corner, &v) in elements[k * N + l].vertices.iter().enumerate() {
+                            let o = &mut acc[v as usize].0;
+                            for c in 0..3 {
+                                o[c] += f[corner][c][l].real();
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for &v in touched {
+            let [x, y, z, _] = acc[v as usize].0;
+            out[v as usize] = [x, y, z];
         }
     }
 
@@ -542,6 +612,8 @@ unsafe fn leaf_avx2<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> 
 #[inline(always)]
 fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
     let mut report = PassReport::default();
+    // The lane blocks' largest bounds, reduced once at the end.
+    let mut bound: L<S, N> = [S::default(); N];
     for (k, ((block, forces), q)) in r
         .blocks
         .iter()
@@ -553,15 +625,10 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
         let alive = || std::array::from_fn(|l| r.alive[i + l]);
         match &block {
             Block::Stvk(b) => {
-                let (lambda, collapsed) = stvk_block(b, alive(), u, r.whole, forces);
-                report = report.join(PassReport { lambda, collapsed });
+                report.collapsed += stvk_block(b, alive(), u, r.whole, forces, &mut bound);
             }
             Block::Corotational(b) => {
-                let lambda = corotational_block(b, alive(), q, u, r.whole, forces);
-                report = report.join(PassReport {
-                    lambda,
-                    collapsed: 0,
-                });
+                corotational_block(b, alive(), q, u, r.whole, forces, &mut bound);
             }
             Block::Scalar => {
                 for l in 0..N.min(r.elements.len() - i) {
@@ -581,7 +648,11 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
             }
         }
     }
-    report
+    let lanes = PassReport {
+        lambda: bound.iter().map(|b| b.real()).fold(0.0, Real::max),
+        collapsed: 0,
+    };
+    report.join(lanes)
 }
 
 /// N elements' rest data as lanes.

@@ -542,3 +542,71 @@ fn whole_forces_step_as_the_corrections_do() {
         }
     }
 }
+
+/// The AVX2 data movement of eight f32 lanes (corner differences into
+/// lanes, the lanes' forces summed at the vertices) equals the portable
+/// one to the bit: over a translated body (differences of large
+/// displacements), a removed lane, differences below the flush floor and
+/// a NaN displacement.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn avx2_data_movement_equals_the_portable_one_to_the_bit() {
+    if !std::arch::is_x86_feature_detected!("avx2") {
+        eprintln!("no AVX2 on this CPU: the portable form is the only one");
+        return;
+    }
+    use super::super::lanes::{corner_differences, portable_corner_differences};
+    let model = mixed_block(MaterialModel::Stvk);
+    let mut large = LargeStrain::with_precision(&model, LanePrecision::F32).unwrap();
+    let p = model.mesh().positions_m();
+    let mut u: Vec<V3> = p
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            [
+                0.1 + 0.03 * x.x - 0.2 * x.y * x.z / 0.01,
+                -0.05 + (i % 3) as Real * 1e-13,
+                0.02 * x.z + 1e-4 * (i % 7) as Real,
+            ]
+        })
+        .collect();
+    u[5][1] = Real::NAN;
+    let bits = |du: &[[[f32; 8]; 3]; 3]| du.map(|k| k.map(|c| c.map(f32::to_bits)));
+    let Lanes::F32(set) = &large.lanes else {
+        panic!("f32 lanes")
+    };
+    let mut compared = 0;
+    for (k, block) in set.blocks.iter().enumerate() {
+        let Block::Stvk(b) = block else { continue };
+        for pattern in [
+            [true; 8],
+            [true, false, true, true, false, true, true, true],
+        ] {
+            let alive: [bool; 8] = std::array::from_fn(|l| pattern[l] && large.alive[k * 8 + l]);
+            let fast = corner_differences(b, alive, &u);
+            let portable = portable_corner_differences(b, alive, &u);
+            assert_eq!(bits(&fast), bits(&portable), "block {k}");
+            compared += 1;
+        }
+    }
+    assert!(compared > 4);
+    // The sweep: the pass (AVX2 here) against the portable sum of the same
+    // lanes' forces, NaN included.
+    let mut fast = vec![[0.0; 3]; u.len()];
+    large.pass(&u, &mut fast, 1);
+    let mut portable = vec![[0.0; 3]; u.len()];
+    let Lanes::F32(set) = &large.lanes else {
+        panic!("f32 lanes")
+    };
+    set.add_to_vertices_portable(&large.elements, &large.vertices, &mut portable);
+    let bits = |f: &[V3]| f.iter().map(|v| v.map(Real::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&fast), bits(&portable));
+    assert!(fast.iter().flatten().any(|x| x.is_nan()));
+    assert!(
+        fast.iter()
+            .flatten()
+            .filter(|x| x.is_finite() && **x != 0.0)
+            .count()
+            > 20
+    );
+}

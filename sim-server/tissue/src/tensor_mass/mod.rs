@@ -11,6 +11,8 @@ pub mod explicit;
 pub mod huge_pages;
 pub mod kernel;
 mod lanes;
+#[cfg(target_arch = "x86_64")]
+mod lanes_avx2;
 pub mod large_strain;
 pub mod model;
 pub mod nonlinear;

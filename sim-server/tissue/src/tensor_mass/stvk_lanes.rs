@@ -10,14 +10,14 @@
 
 use super::kernel::V3;
 use super::lanes::{
-    L, LaneBlock, M, Scalar, add, fma, gershgorin, gradient, identity_plus, mat, matmul, max, mul,
-    row_abs, scatter, splat, stress, sub, zero,
+    L, LaneBlock, M, Scalar, add, fma, gershgorin, gradient, identity_plus, lanes, mat, matmul,
+    max, mul, raise_live, row_abs, scatter, splat, stress, sub, zero,
 };
 use super::nonlinear::{STVK_BARRIER_J, STVK_BARRIER_SCALE};
-use crate::math::Real;
 
 /// A block's force corrections (whole forces when `whole`) into `out` (`alive` masks removed
-/// ones): returns (largest tangent bound, elements in the barrier).
+/// ones), `bound` raised to the live lanes' tangent bounds: returns the
+/// number of elements in the barrier.
 #[inline(always)]
 pub fn stvk_block<S: Scalar, const N: usize>(
     b: &LaneBlock<S, N>,
@@ -25,7 +25,8 @@ pub fn stvk_block<S: Scalar, const N: usize>(
     u: &[V3],
     whole: bool,
     out: &mut [[L<S, N>; 3]; 4],
-) -> (Real, usize) {
+    bound: &mut L<S, N>,
+) -> usize {
     let h = gradient(b, alive, u);
     let mut lin = zero();
     let mut quad = zero();
@@ -40,14 +41,18 @@ pub fn stvk_block<S: Scalar, const N: usize>(
             quad[r][c] = mul(splat(0.5), hh);
         }
     }
-    let sq = stress(b, &quad);
-    let sl = stress(b, &lin);
-    let mut s = zero();
-    for r in 0..3 {
-        for c in 0..3 {
-            s[r][c] = add(sl[r][c], sq[r][c]);
-        }
-    }
+    // The stress is linear in the strain: whole forces need only
+    // S = sigma(E); a correction P - sigma_lin keeps sigma(quad) apart (a
+    // small-strain correction is small: not a difference of two large
+    // stresses in f32).
+    let e: M<S, N> = mat(|r, c| add(lin[r][c], quad[r][c]));
+    let (s, sq) = if whole {
+        (stress(b, &e), zero())
+    } else {
+        let sq = stress(b, &quad);
+        let sl = stress(b, &lin);
+        (mat(|r, c| add(sl[r][c], sq[r][c])), sq)
+    };
     let hs = matmul(&h, &s);
     // F = I + H, its determinant and cofactor (columns f2 x f3, f3 x f1, f1 x f2).
     let f = identity_plus(&h);
@@ -80,12 +85,13 @@ pub fn stvk_block<S: Scalar, const N: usize>(
     for r in 0..3 {
         for c in 0..3 {
             let bar = mul(barrier_coef, cof_cols[c][r]);
-            d[r][c] = add(add(hs[r][c], sq[r][c]), bar);
-            if whole {
-                // P = F S + b = sigma_lin + (H S + sigma(quad) + b).
-                d[r][c] = add(d[r][c], sl[r][c]);
-            }
             p[r][c] = add(fs[r][c], bar);
+            // P = F S + b; its correction P - sigma_lin = H S + sigma(quad) + b.
+            d[r][c] = if whole {
+                p[r][c]
+            } else {
+                add(add(hs[r][c], sq[r][c]), bar)
+            };
         }
     }
     // Bound: sigma_max(F)^2 <= gershgorin(I + 2E) times the rest bound,
@@ -93,7 +99,7 @@ pub fn stvk_block<S: Scalar, const N: usize>(
     let mut c2 = zero();
     for r in 0..3 {
         for c in 0..3 {
-            let x = mul(splat(2.0), add(lin[r][c], quad[r][c]));
+            let x = mul(splat(2.0), e[r][c]);
             c2[r][c] = if r == c { add(x, splat(1.0)) } else { x };
         }
     }
@@ -109,13 +115,8 @@ pub fn stvk_block<S: Scalar, const N: usize>(
         mul(mul(splat(4.0), row_abs(&p)), b.geometric),
     );
     scatter(b, &d, alive, out);
-    let mut lambda: Real = 0.0;
-    let mut in_barrier = 0;
-    for lane in (0..N).filter(|l| alive[*l]) {
-        let barrier = gap[lane] > S::default();
-        in_barrier += barrier as usize;
-        let bound = if barrier { inside[lane] } else { outside[lane] };
-        lambda = lambda.max(bound.real());
-    }
-    (lambda, in_barrier)
+    let zero = S::default();
+    let tangent = lanes(|l| if gap[l] > zero { inside[l] } else { outside[l] });
+    raise_live(bound, tangent, alive);
+    (0..N).filter(|l| alive[*l] && gap[*l] > zero).count()
 }
