@@ -283,6 +283,14 @@ impl LargeStrain {
         };
     }
 
+    /// The pass in tasks of one block (on the current pool), so that each
+    /// element's forces stay in their slots for [`LargeStrain::element_forces`]
+    /// (one task adds them to the vertices as they come).
+    #[cfg(test)]
+    fn pass_keeping_element_forces(&mut self, u: &[V3], out: &mut [V3]) {
+        self.pass_in_tasks(u, out, 0);
+    }
+
     /// Element `i`'s rotation (corotational elements; identity otherwise).
     #[cfg(test)]
     fn rotation(&self, i: usize) -> DQuat {
@@ -299,7 +307,7 @@ impl LargeStrain {
         (0..self.len()).map(|i| self.rotation(i)).collect()
     }
 
-    /// Element `i`'s four corner forces of the last pass (N).
+    /// Element `i`'s four corner forces of the last pass in tasks (N).
     #[cfg(test)]
     fn element_forces(&self, i: usize) -> [V3; 4] {
         match &self.lanes {
@@ -501,10 +509,26 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
             alive,
             rotations,
             blocks: &self.blocks,
-            forces: &mut self.forces,
             quats: &mut self.quats,
         };
-        let report = element_range(range, u, min);
+        #[cfg(target_arch = "x86_64")]
+        if elements.len() <= min
+            && !self.acc.is_empty()
+            && std::arch::is_x86_feature_detected!("avx2")
+        {
+            // One task of eight f32 lanes: forces added as they come.
+            for &v in touched {
+                self.acc[v as usize] = Acc::default();
+            }
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            let report = unsafe { leaf_avx2(range, u, &mut AddTo(&mut self.acc)) };
+            for &v in touched {
+                let [x, y, z, _] = self.acc[v as usize].0;
+                out[v as usize] = [x, y, z];
+            }
+            return report;
+        }
+        let report = element_range(range, &mut self.forces, u, min);
         self.add_to_vertices(elements, touched, out);
         report
     }
@@ -533,8 +557,8 @@ impl<S: Scalar, const N: usize> Block<S, N> {
     }
 }
 
-/// A contiguous range of whole blocks: their elements, blocks, forces and
-/// lane rotations, and the scalar elements' rotations.
+/// A contiguous range of whole blocks: their elements, blocks and lane
+/// rotations, and the scalar elements' rotations.
 struct Range<'a, S: Scalar, const N: usize> {
     /// Whole forces (P), not corrections (P - sigma_lin).
     whole: bool,
@@ -542,7 +566,6 @@ struct Range<'a, S: Scalar, const N: usize> {
     alive: &'a [bool],
     rotations: &'a mut [DQuat],
     blocks: &'a [Block<S, N>],
-    forces: &'a mut [BlockForces<S, N>],
     quats: &'a mut [Q<S, N>],
 }
 
@@ -550,6 +573,7 @@ struct Range<'a, S: Scalar, const N: usize> {
 /// down to `min`.
 fn element_range<S: Scalar, const N: usize>(
     r: Range<'_, S, N>,
+    forces: &mut [BlockForces<S, N>],
     u: &[V3],
     min: usize,
 ) -> PassReport {
@@ -560,7 +584,7 @@ fn element_range<S: Scalar, const N: usize>(
         let (la, lb) = r.alive.split_at(mid);
         let (ra, rb) = r.rotations.split_at_mut(mid);
         let (ba, bb) = r.blocks.split_at(half_blocks);
-        let (fa, fb) = r.forces.split_at_mut(half_blocks);
+        let (fa, fb) = forces.split_at_mut(half_blocks);
         let (qa, qb) = r.quats.split_at_mut(half_blocks);
         let (a, b) = rayon::join(
             || {
@@ -570,10 +594,9 @@ fn element_range<S: Scalar, const N: usize>(
                     alive: la,
                     rotations: ra,
                     blocks: ba,
-                    forces: fa,
                     quats: qa,
                 };
-                element_range(range, u, min)
+                element_range(range, fa, u, min)
             },
             || {
                 let range = Range {
@@ -582,27 +605,69 @@ fn element_range<S: Scalar, const N: usize>(
                     alive: lb,
                     rotations: rb,
                     blocks: bb,
-                    forces: fb,
                     quats: qb,
                 };
-                element_range(range, u, min)
+                element_range(range, fb, u, min)
             },
         );
         return a.join(b);
     }
+    let mut sink = Store(forces);
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { leaf_avx2(r, u) };
+        return unsafe { leaf_avx2(r, u, &mut sink) };
     }
-    leaf(r, u)
+    leaf(r, u, &mut sink)
 }
 
 /// [`leaf`] compiled for AVX2 (the lanes become one 256-bit operation).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn leaf_avx2<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
-    leaf(r, u)
+unsafe fn leaf_avx2<S: Scalar, const N: usize, K: Sink<S, N>>(
+    r: Range<'_, S, N>,
+    u: &[V3],
+    sink: &mut K,
+) -> PassReport {
+    leaf(r, u, sink)
+}
+
+/// Where a leaf puts each block's corner forces.
+trait Sink<S: Scalar, const N: usize> {
+    /// Block `k` of the leaf's range: `count` elements at `vertices`.
+    fn take(&mut self, k: usize, vertices: &[[u32; 4]; N], count: usize, f: &BlockForces<S, N>);
+}
+
+/// Into the per-block force slots (tasks on several threads; the sweep
+/// adds them up afterwards).
+struct Store<'a, S: Scalar, const N: usize>(&'a mut [BlockForces<S, N>]);
+
+impl<S: Scalar, const N: usize> Sink<S, N> for Store<'_, S, N> {
+    #[inline(always)]
+    fn take(&mut self, k: usize, _: &[[u32; 4]; N], _: usize, f: &BlockForces<S, N>) {
+        self.0[k] = *f;
+    }
+}
+
+/// Straight onto the vertices' accumulators, in element order (one task
+/// of eight f32 lanes with AVX2: the forces never go through memory; at
+/// 1M tetrahedra the slots were 96 of the pass's ~240 bytes an element).
+#[cfg(target_arch = "x86_64")]
+struct AddTo<'a>(&'a mut [Acc]);
+
+#[cfg(target_arch = "x86_64")]
+impl<S: Scalar, const N: usize> Sink<S, N> for AddTo<'_> {
+    #[inline(always)]
+    fn take(&mut self, _: usize, vertices: &[[u32; 4]; N], count: usize, f: &BlockForces<S, N>) {
+        let (Some(vertices), Some(f)) = (
+            as_f32x8::<S, N, _, [[u32; 4]; 8]>(vertices),
+            as_f32x8::<S, N, _, [[[f32; 8]; 3]; 4]>(f),
+        ) else {
+            unreachable!("used for eight f32 lanes only")
+        };
+        // SAFETY: used inside the AVX2 leaf only (the CPU has AVX2).
+        unsafe { lanes_avx2::add_block(vertices, count, f, self.0) };
+    }
 }
 
 /// One task's blocks: N StVK or N corotational elements as lanes, the
@@ -610,28 +675,31 @@ unsafe fn leaf_avx2<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> 
 // A scalar block's element l indexes four parallel buffers and a lane.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
+fn leaf<S: Scalar, const N: usize, K: Sink<S, N>>(
+    r: Range<'_, S, N>,
+    u: &[V3],
+    sink: &mut K,
+) -> PassReport {
     let mut report = PassReport::default();
     // The lane blocks' largest bounds, reduced once at the end.
     let mut bound: L<S, N> = [S::default(); N];
-    for (k, ((block, forces), q)) in r
-        .blocks
-        .iter()
-        .zip(r.forces.iter_mut())
-        .zip(r.quats.iter_mut())
-        .enumerate()
-    {
+    for (k, (block, q)) in r.blocks.iter().zip(r.quats.iter_mut()).enumerate() {
         let i = k * N;
         let alive = || std::array::from_fn(|l| r.alive[i + l]);
+        let mut forces: BlockForces<S, N> = [[[S::default(); N]; 3]; 4];
+        let count = N.min(r.elements.len() - i);
         match &block {
             Block::Stvk(b) => {
-                report.collapsed += stvk_block(b, alive(), u, r.whole, forces, &mut bound);
+                report.collapsed += stvk_block(b, alive(), u, r.whole, &mut forces, &mut bound);
+                sink.take(k, &b.vertices, count, &forces);
             }
             Block::Corotational(b) => {
-                corotational_block(b, alive(), q, u, r.whole, forces, &mut bound);
+                corotational_block(b, alive(), q, u, r.whole, &mut forces, &mut bound);
+                sink.take(k, &b.vertices, count, &forces);
             }
             Block::Scalar => {
-                for l in 0..N.min(r.elements.len() - i) {
+                let mut vertices = [[0; 4]; N];
+                for l in 0..count {
                     let mut f = [[0.0; 3]; 4];
                     if r.alive[i + l] {
                         let e = element(
@@ -643,8 +711,10 @@ fn leaf<S: Scalar, const N: usize>(r: Range<'_, S, N>, u: &[V3]) -> PassReport {
                         );
                         report = report.join(e);
                     }
-                    store_lane(forces, l, &f);
+                    store_lane(&mut forces, l, &f);
+                    vertices[l] = r.elements[i + l].vertices;
                 }
+                sink.take(k, &vertices, count, &forces);
             }
         }
     }

@@ -215,7 +215,7 @@ fn vertex_sums_equal_the_scalar_forces_summed() {
                     );
                 }
             }
-            let zero = large
+            let zero = split
                 .element_forces(removed)
                 .iter()
                 .flatten()
@@ -253,7 +253,7 @@ fn stvk_lanes_equal_the_scalar_path(precision: LanePrecision) {
             })
             .collect();
         let mut out = vec![[0.0; 3]; u.len()];
-        large.pass(&u, &mut out, 1);
+        large.pass_keeping_element_forces(&u, &mut out);
         let reference = scalar_forces(&large, &u, &large.rotations());
         let scale = force_scale(&large, &u, &reference);
         let mut lambda: Real = 0.0;
@@ -324,7 +324,7 @@ fn corotational_lanes_equal(precision: LanePrecision) {
     ] {
         let before = large.rotations();
         let mut out = vec![[0.0; 3]; u.len()];
-        large.pass(&u, &mut out, 1);
+        large.pass_keeping_element_forces(&u, &mut out);
         let mut lambda: Real = 0.0;
         let scale = match precision {
             LanePrecision::F64 => (0..large.len())
@@ -426,8 +426,8 @@ fn whole_forces_are_the_corrections_plus_the_linear_forces() {
                 .map(|x| [0.3 * x.y + 0.05 * x.z, -0.2 * x.x, 0.15 * x.x * x.y / 0.01])
                 .collect();
             let mut out = vec![[0.0; 3]; u.len()];
-            corrections.pass_in_tasks(&u, &mut out, usize::MAX);
-            whole.pass_in_tasks(&u, &mut out, usize::MAX);
+            corrections.pass_keeping_element_forces(&u, &mut out);
+            whole.pass_keeping_element_forces(&u, &mut out);
             let lin: Vec<[V3; 4]> = whole
                 .elements
                 .iter()
@@ -590,10 +590,13 @@ fn avx2_data_movement_equals_the_portable_one_to_the_bit() {
         }
     }
     assert!(compared > 4);
-    // The sweep: the pass (AVX2 here) against the portable sum of the same
-    // lanes' forces, NaN included.
+    // The sweep: the pass in tasks (the AVX2 sweep of the slots) and in one
+    // task (each block added as it comes) against the portable sum of the
+    // same lanes' forces, NaN included.
+    let mut one_task = vec![[0.0; 3]; u.len()];
+    large.clone().pass(&u, &mut one_task, 1);
     let mut fast = vec![[0.0; 3]; u.len()];
-    large.pass(&u, &mut fast, 1);
+    large.pass_keeping_element_forces(&u, &mut fast);
     let mut portable = vec![[0.0; 3]; u.len()];
     let Lanes::F32(set) = &large.lanes else {
         panic!("f32 lanes")
@@ -601,6 +604,7 @@ fn avx2_data_movement_equals_the_portable_one_to_the_bit() {
     set.add_to_vertices_portable(&large.elements, &large.vertices, &mut portable);
     let bits = |f: &[V3]| f.iter().map(|v| v.map(Real::to_bits)).collect::<Vec<_>>();
     assert_eq!(bits(&fast), bits(&portable));
+    assert_eq!(bits(&one_task), bits(&portable));
     assert!(fast.iter().flatten().any(|x| x.is_nan()));
     assert!(
         fast.iter()
