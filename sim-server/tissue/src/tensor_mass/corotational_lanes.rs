@@ -104,6 +104,12 @@ fn select<S: Scalar, const N: usize>(mask: L<S, N>, a: L<S, N>, b: L<S, N>) -> L
     lanes(|i| if mask[i] != S::default() { a[i] } else { b[i] })
 }
 
+/// Whether every lane of a mask is set.
+#[inline(always)]
+fn all<S: Scalar, const N: usize>(mask: L<S, N>) -> bool {
+    mask.iter().all(|m| *m != S::default())
+}
+
 /// Whether any lane of a mask is set.
 #[inline(always)]
 fn any<S: Scalar, const N: usize>(mask: L<S, N>) -> bool {
@@ -168,24 +174,28 @@ fn rotation_step<S: Scalar, const N: usize>(
     );
     let one = S::of(1.0);
     let inv_det = select(pd, lanes(|i| one / det[i]), splat(0.0));
-    let mueller = lanes(|i| one / (tr[i].abs() + S::of(1e-12)));
-    let omega = vec3(|r| {
-        let newton = mul(
+    let mut omega = vec3(|r| {
+        mul(
             inv_det,
             fma(
                 adj[r][0],
                 axial[0],
                 fma(adj[r][1], axial[1], mul(adj[r][2], axial[2])),
             ),
-        );
-        select(pd, newton, mul(axial[r], mueller))
+        )
     });
+    // Mueller et al.'s step where Newton's matrix is not safely positive
+    // definite: rare (large rotations from a cold start), so its division
+    // only when a lane needs it.
+    if !all(pd) {
+        let mueller = lanes(|i| one / (tr[i].abs() + S::of(1e-12)));
+        omega = vec3(|r| select(pd, omega[r], mul(axial[r], mueller)));
+    }
     let w2 = fma(
         omega[0],
         omega[0],
         fma(omega[1], omega[1], mul(omega[2], omega[2])),
     );
-    let w: L<S, N> = lanes(|i| w2[i].sqrt());
     // q * (omega / 2, 1), normalised.
     let [hx, hy, hz] = omega.map(|o| mul(half, o));
     let [x, y, z, qw] = *q;
@@ -196,14 +206,18 @@ fn rotation_step<S: Scalar, const N: usize>(
     let n2 = fma(nx, nx, fma(ny, ny, fma(nz, nz, mul(nw, nw))));
     let inv = lanes(|i| one / n2[i].sqrt());
     // A NaN stops a lane before its update, as in the scalar loop.
-    let update = mul(active, not_nan(w));
+    let update = mul(active, not_nan(w2));
     *q = [
         select(update, mul(nx, inv), q[0]),
         select(update, mul(ny, inv), q[1]),
         select(update, mul(nz, inv), q[2]),
         select(update, mul(nw, inv), q[3]),
     ];
-    mul(update, gt(w, splat(S::ROTATION_TOL_RAD)))
+    // |omega| > tol, compared squared (no square root).
+    mul(
+        update,
+        gt(w2, splat(S::ROTATION_TOL_RAD * S::ROTATION_TOL_RAD)),
+    )
 }
 
 /// A block of corotational elements' force corrections (whole forces when
@@ -239,9 +253,17 @@ pub fn corotational_block<S: Scalar, const N: usize>(
     let half = splat(0.5);
     let lin: M<S, N> = mat(|i, j| mul(half, add(h[i][j], h[j][i])));
     let turned: M<S, N> = mat(|i, j| mul(half, add(g[i][j], g[j][i])));
-    let sl = stress(b, &lin);
-    let st = stress(b, &turned);
-    let rot: M<S, N> = mat(|i, j| add(sl[i][j], st[i][j]));
+    // The stress is linear in the strain: whole forces need only
+    // sigma_rot = sigma(sym H + sym G); a correction keeps sigma(sym G)
+    // apart (small, not a difference of two larger stresses in f32).
+    let (rot, st) = if whole {
+        let strain: M<S, N> = mat(|i, j| add(lin[i][j], turned[i][j]));
+        (stress(b, &strain), zero())
+    } else {
+        let sl = stress(b, &lin);
+        let st = stress(b, &turned);
+        (mat(|i, j| add(sl[i][j], st[i][j])), st)
+    };
     let rmi_rot = matmul(&rmi, &rot);
     let p: M<S, N> = mat(|i, j| add(rot[i][j], rmi_rot[i][j]));
     let d: M<S, N> = if whole {
