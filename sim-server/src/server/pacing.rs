@@ -32,7 +32,10 @@
 //!   real-time rate (simulated time ahead of wall time by at most the early
 //!   window plus half a step): a pose stream slightly slower or faster than
 //!   the grid makes it wrap now and then, one step without a fresh pose or
-//!   two poses in one step.
+//!   two poses in one step. Poses faster than three to every four steps
+//!   (a 2-4 kHz device against 1 ms steps; the period estimated from their
+//!   sequence numbers and device times) are not followed: one is waiting
+//!   whenever the window opens.
 //! - After a stall (the process stopped, a long step) the loop does not
 //!   fast-forward through the missed steps: when the next step is more than
 //!   `bound_ns` (two steps or 5 ms, whichever is larger) overdue,
@@ -58,6 +61,11 @@ pub struct Pacing {
     early_ns: u64,
     /// The grid's shift towards the poses' phase (ns), within half a step.
     phase_ns: i64,
+    /// The poses' period (ns), estimated from their sequence numbers and
+    /// device times (0 until two have been seen).
+    pose_period_ns: u64,
+    /// The last pose seen: (sequence number, device time in ns).
+    last_pose: Option<(u64, u64)>,
     dropped_ns: u64,
     stalls: u64,
 }
@@ -73,6 +81,8 @@ impl Pacing {
             bound_ns: (2 * step_ns).max(MIN_STALL_BOUND_NS),
             early_ns: (2 * step_ns).min(MAX_EARLY_NS),
             phase_ns: 0,
+            pose_period_ns: 0,
+            last_pose: None,
             dropped_ns: 0,
             stalls: 0,
         }
@@ -84,6 +94,25 @@ impl Pacing {
             .saturating_add_signed(self.phase_ns)
     }
 
+    /// A fresh pose: its sequence number and device time (ns). Sequence
+    /// numbers that skip (the loop sees one pose a step of a faster stream)
+    /// divide the time between the two; the estimate is a moving average
+    /// (1/8 of each new interval).
+    pub fn observe_pose(&mut self, seq: u64, t_ns: u64) {
+        if let Some((seq0, t0)) = self.last_pose
+            && seq > seq0
+            && t_ns > t0
+        {
+            let interval = (t_ns - t0) / (seq - seq0);
+            self.pose_period_ns = if self.pose_period_ns == 0 {
+                interval
+            } else {
+                (7 * self.pose_period_ns + interval) / 8
+            };
+        }
+        self.last_pose = Some((seq, t_ns));
+    }
+
     /// The step after `steps` steps starts at `now_ns` on a pose that
     /// arrived then: moves the grid's phase towards the one at which
     /// poses arrive in the middle of the early window.
@@ -92,6 +121,16 @@ impl Pacing {
             // Steps over 1 ms (the window capped below two steps): poses
             // come several to a step, there is no one phase to follow, and
             // a wrap of a long step could pass for a stall.
+            return;
+        }
+        if self.pose_period_ns > 0 && 4 * self.pose_period_ns < 3 * self.step_ns {
+            // Poses several to a step (a 2-4 kHz device against 1 ms
+            // steps): a fresh pose is waiting whenever the window opens, so
+            // every step starts at the opening and no phase of the grid
+            // makes the poses wait less on average (half a pose period).
+            // Followed, the first pose in the window always looked early,
+            // the phase drifted on and wrapped every few tens of steps,
+            // each wrap a step lost.
             return;
         }
         let target = self.due(steps) as i64 - (self.early_ns / 2) as i64;
@@ -252,6 +291,20 @@ mod tests {
         jitter_ns: &[u64],
         end_ns: u64,
     ) -> (Vec<(u64, bool, u64)>, Pacing) {
+        let (out, p, _) = with_poses_traced(step_ns, cost_ns, pose_ns, first_ns, jitter_ns, end_ns);
+        (out, p)
+    }
+
+    /// [`with_poses`], and the phase after each step.
+    fn with_poses_traced(
+        step_ns: u64,
+        cost_ns: u64,
+        pose_ns: u64,
+        first_ns: u64,
+        jitter_ns: &[u64],
+        end_ns: u64,
+    ) -> (Vec<(u64, bool, u64)>, Pacing, Vec<i64>) {
+        let mut phases = Vec::new();
         let mut p = Pacing::new(0, step_ns);
         let (mut now, mut steps, mut next_pose) = (0, 0u64, 0u64);
         let arrival = |j: u64| first_ns + j * pose_ns + jitter_ns[j as usize % jitter_ns.len()];
@@ -266,7 +319,12 @@ mod tests {
                 (due.max(now), false)
             };
             let mut waited = 0;
+            // The newest pose that arrived by the start is the one taken.
+            while arrival(next_pose + 1) <= start {
+                next_pose += 1;
+            }
             if on_pose {
+                p.observe_pose(next_pose, arrival(next_pose));
                 p.started_on_pose(steps, start);
                 waited = start - arrival(next_pose);
             }
@@ -274,11 +332,12 @@ mod tests {
                 next_pose += 1;
             }
             out.push((start, on_pose, waited));
+            phases.push(p.phase_ns());
             now = start + cost_ns;
             steps += 1;
             p.catch_up(steps, now);
         }
-        (out, p)
+        (out, p, phases)
     }
 
     #[test]
@@ -336,6 +395,53 @@ mod tests {
         let (t, _, _) = *out.last().unwrap();
         let k = out.len() as u64 - 1;
         assert!((t as i64 - (k * MS) as i64).unsigned_abs() <= 5 * MS / 2);
+    }
+
+    #[test]
+    fn poses_faster_than_the_steps_hold_the_phase_still() {
+        // A 2 or 4 kHz device (omega, Falcon) against 1 ms steps, jittered:
+        // several poses to a step, not followed. Followed, the first pose
+        // in the window always looked early, the phase drifted on and
+        // wrapped every few tens of steps (a step lost each time).
+        for pose_ns in [MS / 2, MS / 4] {
+            let jitter = [0, 60_000, 20_000, 90_000, 40_000];
+            let jitter: Vec<u64> = jitter.iter().map(|j| j * pose_ns / MS).collect();
+            let (out, p, phases) =
+                with_poses_traced(MS, 150_000, pose_ns, 123_000, &jitter, 3000 * MS);
+            let settled = 500..out.len();
+            let wraps = phases[settled.clone()]
+                .windows(2)
+                .filter(|w| (w[1] - w[0]).unsigned_abs() > MS / 4)
+                .count();
+            assert_eq!(wraps, 0, "poses every {pose_ns} ns: the phase wrapped");
+            assert!(
+                out[settled]
+                    .iter()
+                    .all(|(_, on_pose, waited)| *on_pose && *waited < pose_ns),
+                "poses every {pose_ns} ns: every step starts on a pose younger than a period"
+            );
+            let (t, _, _) = *out.last().unwrap();
+            let k = out.len() as u64 - 1;
+            assert!((t as i64 - (k * MS) as i64).unsigned_abs() <= 5 * MS / 2);
+            assert_eq!(p.stalls(), 0);
+        }
+    }
+
+    #[test]
+    fn the_pose_period_comes_from_sequence_numbers_and_device_times() {
+        let mut p = Pacing::new(0, MS);
+        p.observe_pose(10, 5 * MS);
+        assert_eq!(p.pose_period_ns, 0, "one pose: no period yet");
+        // Two poses in a millisecond (the loop saw every other one).
+        p.observe_pose(12, 6 * MS);
+        assert_eq!(p.pose_period_ns, MS / 2);
+        // The same pose again, then a restarted daemon: no interval.
+        p.observe_pose(12, 7 * MS);
+        p.observe_pose(3, 8 * MS);
+        assert_eq!(p.pose_period_ns, MS / 2);
+        // Four in a millisecond: an eighth of the way there.
+        p.observe_pose(7, 9 * MS);
+        assert_eq!(p.pose_period_ns, (7 * (MS / 2) + MS / 4) / 8);
     }
 
     #[test]

@@ -177,6 +177,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             && self.last_pose_seq != Some(p.seq)
         {
             self.last_pose_seq = Some(p.seq);
+            self.pacing.observe_pose(p.seq, p.t_ns);
             self.pose_wait_times
                 .record(self.woke_ns.saturating_sub(p.t_ns));
         }
