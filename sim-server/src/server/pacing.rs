@@ -32,10 +32,11 @@
 //!   real-time rate (simulated time ahead of wall time by at most the early
 //!   window plus half a step): a pose stream slightly slower or faster than
 //!   the grid makes it wrap now and then, one step without a fresh pose or
-//!   two poses in one step. Poses faster than three to every four steps
+//!   two poses in one step. Poses more than four to every three steps
 //!   (a 2-4 kHz device against 1 ms steps; the period estimated from their
-//!   sequence numbers and device times) are not followed: one is waiting
-//!   whenever the window opens.
+//!   sequence numbers and device times) have one waiting whenever the
+//!   window opens: the phase then follows the age of the pose each step
+//!   takes instead ([`Pacing::observe_pose`]).
 //! - After a stall (the process stopped, a long step) the loop does not
 //!   fast-forward through the missed steps: when the next step is more than
 //!   `bound_ns` (two steps or 5 ms, whichever is larger) overdue,
@@ -66,6 +67,9 @@ pub struct Pacing {
     pose_period_ns: u64,
     /// The last pose seen: (sequence number, device time in ns).
     last_pose: Option<(u64, u64)>,
+    /// Device read to step start of a pose that woke the waiting loop
+    /// (ns, a moving average): the transport, without a wait.
+    transport_ns: Option<u64>,
     dropped_ns: u64,
     stalls: u64,
 }
@@ -83,6 +87,7 @@ impl Pacing {
             phase_ns: 0,
             pose_period_ns: 0,
             last_pose: None,
+            transport_ns: None,
             dropped_ns: 0,
             stalls: 0,
         }
@@ -94,11 +99,14 @@ impl Pacing {
             .saturating_add_signed(self.phase_ns)
     }
 
-    /// A fresh pose: its sequence number and device time (ns). Sequence
-    /// numbers that skip (the loop sees one pose a step of a faster stream)
-    /// divide the time between the two; the estimate is a moving average
-    /// (1/8 of each new interval).
-    pub fn observe_pose(&mut self, seq: u64, t_ns: u64) {
+    /// A fresh pose taken by a step that started at `start_ns`: its
+    /// sequence number and device time (ns). Estimates the poses' period
+    /// (sequence numbers that skip, as when the loop takes one pose a step
+    /// of a faster stream, divide the time between the two; a moving
+    /// average, 1/8 of each new interval) and, when poses come several to
+    /// a step, moves the grid's phase so that the window opens just after
+    /// one arrives (see [`Pacing::several_to_a_step`]).
+    pub fn observe_pose(&mut self, seq: u64, t_ns: u64, start_ns: u64, on_arrival: bool) {
         if let Some((seq0, t0)) = self.last_pose
             && seq > seq0
             && t_ns > t0
@@ -111,6 +119,54 @@ impl Pacing {
             };
         }
         self.last_pose = Some((seq, t_ns));
+        let age_ns = start_ns.saturating_sub(t_ns);
+        if on_arrival {
+            // A pose that woke the waiting loop: its age is the transport
+            // alone (a moving average, 1/8 of each).
+            self.transport_ns = Some(self.transport_ns.map_or(age_ns, |t| (7 * t + age_ns) / 8));
+        } else if self.several_to_a_step() && self.early_ns >= 2 * self.step_ns {
+            self.follow_fresh_pose(age_ns);
+        }
+    }
+
+    /// Whether poses come more than four to every three steps (a 2-4 kHz
+    /// device against 1 ms steps). A pose is then waiting whenever the
+    /// window opens and every step starts at the opening: the phase is set
+    /// by the age of the pose it takes (device read to step start), not by
+    /// when a pose arrived in the window. Followed as at one pose a step,
+    /// the first pose in the window always looked early, the phase drifted
+    /// on and wrapped every few tens of steps, a step lost each time.
+    fn several_to_a_step(&self) -> bool {
+        self.pose_period_ns > 0 && 4 * self.pose_period_ns < 3 * self.step_ns
+    }
+
+    /// Poses several to a step: moves the window's opening towards just
+    /// after the newest pose arrived. `age_ns` (device read to step start)
+    /// is the transport (`transport_ns`, measured on poses that woke the
+    /// waiting loop, never on these: a reference taken from the ages being
+    /// steered, such as their minimum, moves with them and the lock ran
+    /// away) plus the pose's wait for the opening; the error is the wait
+    /// beyond an eighth of a period (room for jitter), taken modulo a
+    /// period within half a period either way: a window that opens just
+    /// before a pose arrives takes the one before it, a period older,
+    /// which is the same phase error, so the lock settles instead of
+    /// drifting. Without a transport yet, the phase stays.
+    fn follow_fresh_pose(&mut self, age_ns: u64) {
+        let Some(transport) = self.transport_ns else {
+            return;
+        };
+        let period = self.pose_period_ns as i64;
+        let wait = age_ns as i64 - transport as i64;
+        let error = (wait - period / 8 + period / 2).rem_euclid(period) - period / 2;
+        let slew = (self.early_ns as f64 * PHASE_SLEW_OF_EARLY) as i64;
+        // Waited too long: the opening moves earlier, towards the arrival.
+        self.shift_phase(-(error / 8).clamp(-slew, slew));
+    }
+
+    /// Moves the phase by `by_ns`, modulo a step within half a step.
+    fn shift_phase(&mut self, by_ns: i64) {
+        let (step, half) = (self.step_ns as i64, (self.step_ns / 2) as i64);
+        self.phase_ns = (self.phase_ns + by_ns + half).rem_euclid(step) - half;
     }
 
     /// The step after `steps` steps starts at `now_ns` on a pose that
@@ -123,14 +179,8 @@ impl Pacing {
             // a wrap of a long step could pass for a stall.
             return;
         }
-        if self.pose_period_ns > 0 && 4 * self.pose_period_ns < 3 * self.step_ns {
-            // Poses several to a step (a 2-4 kHz device against 1 ms
-            // steps): a fresh pose is waiting whenever the window opens, so
-            // every step starts at the opening and no phase of the grid
-            // makes the poses wait less on average (half a pose period).
-            // Followed, the first pose in the window always looked early,
-            // the phase drifted on and wrapped every few tens of steps,
-            // each wrap a step lost.
+        if self.several_to_a_step() {
+            // Followed by the poses' age instead (`observe_pose`).
             return;
         }
         let target = self.due(steps) as i64 - (self.early_ns / 2) as i64;
@@ -142,9 +192,7 @@ impl Pacing {
         // costs one step without a fresh pose; a phase held at a bound
         // instead left them arriving at the window's edge, a third of them
         // waiting ~0.45 ms for it to open (measured on the liver).
-        let (step, half) = (self.step_ns as i64, (self.step_ns / 2) as i64);
-        let moved = self.phase_ns + (error / 8).clamp(-slew, slew);
-        self.phase_ns = (moved + half).rem_euclid(step) - half;
+        self.shift_phase((error / 8).clamp(-slew, slew));
     }
 
     /// The grid's current shift towards the poses' phase (ns).
@@ -319,13 +367,16 @@ mod tests {
                 (due.max(now), false)
             };
             let mut waited = 0;
+            // The loop was waiting in the window when the pose came.
+            let on_arrival = on_pose && arrival(next_pose) >= now.max(earliest);
             // The newest pose that arrived by the start is the one taken.
             while arrival(next_pose + 1) <= start {
                 next_pose += 1;
             }
             if on_pose {
-                p.observe_pose(next_pose, arrival(next_pose));
                 p.started_on_pose(steps, start);
+                // Read on the device 50 us before it arrives.
+                p.observe_pose(next_pose, arrival(next_pose) - 50_000, start, on_arrival);
                 waited = start - arrival(next_pose);
             }
             while arrival(next_pose) <= start {
@@ -400,9 +451,10 @@ mod tests {
     #[test]
     fn poses_faster_than_the_steps_hold_the_phase_still() {
         // A 2 or 4 kHz device (omega, Falcon) against 1 ms steps, jittered:
-        // several poses to a step, not followed. Followed, the first pose
-        // in the window always looked early, the phase drifted on and
-        // wrapped every few tens of steps (a step lost each time).
+        // several poses to a step, followed by the age of the pose taken.
+        // Followed as one pose a step, the first pose in the window always
+        // looked early, the phase drifted on and wrapped every few tens of
+        // steps (a step lost each time).
         for pose_ns in [MS / 2, MS / 4] {
             let jitter = [0, 60_000, 20_000, 90_000, 40_000];
             let jitter: Vec<u64> = jitter.iter().map(|j| j * pose_ns / MS).collect();
@@ -414,11 +466,15 @@ mod tests {
                 .filter(|w| (w[1] - w[0]).unsigned_abs() > MS / 4)
                 .count();
             assert_eq!(wraps, 0, "poses every {pose_ns} ns: the phase wrapped");
+            // Each step takes a pose that waited at most an eighth of a
+            // period beyond its jitter (the lock's margin) for the window.
+            let max_jitter = jitter.iter().max().unwrap();
+            let longest = out[settled.clone()].iter().map(|o| o.2).max();
             assert!(
                 out[settled]
                     .iter()
-                    .all(|(_, on_pose, waited)| *on_pose && *waited < pose_ns),
-                "poses every {pose_ns} ns: every step starts on a pose younger than a period"
+                    .all(|(_, on_pose, waited)| *on_pose && *waited <= pose_ns / 8 + max_jitter),
+                "poses every {pose_ns} ns: longest wait {longest:?}"
             );
             let (t, _, _) = *out.last().unwrap();
             let k = out.len() as u64 - 1;
@@ -430,17 +486,17 @@ mod tests {
     #[test]
     fn the_pose_period_comes_from_sequence_numbers_and_device_times() {
         let mut p = Pacing::new(0, MS);
-        p.observe_pose(10, 5 * MS);
+        p.observe_pose(10, 5 * MS, 5 * MS, true);
         assert_eq!(p.pose_period_ns, 0, "one pose: no period yet");
         // Two poses in a millisecond (the loop saw every other one).
-        p.observe_pose(12, 6 * MS);
+        p.observe_pose(12, 6 * MS, 6 * MS, true);
         assert_eq!(p.pose_period_ns, MS / 2);
         // The same pose again, then a restarted daemon: no interval.
-        p.observe_pose(12, 7 * MS);
-        p.observe_pose(3, 8 * MS);
+        p.observe_pose(12, 7 * MS, 7 * MS, true);
+        p.observe_pose(3, 8 * MS, 8 * MS, true);
         assert_eq!(p.pose_period_ns, MS / 2);
         // Four in a millisecond: an eighth of the way there.
-        p.observe_pose(7, 9 * MS);
+        p.observe_pose(7, 9 * MS, 9 * MS, true);
         assert_eq!(p.pose_period_ns, (7 * (MS / 2) + MS / 4) / 8);
     }
 

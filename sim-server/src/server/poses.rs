@@ -32,8 +32,13 @@ pub fn is_fresh(pose_t_ns: u64, now_ns: u64, timeout_ns: u64) -> bool {
 pub enum WaitEnd {
     /// The step was due.
     Due,
-    /// A pose arrived inside the early window.
-    Pose,
+    /// A pose is waiting inside the early window: `on_arrival` when it
+    /// came while the loop waited in the window (its age is then the
+    /// transport alone), not before the window opened.
+    Pose {
+        /// It woke the waiting loop.
+        on_arrival: bool,
+    },
     /// Stop requested.
     Stop,
 }
@@ -131,6 +136,8 @@ impl PoseIntake {
     /// Waits until `due_ns`, or from `earliest_ns` on until a pose is
     /// waiting (it then steps on it at once), or until `stop` is set.
     pub fn wait(&self, earliest_ns: u64, due_ns: u64, stop: &AtomicBool) -> WaitEnd {
+        // Whether the last wait ended on a notification inside the window.
+        let mut woken_in_window = false;
         loop {
             if stop.load(Ordering::Relaxed) {
                 return WaitEnd::Stop;
@@ -140,7 +147,9 @@ impl PoseIntake {
                 return WaitEnd::Due;
             }
             if now >= earliest_ns && self.subscriber.has_samples().unwrap_or(false) {
-                return WaitEnd::Pose;
+                return WaitEnd::Pose {
+                    on_arrival: woken_in_window,
+                };
             }
             let until = if now < earliest_ns {
                 earliest_ns
@@ -155,6 +164,7 @@ impl PoseIntake {
                 .listener
                 .as_ref()
                 .is_some_and(|l| services::wait_notified(l, left));
+            woken_in_window = notified && now >= earliest_ns;
             if !notified {
                 let now = monotonic_ns();
                 if now < until {

@@ -53,6 +53,8 @@ pub struct RunLoop<'a, B: Backend> {
     step_times: StepHistogram,
     /// From the loop's wake-up to its force sample sent.
     turnaround_times: StepHistogram,
+    /// Whether the pose this step started on woke the waiting loop.
+    pose_on_arrival: bool,
     /// From a new pose's device read to the loop's wake-up for it.
     pose_wait_times: StepHistogram,
     /// The last pose taken (its seq), to time only new ones.
@@ -142,6 +144,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             summary,
             step_times: StepHistogram::new(),
             turnaround_times: StepHistogram::new(),
+            pose_on_arrival: false,
             pose_wait_times: StepHistogram::new(),
             last_pose_seq: None,
             woke_ns: 0,
@@ -177,7 +180,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             && self.last_pose_seq != Some(p.seq)
         {
             self.last_pose_seq = Some(p.seq);
-            self.pacing.observe_pose(p.seq, p.t_ns);
+            self.pacing
+                .observe_pose(p.seq, p.t_ns, self.woke_ns, self.pose_on_arrival);
             self.pose_wait_times
                 .record(self.woke_ns.saturating_sub(p.t_ns));
         }
@@ -378,8 +382,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 due
             };
             match self.poses.wait(earliest, until, &self.stop) {
-                WaitEnd::Pose => {
+                WaitEnd::Pose { on_arrival } => {
                     self.summary.steps_on_pose += 1;
+                    self.pose_on_arrival = on_arrival;
                     self.pacing.started_on_pose(steps, monotonic_ns());
                     break;
                 }
