@@ -112,11 +112,15 @@ impl Pacing {
             && t_ns > t0
         {
             let interval = (t_ns - t0) / (seq - seq0);
-            self.pose_period_ns = if self.pose_period_ns == 0 {
-                interval
-            } else {
-                (7 * self.pose_period_ns + interval) / 8
-            };
+            // A gap longer than a stall bound (a paused publisher, a bad
+            // device time) says nothing about the period.
+            if interval <= self.bound_ns {
+                self.pose_period_ns = if self.pose_period_ns == 0 {
+                    interval
+                } else {
+                    (7 * self.pose_period_ns + interval) / 8
+                };
+            }
         }
         self.last_pose = Some((seq, t_ns));
         let age_ns = start_ns.saturating_sub(t_ns);
@@ -150,7 +154,12 @@ impl Pacing {
     /// period within half a period either way: a window that opens just
     /// before a pose arrives takes the one before it, a period older,
     /// which is the same phase error, so the lock settles instead of
-    /// drifting. Without a transport yet, the phase stays.
+    /// drifting. Once locked, poses seldom wake the loop, so the transport
+    /// is mostly the one measured before (at start-up, while the loop
+    /// caught up; re-measured after a stall): a path that became slower by
+    /// most of a period since would leave the window opening just before
+    /// arrivals. Without a transport (no pose-ready notifications), the
+    /// phase stays.
     fn follow_fresh_pose(&mut self, age_ns: u64) {
         let Some(transport) = self.transport_ns else {
             return;
@@ -218,6 +227,8 @@ impl Pacing {
         self.anchor_ns = now_ns;
         self.anchor_step = steps;
         self.phase_ns = 0;
+        // The path may have changed with whatever stalled.
+        self.transport_ns = None;
         self.dropped_ns += behind;
         self.stalls += 1;
         Some(behind)
@@ -329,8 +340,9 @@ mod tests {
     /// A loop of steps costing `cost_ns` with poses every `pose_ns` from
     /// `first_ns`, each late by a jitter cycling through `jitter_ns`: the
     /// loop waits for the due time or, from the earliest, a pose that has
-    /// arrived and was not used yet. Returns, per step, (start, whether it
-    /// started on a pose, how long its pose had waited), and the pacing.
+    /// arrived and was not used yet, and takes the newest. Returns, per
+    /// step, (start, whether it started on a pose, how long the pose it
+    /// took had waited), and the pacing.
     fn with_poses(
         step_ns: u64,
         cost_ns: u64,

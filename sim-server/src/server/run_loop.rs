@@ -182,6 +182,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             self.last_pose_seq = Some(p.seq);
             self.pacing
                 .observe_pose(p.seq, p.t_ns, self.woke_ns, self.pose_on_arrival);
+            // Told once: a step that starts on the clock next has none.
+            self.pose_on_arrival = false;
             self.pose_wait_times
                 .record(self.woke_ns.saturating_sub(p.t_ns));
         }
@@ -389,7 +391,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                     break;
                 }
                 WaitEnd::Due if until < due => self.local_out.publish_ready(&mut self.contacts),
-                WaitEnd::Due | WaitEnd::Stop => break,
+                WaitEnd::Due | WaitEnd::Stop => {
+                    self.pose_on_arrival = false;
+                    break;
+                }
             }
         }
     }

@@ -339,14 +339,15 @@ pub fn gradient<S: Scalar, const N: usize>(
 }
 
 /// The eight-f32-lane form of a generic lane type, when it is that
-/// (`S` = f32, `N` = 8): the types are then the same.
+/// (`S` = f32, `N` = 8): `x` as `U` when `T` is `U` (the generic spelling
+/// of the concrete type), else `None`.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub fn as_f32x8<S: Scalar, const N: usize, T, U>(x: &T) -> Option<&U> {
-    (N == 8 && std::any::TypeId::of::<S>() == std::any::TypeId::of::<f32>()).then(|| {
-        debug_assert_eq!(std::mem::size_of::<T>(), std::mem::size_of::<U>());
-        // SAFETY: with S = f32 and N = 8 the caller's T is its U spelled
-        // generically (same type, same layout).
+pub fn as_f32x8<S: Scalar, const N: usize, T: 'static, U: 'static>(x: &T) -> Option<&U> {
+    use std::any::TypeId;
+    let eight_f32 = N == 8 && TypeId::of::<S>() == TypeId::of::<f32>();
+    (eight_f32 && TypeId::of::<T>() == TypeId::of::<U>()).then(|| {
+        // SAFETY: T and U are the same type (their TypeIds are equal).
         unsafe { &*(x as *const T as *const U) }
     })
 }

@@ -9,13 +9,16 @@
 //! nonlinear force and its linear one, -V (P - sigma_lin) m_k. When every
 //! element is nonlinear and the tensors hold nothing else, the kernel
 //! carries no tensors and the pass computes the whole force, -V P m_k
-//! ([`LargeStrain::computing_whole_forces`]). The pass writes each
-//! element's four forces to its own slots (threads own element ranges, no
-//! atomics), then one sequential sweep adds the slots to their vertices in
-//! element order: every vertex sums its forces in the same order whatever
-//! the thread count, and the sweep reads the slots as they lie in memory
-//! (a per-vertex gather read them across the array and, past the cache at
-//! 1M tetrahedra, cost more than the elements).
+//! ([`LargeStrain::computing_whole_forces`]). On several threads the pass
+//! writes each element's four forces to its own slots (threads own element
+//! ranges, no atomics), then one sequential sweep adds the slots to their
+//! vertices in element order: every vertex sums its forces in the same
+//! order whatever the thread count, and the sweep reads the slots as they
+//! lie in memory (a per-vertex gather read them across the array and, past
+//! the cache at 1M tetrahedra, cost more than the elements). One task of
+//! eight f32 lanes on an AVX2 CPU skips the slots: each block's forces go
+//! straight to per-vertex accumulators in the same order (the same sums
+//! to the bit; `lanes_avx2`).
 
 use super::corotational_lanes::{Q, corotational_block};
 use super::element::{Geometry, TetElastic};
@@ -243,11 +246,16 @@ impl LargeStrain {
     /// Bytes the pass streams: the blocks' rest data, forces and rotations
     /// (besides the displacements and vertex forces the step counts).
     pub fn bytes(&self) -> usize {
+        // Eight f32 lanes in one task skip the force slots (counted as
+        // such: on several threads they are written and read again).
         fn of<S: Scalar, const N: usize>(set: &LaneSet<S, N>) -> usize {
+            let slots = if set.acc.is_empty() {
+                std::mem::size_of::<BlockForces<S, N>>()
+            } else {
+                0
+            };
             set.blocks.len()
-                * (std::mem::size_of::<Block<S, N>>()
-                    + std::mem::size_of::<BlockForces<S, N>>()
-                    + std::mem::size_of::<Q<S, N>>())
+                * (std::mem::size_of::<Block<S, N>>() + slots + std::mem::size_of::<Q<S, N>>())
         }
         match &self.lanes {
             Lanes::F64(set) => of(set),
@@ -345,9 +353,10 @@ fn store_lane<S: Scalar, const N: usize>(block: &mut BlockForces<S, N>, l: usize
     }
 }
 
-/// The elements as blocks of N lanes, their forces block by block (the
-/// pass stores each block's forces with a few vector writes; the sweep
-/// reads them in the same order) and the corotational blocks' rotations.
+/// The elements as blocks of N lanes, their forces block by block (a pass
+/// in tasks stores each block's forces with a few vector writes; the sweep
+/// reads them in the same order; one task of eight f32 lanes adds them to
+/// `acc` instead) and the corotational blocks' rotations.
 #[derive(Clone, Debug)]
 struct LaneSet<S: Scalar, const N: usize> {
     /// Block k holds elements kN..(k+1)N (a last, short block is scalar).
