@@ -16,6 +16,8 @@ pub struct StepPercentiles {
     pub count: u64,
     /// Median.
     pub p50: f64,
+    /// 90th percentile.
+    pub p90: f64,
     /// 99th percentile.
     pub p99: f64,
     /// 99.9th percentile.
@@ -102,6 +104,7 @@ impl StepHistogram {
         StepPercentiles {
             count: self.count,
             p50: self.quantile_ns(0.5) * 1e-3,
+            p90: self.quantile_ns(0.9) * 1e-3,
             p99: self.quantile_ns(0.99) * 1e-3,
             p999: self.quantile_ns(0.999) * 1e-3,
             max: self.max_ns as f64 * 1e-3,

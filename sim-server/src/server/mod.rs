@@ -121,6 +121,11 @@ pub struct RunSummary {
     /// to its force sample sent (us): pose intake and the tools' update,
     /// the step, the sample; the simulation's share of device -> force.
     pub turnaround_us: StepPercentiles,
+    /// The contact stiffness's hand-over after each sample (us; a
+    /// snapshot for the stiffness solver and a contact problem's sampling
+    /// every few steps, nearly nothing otherwise): work that ran inside
+    /// the step, before the sample, until 2026-11-26.
+    pub hand_over_us: StepPercentiles,
     /// From a pose's device read (its `t_ns`) to the loop waking for the
     /// step that takes it, over the steps that took a new pose: the pose's
     /// transport plus the loop's wake-up, or the step in progress it waited

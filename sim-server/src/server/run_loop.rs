@@ -53,6 +53,7 @@ pub struct RunLoop<'a, B: Backend> {
     step_times: StepHistogram,
     /// From the loop's wake-up to its force sample sent.
     turnaround_times: StepHistogram,
+    hand_over_times: StepHistogram,
     /// Whether the pose this step started on woke the waiting loop.
     pose_on_arrival: bool,
     /// From a new pose's device read to the loop's wake-up for it.
@@ -83,10 +84,12 @@ impl<'a, B: Backend> RunLoop<'a, B> {
     ) -> Result<Self, RunError> {
         let Prepared {
             sim,
-            tools: contacts,
+            tools: mut contacts,
             dt_s,
             original_vertex_ids,
         } = prepared;
+        // The stiffness hand-over after the force sample, not before it.
+        contacts.hand_over_after_sample(true);
         if cfg.status {
             announce(&sim);
         }
@@ -144,6 +147,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             summary,
             step_times: StepHistogram::new(),
             turnaround_times: StepHistogram::new(),
+            hand_over_times: StepHistogram::new(),
             pose_on_arrival: false,
             pose_wait_times: StepHistogram::new(),
             last_pose_seq: None,
@@ -290,6 +294,14 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         s.samples_published += 1;
         self.turnaround_times
             .record(monotonic_ns().saturating_sub(self.woke_ns));
+        // The contact stiffness's hand-over, left by the step until the
+        // sample was out (`Tools::hand_over_after_sample`); timed as the
+        // step's, where it ran before.
+        let t0 = monotonic_ns();
+        self.contacts.hand_over(&self.sim);
+        let t1 = monotonic_ns();
+        s.step_s += (t1 - t0) as Real * 1e-9;
+        self.hand_over_times.record(t1 - t0);
         // After the force sample: the problem reaches the daemon later
         // than the force it explains, never before.
         self.local_out.after_sample(
@@ -413,6 +425,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.pose_timeouts = self.poses.timeouts;
         summary.step_us = self.step_times.percentiles_us();
         summary.turnaround_us = self.turnaround_times.percentiles_us();
+        summary.hand_over_us = self.hand_over_times.percentiles_us();
         summary.pose_wait_us = self.pose_wait_times.percentiles_us();
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();

@@ -93,6 +93,11 @@ pub struct Tools {
     local: LocalScratch,
     /// Steps taken.
     steps: u64,
+    /// The stiffness hand-over waits for [`Tools::hand_over`] instead of
+    /// ending [`Tools::step`] (see [`Tools::hand_over_after_sample`]).
+    deferred_hand_over: bool,
+    /// Simulated time since the last hand-over (s), while deferred.
+    hand_over_due_s: Real,
 }
 
 /// Which contact problem [`Tools::set_local_contact`] makes.
@@ -366,6 +371,8 @@ impl Tools {
                 ..Default::default()
             },
             steps: 0,
+            deferred_hand_over: false,
+            hand_over_due_s: 0.0,
         }
     }
 
@@ -403,9 +410,40 @@ impl Tools {
             r.contact = t.after_step(&self.field, &mut self.mark);
         }
         self.steps += 1;
+        if self.deferred_hand_over {
+            self.hand_over_due_s += sim.dt_s();
+        } else {
+            self.hand_over_since(sim, sim.dt_s());
+        }
+        &self.reports
+    }
+
+    /// Has [`Tools::step`] leave the contact stiffness's hand-over (the
+    /// snapshot of the contact set for the stiffness solver, a contact
+    /// problem's sampling, taking the solver's results) to
+    /// [`Tools::hand_over`], which a live loop calls once the step's force
+    /// sample is out: on the liver one step in four hands over, 50-100 us
+    /// that delayed that step's force. The sample then carries the
+    /// stiffness received a step earlier (it is a few steps old anyway: the
+    /// solver works on snapshots every [`super::stiffness_thread::HAND_OVER_EVERY_S`]).
+    pub fn hand_over_after_sample(&mut self, deferred: bool) {
+        self.deferred_hand_over = deferred;
+    }
+
+    /// The hand-over [`Tools::step`] left (see
+    /// [`Tools::hand_over_after_sample`]); nothing when none is pending.
+    pub fn hand_over<B: Backend + ?Sized>(&mut self, sim: &B) {
+        if self.deferred_hand_over && self.hand_over_due_s > 0.0 {
+            let since_s = std::mem::take(&mut self.hand_over_due_s);
+            self.hand_over_since(sim, since_s);
+        }
+    }
+
+    /// The stiffness hand-over after `since_s` of simulated time.
+    fn hand_over_since<B: Backend + ?Sized>(&mut self, sim: &B, since_s: Real) {
         if let Some(k) = &mut self.stiffness {
             let spec = self.local.spec;
-            self.local.since_s += sim.dt_s();
+            self.local.since_s += since_s;
             let due = spec.is_some_and(|s| self.local.since_s >= s.every_s);
             let mut made = false;
             let mut ctx = self.sampler.as_mut().map(|sampler| LocalSampling {
@@ -429,7 +467,7 @@ impl Tools {
                 sim.model(),
                 &self.field,
                 self.stiffness_n_per_m.len(),
-                sim.dt_s(),
+                since_s,
                 wanted.then_some(&mut make as &mut dyn FnMut(&mut LocalContact) -> bool),
             );
             if made {
@@ -439,7 +477,6 @@ impl Tools {
                 *out = k.stiffness(i);
             }
         }
-        &self.reports
     }
 
     /// Where the contact stiffness is computed (see [`StiffnessSolves`];
