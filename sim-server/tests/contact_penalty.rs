@@ -468,3 +468,50 @@ fn implicit_springs_add_no_sub_steps_and_settle_to_the_explicit_springs_force() 
         "settled: implicit {implicit}, explicit {explicit}"
     );
 }
+
+/// The live loop hands the contact stiffness over after its force sample
+/// (`Tools::hand_over_after_sample`): the same forces, each sample's
+/// stiffness the one the in-step hand-over gave a step earlier, and zero at
+/// once when nothing touches any more (the protocol's rule).
+#[test]
+fn a_deferred_hand_over_gives_the_stiffness_a_step_late_and_zero_at_once_on_release() {
+    let tip_in = Vec3::new(0.02, 0.01, TOP_M + 0.0025 - 0.003);
+    let tip_out = Vec3::new(0.02, 0.01, TOP_M + 0.02);
+    let mut in_step = scene("hook", "");
+    let mut deferred = scene("hook", "");
+    deferred.tools.hand_over_after_sample(true);
+    let mut previous = Mat3::ZERO;
+    let (mut touching_steps, mut released_steps) = (0, 0);
+    // The proxy brings the tool in from its fulcrum (13 cm above) first.
+    for i in 0..600 {
+        let tip = if i < 400 { tip_in } else { tip_out };
+        let f = step(&mut in_step, tip, 1.0);
+        let g = step(&mut deferred, tip, 1.0);
+        assert_eq!(f, g, "step {i}: the hand-over changed the force");
+        let k = in_step.tools.reaction(0, &in_step.sim).stiffness_n_per_m;
+        let late = deferred.tools.reaction(0, &deferred.sim).stiffness_n_per_m;
+        let touching = in_step
+            .tools
+            .field()
+            .penetrations_m()
+            .iter()
+            .any(|d| *d > 0.0);
+        if touching {
+            touching_steps += 1;
+            assert_eq!(
+                late, previous,
+                "step {i}: not the stiffness of a step earlier"
+            );
+        } else {
+            released_steps += (i > 400) as usize;
+            assert_eq!(late, Mat3::ZERO, "step {i}: stiffness without contact");
+        }
+        deferred.tools.hand_over(&deferred.sim);
+        previous = k;
+    }
+    assert!(
+        touching_steps > 100 && released_steps > 100,
+        "{touching_steps} steps in contact, {released_steps} released"
+    );
+    assert!(previous == Mat3::ZERO);
+}

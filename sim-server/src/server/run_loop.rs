@@ -295,8 +295,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         self.turnaround_times
             .record(monotonic_ns().saturating_sub(self.woke_ns));
         // The contact stiffness's hand-over, left by the step until the
-        // sample was out (`Tools::hand_over_after_sample`); timed as the
-        // step's, where it ran before.
+        // sample was out (`Tools::hand_over_after_sample`); its time counts
+        // in `step_s` (contact_fraction compares as before), not in
+        // `step_us` (its own `hand_over_us`).
         let t0 = monotonic_ns();
         self.contacts.hand_over(&self.sim);
         let t1 = monotonic_ns();
