@@ -1,5 +1,7 @@
 //! The nonlinear pass's lanes (four f64, eight f32) against the scalar path.
 
+use super::super::lanes::LaneBlock;
+use super::lane_set::block;
 use super::*;
 use crate::material::{Elasticity, Isotropic, Material, Terms, TransverselyIsotropic};
 use crate::material_map::TetMaterials;
