@@ -337,6 +337,15 @@ mod tests {
         assert_eq!(slow.earliest(1), 31 * MS);
     }
 
+    /// Real time: simulated time (a step each, 1 ms steps) within the
+    /// early window (two steps) and half a step of the last start.
+    fn assert_real_time(out: &[(u64, bool, u64)]) {
+        let (t, _, _) = *out.last().unwrap();
+        let k = out.len() as u64 - 1;
+        let lag = t as i64 - (k * MS) as i64;
+        assert!(lag.unsigned_abs() <= 5 * MS / 2, "{k} steps by {t} ns");
+    }
+
     /// A loop of steps costing `cost_ns` with poses every `pose_ns` from
     /// `first_ns`, each late by a jitter cycling through `jitter_ns`: the
     /// loop waits for the due time or, from the earliest, a pose that has
@@ -420,9 +429,7 @@ mod tests {
         assert!(p.phase_ns().unsigned_abs() <= MS / 2);
         // Real time: simulated time within the early window (two steps)
         // and half a step of wall time.
-        let (t, _, _) = *out.last().unwrap();
-        let k = out.len() as u64 - 1;
-        assert!((t as i64 - (k * MS) as i64).unsigned_abs() <= 5 * MS / 2);
+        assert_real_time(&out);
         assert_eq!(p.stalls(), 0);
     }
 
@@ -455,9 +462,7 @@ mod tests {
             "{waited} of {} poses waited over 0.1 ms",
             on_pose.len()
         );
-        let (t, _, _) = *out.last().unwrap();
-        let k = out.len() as u64 - 1;
-        assert!((t as i64 - (k * MS) as i64).unsigned_abs() <= 5 * MS / 2);
+        assert_real_time(&out);
     }
 
     #[test]
@@ -488,9 +493,7 @@ mod tests {
                     .all(|(_, on_pose, waited)| *on_pose && *waited <= pose_ns / 8 + max_jitter),
                 "poses every {pose_ns} ns: longest wait {longest:?}"
             );
-            let (t, _, _) = *out.last().unwrap();
-            let k = out.len() as u64 - 1;
-            assert!((t as i64 - (k * MS) as i64).unsigned_abs() <= 5 * MS / 2);
+            assert_real_time(&out);
             assert_eq!(p.stalls(), 0);
         }
     }

@@ -19,18 +19,10 @@
 //! round to f32, flush below [`Scalar::FLUSH_BELOW_M`]; widen, add in element
 //! order), so the results are the same to the bit (tested).
 
+use super::avx2::load3;
 use super::kernel::V3;
 use super::lanes::{Acc, Scalar};
 use std::arch::x86_64::*;
-
-/// `[x, y, z, 0]` of a vertex, without reading past it.
-#[inline]
-#[target_feature(enable = "avx2")]
-fn load3(v: &V3) -> __m256d {
-    // SAFETY: the mask reads v[0], v[1] and v[2] only; a masked-off lane
-    // never faults.
-    unsafe { _mm256_maskload_pd(v.as_ptr(), _mm256_set_epi64x(0, -1, -1, -1)) }
-}
 
 /// Eight `[a, b, c, _]` (lane l in `rows[l]`) as three vectors of eight:
 /// all the a's, all the b's, all the c's.
