@@ -351,21 +351,8 @@ mod tests {
     /// loop waits for the due time or, from the earliest, a pose that has
     /// arrived and was not used yet, and takes the newest. Returns, per
     /// step, (start, whether it started on a pose, how long the pose it
-    /// took had waited), and the pacing.
+    /// took had waited), the pacing, and the phase after each step.
     fn with_poses(
-        step_ns: u64,
-        cost_ns: u64,
-        pose_ns: u64,
-        first_ns: u64,
-        jitter_ns: &[u64],
-        end_ns: u64,
-    ) -> (Vec<(u64, bool, u64)>, Pacing) {
-        let (out, p, _) = with_poses_traced(step_ns, cost_ns, pose_ns, first_ns, jitter_ns, end_ns);
-        (out, p)
-    }
-
-    /// [`with_poses`], and the phase after each step.
-    fn with_poses_traced(
         step_ns: u64,
         cost_ns: u64,
         pose_ns: u64,
@@ -418,7 +405,7 @@ mod tests {
         // steps of 150 us: unlocked, every step whose pose is late starts
         // on the clock with the old pose, and the fresh one waits for it.
         let jitter = [0, 100_000, 30_000, 170_000, 60_000, 200_000, 10_000];
-        let (out, p) = with_poses(MS, 150_000, MS, MS - 50_000, &jitter, 2000 * MS);
+        let (out, p, _) = with_poses(MS, 150_000, MS, MS - 50_000, &jitter, 2000 * MS);
         let settled = &out[200..];
         assert!(
             settled
@@ -436,7 +423,7 @@ mod tests {
     #[test]
     fn poses_at_another_rate_leave_the_loop_at_the_real_time_rate() {
         for pose_ns in [MS / 2, MS / 3, 3 * MS / 2] {
-            let (out, p) = with_poses(MS, 200_000, pose_ns, 123_000, &[0, 40_000], 5000 * MS);
+            let (out, p, _) = with_poses(MS, 200_000, pose_ns, 123_000, &[0, 40_000], 5000 * MS);
             let (t, _, _) = *out.last().unwrap();
             let k = out.len() as u64 - 1;
             let lag = t as i64 - (k * MS) as i64;
@@ -453,7 +440,7 @@ mod tests {
         // The daemon's poses 0.4% slower than the grid with jitter: the
         // phase follows them and wraps; almost every pose is taken at once.
         let jitter = [0, 60_000, 20_000, 90_000, 40_000];
-        let (out, _) = with_poses(MS, 150_000, 1_004_000, 300_000, &jitter, 10_000 * MS);
+        let (out, _, _) = with_poses(MS, 150_000, 1_004_000, 300_000, &jitter, 10_000 * MS);
         let settled = &out[500..];
         let on_pose: Vec<_> = settled.iter().filter(|(_, p, _)| *p).collect();
         let waited = on_pose.iter().filter(|(_, _, w)| *w > 100_000).count();
@@ -475,8 +462,7 @@ mod tests {
         for pose_ns in [MS / 2, MS / 4] {
             let jitter = [0, 60_000, 20_000, 90_000, 40_000];
             let jitter: Vec<u64> = jitter.iter().map(|j| j * pose_ns / MS).collect();
-            let (out, p, phases) =
-                with_poses_traced(MS, 150_000, pose_ns, 123_000, &jitter, 3000 * MS);
+            let (out, p, phases) = with_poses(MS, 150_000, pose_ns, 123_000, &jitter, 3000 * MS);
             let settled = 500..out.len();
             let wraps = phases[settled.clone()]
                 .windows(2)

@@ -137,43 +137,23 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
     }
 
     /// [`LaneSet::add_to_vertices`] for eight f32 lanes: each block's
-    /// forces transposed in registers and added to the aligned per-vertex
-    /// accumulators (`lanes_avx2::add_block`), the same sums to the bit.
+    /// stored forces through the one-task pass's sink ([`AddTo`]), the same
+    /// sums to the bit.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn add_to_vertices_avx2(&mut self, elements: &[Element], touched: &[u32], out: &mut [V3]) {
-        let acc = &mut self.acc;
-        for &v in touched {
-            acc[v as usize] = Acc::default();
-        }
-        for (k, (block, f)) in self.blocks.iter().zip(&self.forces).enumerate() {
-            let count = N.min(elements.len() - k * N);
-            match block {
-                Block::Stvk(b) | Block::Corotational(b) => {
-                    let (Some(vertices), Some(f)) = (
-                        as_f32x8::<S, N, _, [[u32; 4]; 8]>(&b.vertices),
-                        as_f32x8::<S, N, _, [[[f32; 8]; 3]; 4]>(f),
-                    ) else {
-                        unreachable!("called for eight f32 lanes only")
-                    };
-                    lanes_avx2::add_block(vertices, count, f, acc);
-                }
-                Block::Scalar => {
-                    for l in 0..count {
-                        for (corner, &v) in elements[k * N + l].vertices.iter().enumerate() {
-                            let o = &mut acc[v as usize].0;
-                            for c in 0..3 {
-                                o[c] += f[corner][c][l].real();
-                            }
-                        }
-                    }
-                }
+        let (blocks, forces) = (&self.blocks, &self.forces);
+        through_accumulators(&mut self.acc, touched, out, |acc| {
+            let mut sink = AddTo(acc);
+            for (k, (block, f)) in blocks.iter().zip(forces).enumerate() {
+                let count = N.min(elements.len() - k * N);
+                let vertices = match block {
+                    Block::Stvk(b) | Block::Corotational(b) => b.vertices,
+                    Block::Scalar => scalar_vertices(&elements[k * N..k * N + count]),
+                };
+                sink.take(k, &vertices, count, f);
             }
-        }
-        for &v in touched {
-            let [x, y, z, _] = acc[v as usize].0;
-            out[v as usize] = [x, y, z];
-        }
+        });
     }
 
     /// Element `i`'s forces from its lane.
@@ -211,16 +191,10 @@ impl<S: Scalar, const N: usize> LaneSet<S, N> {
             && std::arch::is_x86_feature_detected!("avx2")
         {
             // One task of eight f32 lanes: forces added as they come.
-            for &v in touched {
-                self.acc[v as usize] = Acc::default();
-            }
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            let report = unsafe { leaf_avx2(range, u, &mut AddTo(&mut self.acc)) };
-            for &v in touched {
-                let [x, y, z, _] = self.acc[v as usize].0;
-                out[v as usize] = [x, y, z];
-            }
-            return report;
+            return through_accumulators(&mut self.acc, touched, out, |acc| {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                unsafe { leaf_avx2(range, u, &mut AddTo(acc)) }
+            });
         }
         let report = element_range(range, &mut self.forces, u, min);
         self.add_to_vertices(elements, touched, out);
@@ -343,6 +317,38 @@ impl<S: Scalar, const N: usize> Sink<S, N> for Store<'_, S, N> {
     }
 }
 
+/// Zeroes the `touched` vertices' accumulators, lets `fill` add the
+/// element forces to them, and writes their sums to `out`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn through_accumulators<R>(
+    acc: &mut [Acc],
+    touched: &[u32],
+    out: &mut [V3],
+    fill: impl FnOnce(&mut [Acc]) -> R,
+) -> R {
+    for &v in touched {
+        acc[v as usize] = Acc::default();
+    }
+    let result = fill(acc);
+    for &v in touched {
+        let [x, y, z, _] = acc[v as usize].0;
+        out[v as usize] = [x, y, z];
+    }
+    result
+}
+
+/// The vertices of a scalar block's elements, lane by lane (the lanes past
+/// them unused).
+#[inline(always)]
+fn scalar_vertices<const N: usize>(elements: &[Element]) -> [[u32; 4]; N] {
+    let mut vertices = [[0; 4]; N];
+    for (v, e) in vertices.iter_mut().zip(elements) {
+        *v = e.vertices;
+    }
+    vertices
+}
+
 /// Straight onto the vertices' accumulators, in element order (one task
 /// of eight f32 lanes with AVX2: the forces never go through memory; at
 /// 1M tetrahedra the slots were 96 of the pass's ~240 bytes an element).
@@ -392,7 +398,6 @@ fn leaf<S: Scalar, const N: usize, K: Sink<S, N>>(
                 sink.take(k, &b.vertices, count, &forces);
             }
             Block::Scalar => {
-                let mut vertices = [[0; 4]; N];
                 for l in 0..count {
                     let mut f = [[0.0; 3]; 4];
                     if r.alive[i + l] {
@@ -406,8 +411,8 @@ fn leaf<S: Scalar, const N: usize, K: Sink<S, N>>(
                         report = report.join(e);
                     }
                     store_lane(&mut forces, l, &f);
-                    vertices[l] = r.elements[i + l].vertices;
                 }
+                let vertices = scalar_vertices(&r.elements[i..i + count]);
                 sink.take(k, &vertices, count, &forces);
             }
         }
