@@ -104,8 +104,10 @@ pub trait Backend {
         false
     }
     /// Does now what the next step can do before its tools are known (the
-    /// explicit backend: the first sub-step's elastic forces), so that the
-    /// step answers a pose sooner; the step's result is unchanged. A loop
+    /// explicit backend: the whole step without the tools on a linear
+    /// model, finished locally once they are known; else the first
+    /// sub-step's elastic forces), so that the step answers a pose sooner;
+    /// the step's result is unchanged. A loop
     /// calls it while it waits for the next pose. Others: nothing.
     fn prepare_step(&mut self) {}
     /// Makes the coming steps stable with contact springs adding up to

@@ -10,6 +10,7 @@ use super::model::{CutChange, CutError, ElasticModel};
 use super::stability::{BoundMethod, StableStep, element_bound, power_iteration};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
+use predicted::Prediction;
 use thiserror::Error;
 
 /// What to do when the requested step exceeds the stable step.
@@ -192,6 +193,11 @@ pub struct Explicit<S: Storage> {
     /// while `ku_ready`).
     ku_ahead: Vec<V3>,
     ku_ready: bool,
+    /// The whole next step computed ahead without the tools, where every
+    /// row is the linear kernel's (see `tensor_mass/predicted.rs`).
+    prediction: Prediction,
+    /// Steps finished from a prediction.
+    predicted_steps: u64,
 }
 
 impl<S: Storage> Explicit<S> {
@@ -295,6 +301,8 @@ impl<S: Storage> Explicit<S> {
             steps: 0,
             ku_ahead: Vec::new(),
             ku_ready: false,
+            prediction: Prediction::default(),
+            predicted_steps: 0,
             model,
         };
         for v in 0..n {
@@ -322,6 +330,10 @@ impl<S: Storage> Explicit<S> {
 
     /// Advances by `dt_s` (in `substeps()` equal sub-steps).
     pub fn step(&mut self) {
+        if self.prediction.ready(self.substeps) {
+            self.finish_predicted(None);
+            return;
+        }
         let mut k = 0;
         while k < self.substeps {
             self.membrane_step();
@@ -398,6 +410,14 @@ impl<S: Storage> Explicit<S> {
         }
         let mut h = self.dt_s / self.substeps as Real;
         let mut every = ((resample_every_s / h).floor() as usize).max(1);
+        if self.prediction.ready(self.substeps) {
+            // The prediction cannot re-select points inside the step.
+            if every >= self.substeps {
+                self.finish_predicted(Some(field));
+                return;
+            }
+            self.forget_prepared();
+        }
         let mut k = 0;
         while k < self.substeps {
             if k > 0 && k % every == 0 {
@@ -507,6 +527,12 @@ impl<S: Storage> Explicit<S> {
         self.resubsteps
     }
 
+    /// How many steps were finished from the prediction
+    /// [`Explicit::prepare_step`] made (the rest ran in full).
+    pub fn predicted_steps(&self) -> u64 {
+        self.predicted_steps
+    }
+
     /// Splits each step into `factor` times the sub-steps stability needs
     /// (now and as contact springs come and go): to check a result
     /// against a finer integration.
@@ -522,6 +548,7 @@ impl<S: Storage> Explicit<S> {
         if n == self.substeps {
             return;
         }
+        self.forget_prepared();
         let ratio = self.substeps as Real / n as Real;
         for (now, before) in self.u.iter().zip(self.next.iter_mut()) {
             for k in 0..3 {
@@ -544,18 +571,24 @@ impl<S: Storage> Explicit<S> {
         }
     }
 
-    /// Computes K U(t) for the next step's first sub-step now, so that the
-    /// step, when it comes, only integrates that sub-step: the elastic
-    /// forces at the start of a step do not depend on the tools, so a
-    /// server loop can spend its wait for the next pose on them and answer
-    /// the pose a kernel pass sooner (a third of the liver's three
-    /// sub-steps). The same arithmetic as in the step (the kernel's
-    /// deferred-row path): the result is identical to the bit. One part
-    /// only (with worker threads it does nothing); a cut or
-    /// [`Explicit::set_state`] before the step discards it. The first call
-    /// allocates one array.
+    /// Computes now what the next step can before its tools are known, so
+    /// that a server loop spends its wait for the next pose on it and
+    /// answers the pose sooner. Where every row's force is the linear
+    /// kernel's (no nonlinear elements or membrane): the whole step without
+    /// the tools, which the step then finishes by recomputing only the rows
+    /// the tools' forces, prescribed vertices and changed loads reach, one
+    /// ring of neighbours a sub-step (`tensor_mass/predicted.rs`). Otherwise: the
+    /// first sub-step's K U (the kernel's deferred-row path). Either way
+    /// the step's result is identical to the bit (tests). One part only
+    /// (with worker threads it does nothing); a cut, a new sub-step count,
+    /// cleared loads or [`Explicit::set_state`] before the step discard it.
+    /// The first call allocates its arrays.
     pub fn prepare_step(&mut self) {
         if self.plans.len() != 1 || self.ku_ready {
+            return;
+        }
+        if self.large.is_none() && self.capsule_vertices.is_empty() && self.kernel.is_elastic() {
+            self.predict();
             return;
         }
         let n = self.u.len();
@@ -579,6 +612,13 @@ impl<S: Storage> Explicit<S> {
             },
         );
         self.ku_ready = true;
+    }
+
+    /// Drops what [`Explicit::prepare_step`] computed (the state or the
+    /// model changed under it).
+    fn forget_prepared(&mut self) {
+        self.ku_ready = false;
+        self.prediction.forget();
     }
 
     /// The step's inputs, borrowed beside what a kernel pass writes.
@@ -679,12 +719,14 @@ impl<S: Storage> Explicit<S> {
         self.constraint[v.idx()] = kind::PRESCRIBED;
         self.target[v.idx()] = d_m.to_array();
         self.refresh_vertex(v.idx());
+        self.prediction.touch(v.idx());
     }
 
     /// Frees vertex `v` (its current displacement and velocity are kept).
     pub fn release(&mut self, v: VertexId) {
         self.constraint[v.idx()] = kind::FREE;
         self.refresh_vertex(v.idx());
+        self.prediction.touch(v.idx());
     }
 
     /// Sets the external force (N) on vertex `v`. The first call allocates the
@@ -694,17 +736,19 @@ impl<S: Storage> Explicit<S> {
             self.fext = huge_vec(self.u.len(), [0.0; 3]);
         }
         self.fext[v.idx()] = f_n.to_array();
+        self.prediction.touch(v.idx());
     }
 
     /// Removes all external forces.
     pub fn clear_external_forces(&mut self) {
+        self.forget_prepared();
         self.fext = Vec::new();
     }
 
     /// Sets U(t) and U(t-1) (m), e.g. to start with an initial velocity
     /// (U(t) - U(t-1)) / dt.
     pub fn set_state(&mut self, u_m: &[Vec3], u_prev_m: &[Vec3]) {
-        self.ku_ready = false;
+        self.forget_prepared();
         for (d, s) in self.u.iter_mut().zip(u_m) {
             *d = s.to_array();
         }
@@ -734,7 +778,7 @@ impl<S: Storage> Explicit<S> {
     }
 
     fn after_cut(&mut self, change: &CutChange) {
-        self.ku_ready = false;
+        self.forget_prepared();
         self.kernel.update(&self.model, change);
         for v in change.vertices {
             self.refresh_vertex(v.idx());
@@ -915,3 +959,6 @@ fn run_parts<S: Storage>(
         || run_parts(kernel, inputs, pb, plans[mid].start, next_b, buf_b),
     );
 }
+
+#[path = "predicted.rs"]
+mod predicted;

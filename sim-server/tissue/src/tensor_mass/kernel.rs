@@ -117,7 +117,7 @@ fn pack<S: Storage>(m: &Mat3) -> Block<S> {
 /// The block's entries in f64 (written out: `array::map` does not always
 /// unroll in the hot loop).
 #[inline(always)]
-fn widen<S: Storage>(k: &Block<S>) -> [Real; 9] {
+pub(super) fn widen<S: Storage>(k: &Block<S>) -> [Real; 9] {
     [
         k[0].to_real(),
         k[1].to_real(),

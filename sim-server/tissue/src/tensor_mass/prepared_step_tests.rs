@@ -1,6 +1,8 @@
-//! [`Explicit::prepare_step`]: the first sub-step's K U computed ahead
-//! changes nothing in the step, and what changes the model or the state
-//! between the two discards it.
+//! [`Explicit::prepare_step`]: the step computed ahead (the whole step
+//! without the tools on a linear model, see `predicted`) changes nothing
+//! in the step, what changes constraints or loads between the two is
+//! recomputed where it acts, and what changes the model or the state
+//! discards it.
 
 use super::*;
 use crate::ids::{TetId, VertexId};
@@ -101,4 +103,43 @@ fn a_preparation_the_step_does_not_use_is_forgotten() {
         sim.step();
     }
     same(&plain, &prepared, "two steps after the cut");
+}
+
+#[test]
+fn constraints_and_loads_changed_after_the_preparation_count() {
+    check_changes::<f32>();
+    check_changes::<f64>();
+}
+
+/// Between the preparation and the step (as a tool's update does): a load
+/// changed, a vertex prescribed and moved each step, one released, one
+/// fixed; the prepared block follows the plain one to the bit.
+fn check_changes<S: Storage>() {
+    let (mut plain, mut prepared) = (block::<S>(), block::<S>());
+    let rest: Vec<Vec3> = plain.model().mesh().positions_m().to_vec();
+    let inner = (0..rest.len())
+        .filter(|&v| rest[v].x > 0.004 && rest[v].x < 0.016)
+        .map(VertexId::from)
+        .collect::<Vec<_>>();
+    let (held, freed, loaded) = (inner[0], inner[inner.len() / 2], inner[inner.len() - 1]);
+    for k in 0..40 {
+        prepared.prepare_step();
+        let kf = k as f64;
+        for sim in [&mut plain, &mut prepared] {
+            sim.set_external_force(loaded, Vec3::new(0.0, 1e-3 * (0.3 * kf).sin(), 0.0));
+            if k >= 5 {
+                sim.prescribe(held, Vec3::new(0.0, 0.0, 2e-5 * kf));
+            }
+            if k == 10 {
+                sim.fix(freed);
+            }
+            if k == 25 {
+                sim.release(freed);
+            }
+            sim.step();
+        }
+        same(&plain, &prepared, &format!("after step {k}"));
+    }
+    assert_eq!(prepared.predicted_steps(), 40);
+    assert_eq!(plain.predicted_steps(), 0);
 }

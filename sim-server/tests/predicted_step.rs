@@ -1,0 +1,110 @@
+//! The step computed ahead without the tools and finished locally once
+//! the tools are known (`Explicit::prepare_step`, as the live loop calls
+//! it while it waits for a pose) is the plain step to the bit, in contact:
+//! pressing, sliding and withdrawing under the penalty law with implicit
+//! and explicit springs, with friction, and gripping, lifting and cutting
+//! with the grasper.
+
+mod common;
+
+use common::{TOP_M, scene};
+use sim_server::contact::ToolInput;
+use sim_server::prelude::*;
+use sim_server::prepare::Prepared;
+
+/// The tool's path: above the block, down 3 mm between vertices, 8 mm
+/// along x, back up; the jaws as `jaw(k)` says.
+fn path(k: usize) -> Vec3 {
+    let t = k as f64;
+    let start = Vec3::new(0.0175, 0.0075, TOP_M + 0.0025 + 0.002);
+    let down = Vec3::new(0.0, 0.0, -0.005);
+    match k {
+        0..150 => start + down * (t / 150.0),
+        150..550 => start + down + Vec3::new(0.00002 * (t - 150.0), 0.0, 0.0),
+        _ => start + down + Vec3::new(0.008, 0.0, 0.00002 * (t - 550.0)),
+    }
+}
+
+/// Steps `plain` and `prepared` side by side over `steps` steps, the
+/// prepared one preparing before each pose; every state and force equal.
+fn lockstep(
+    mut plain: Prepared<Explicit<f64>>,
+    mut prepared: Prepared<Explicit<f64>>,
+    steps: usize,
+    tip: impl Fn(usize) -> Vec3,
+    jaw: impl Fn(usize) -> f64,
+) -> (Prepared<Explicit<f64>>, f64) {
+    let mut peak: f64 = 0.0;
+    for k in 0..steps {
+        prepared.sim.prepare_step();
+        let input = [Some(ToolInput {
+            tip_m: tip(k),
+            jaw_opening: jaw(k),
+        })];
+        let mut forces = [Vec3::ZERO; 2];
+        for (p, f) in [&mut plain, &mut prepared].into_iter().zip(&mut forces) {
+            p.tools.update(&mut p.sim, &input);
+            p.tools.step(&mut p.sim);
+            *f = p.tools.reaction(0, &p.sim).force_n;
+        }
+        assert_eq!(forces[0], forces[1], "force at step {k}");
+        let bits = |p: &Prepared<Explicit<f64>>| -> Vec<u64> {
+            p.sim
+                .displacements()
+                .iter()
+                .flatten()
+                .map(|x| x.to_bits())
+                .collect()
+        };
+        assert!(bits(&plain) == bits(&prepared), "state at step {k}");
+        peak = peak.max(forces[0].length());
+    }
+    assert_eq!(plain.sim.predicted_steps(), 0);
+    (prepared, peak)
+}
+
+fn press_slide_withdraw(extra: &str) {
+    let (p, peak) = lockstep(
+        scene("hook", extra),
+        scene("hook", extra),
+        700,
+        path,
+        |_| 1.0,
+    );
+    assert!(peak > 0.05, "the tool must press: {peak} N");
+    assert!(
+        p.sim.predicted_steps() > 650,
+        "{} of 700 steps predicted",
+        p.sim.predicted_steps()
+    );
+}
+
+#[test]
+fn a_predicted_step_in_contact_is_the_plain_step_to_the_bit() {
+    press_slide_withdraw("");
+}
+
+#[test]
+fn the_same_with_explicit_springs_and_with_friction() {
+    press_slide_withdraw("[contact]\nsprings = \"explicit\"\n");
+    press_slide_withdraw("friction_static = 0.6\nfriction_dynamic = 0.4\n");
+}
+
+#[test]
+fn gripping_lifting_and_cutting_after_a_prediction_change_nothing() {
+    // Down 2 mm, close the jaws (grip), lift 3 mm, close below 0.1 (cut).
+    let tip = |k: usize| {
+        let base = Vec3::new(0.0175, 0.0075, TOP_M + 0.0025 - 0.002);
+        match k {
+            0..300 => base,
+            _ => base + Vec3::new(0.0, 0.0, 0.003 * ((k - 300) as f64 / 200.0).min(1.0)),
+        }
+    };
+    let jaw = |k: usize| match k {
+        0..300 => 1.0,
+        300..600 => 0.3,
+        _ => 0.05,
+    };
+    let (p, _) = lockstep(scene("grasper", ""), scene("grasper", ""), 620, tip, jaw);
+    assert!(p.sim.model().topology().alive_count() < p.sim.model().mesh().tet_count());
+}

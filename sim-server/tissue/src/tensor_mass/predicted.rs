@@ -1,0 +1,505 @@
+//! The whole next step computed ahead without the tools, and finished
+//! locally once they are known (predictor / local corrector).
+//!
+//! A live loop waits most of a millisecond for the next pose, then has to
+//! answer it with a step. Everything in that step except the tools'
+//! forces, prescribed vertices and loads is already known: the free motion
+//! of the tissue. [`Explicit::prepare_step`] computes all of the next
+//! step's sub-steps that way (P_1 .. P_S, the kernel's own pass, with no
+//! contact force), and the step, when it comes, recomputes only the rows
+//! the tools can have changed:
+//!
+//! ```text
+//! R_0 = contact vertices of the field's points + vertices whose constraint,
+//!       target or load changed since the prediction
+//! R_k = R_(k-1) + their neighbours         (one ring a sub-step)
+//! ```
+//!
+//! A row outside R_k reads only values that equal the prediction (its own
+//! and its neighbours' U(t), its U(t-1), no contact force, the same
+//! constraint), so its prediction is the step's value; a row inside is
+//! recomputed by [`row_product`] in exactly the pass's order of additions,
+//! so the whole step equals the plain one to the bit (tests:
+//! `prepared_step_tests`, and the contact scenes in
+//! `sim-server/tests/predicted_step.rs`). On the liver (3 sub-steps, a
+//! tool touching a few dozen vertices) the step after a pose then touches
+//! a few hundred rows instead of three passes over all of them.
+//!
+//! Used where every row's force is the linear kernel's: one part (no
+//! worker threads), no nonlinear elements, no nonlinear membrane, and no
+//! re-selection of contact points inside the step (a step longer than the
+//! field's resampling period). Otherwise the first sub-step's K U alone is
+//! computed ahead, as before.
+
+use super::Explicit;
+use crate::math::Real;
+use crate::tensor_mass::huge_pages::huge_vec;
+use crate::tensor_mass::kernel::{Kernel, Part, StepInputs, Storage, V3, kind, widen};
+
+/// The kernel's edges seen from their column: for each vertex `i`, the
+/// rows `j < i` whose stored edge reaches it, ascending (the order in
+/// which the pass scatters them into row `i`), with the edge's slot.
+#[derive(Clone, Debug, Default)]
+pub(in crate::tensor_mass) struct LowerRows {
+    start: Vec<u32>,
+    /// (row j, edge slot).
+    entries: Vec<[u32; 2]>,
+}
+
+impl LowerRows {
+    /// Built once per kernel: cuts change the tensors' values, never the
+    /// edges' places.
+    pub(in crate::tensor_mass) fn new<S: Storage>(kernel: &Kernel<S>) -> Self {
+        let n = kernel.rows();
+        let (_, _, edges) = kernel.parts();
+        let mut start = vec![0u32; n + 1];
+        for e in edges {
+            start[e.col as usize + 1] += 1;
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut entries = vec![[0u32; 2]; edges.len()];
+        for j in 0..n {
+            for slot in kernel.row(j) {
+                let i = edges[slot].col as usize;
+                entries[fill[i] as usize] = [j as u32, slot as u32];
+                fill[i] += 1;
+            }
+        }
+        Self { start, entries }
+    }
+
+    fn of(&self, i: usize) -> &[[u32; 2]] {
+        &self.entries[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+
+    /// Whether it was built for a kernel of `rows` rows.
+    pub(in crate::tensor_mass) fn fits(&self, rows: usize) -> bool {
+        self.start.len() == rows + 1
+    }
+}
+
+/// (K u)_i, added up exactly as the fused pass does (`Kernel::run_part_body`,
+/// which the AVX2 pass equals to the bit): the lower rows' K_ji^T u_j in
+/// ascending j into a zeroed accumulator, then the row's own products,
+/// entry by entry, reduced once and added.
+#[inline]
+pub(in crate::tensor_mass) fn row_product<S: Storage>(
+    kernel: &Kernel<S>,
+    lower: &LowerRows,
+    u: &[V3],
+    i: usize,
+) -> V3 {
+    let (diag, _, edges) = kernel.parts();
+    let mut acc = [0.0; 3];
+    for &[j, slot] in lower.of(i) {
+        let k = widen(&edges[slot as usize].k);
+        let uj = u[j as usize];
+        let tj = [
+            uj[0], uj[0], uj[0], uj[1], uj[1], uj[1], uj[2], uj[2], uj[2],
+        ];
+        let mut t = [0.0; 9];
+        for q in 0..9 {
+            t[q] = k[q] * tj[q];
+        }
+        acc[0] += t[0] + t[3] + t[6];
+        acc[1] += t[1] + t[4] + t[7];
+        acc[2] += t[2] + t[5] + t[8];
+    }
+    let tile = |v: V3| [v[0], v[1], v[2], v[0], v[1], v[2], v[0], v[1], v[2]];
+    let d = widen(&diag[i]);
+    let tu = tile(u[i]);
+    let mut m = [0.0; 9];
+    for q in 0..9 {
+        m[q] = d[q] * tu[q];
+    }
+    for e in &edges[kernel.row(i)] {
+        let k = widen(&e.k);
+        let tj = tile(u[e.col as usize]);
+        for q in 0..9 {
+            m[q] += k[q] * tj[q];
+        }
+    }
+    acc[0] += m[0] + m[1] + m[2];
+    acc[1] += m[3] + m[4] + m[5];
+    acc[2] += m[6] + m[7] + m[8];
+    acc
+}
+
+/// The predicted step and the bookkeeping of its correction, allocated at
+/// the first prediction and reused.
+#[derive(Debug, Default)]
+pub(in crate::tensor_mass) struct Prediction {
+    /// While a step is finished: U(t-1), U(t), then P_1 .. P_S (each
+    /// corrected in place). Between steps slots 0 and 1 are empty (the
+    /// state's own arrays) and 2.. hold the prediction.
+    traj: Vec<Vec<V3>>,
+    /// The sub-step count it was made for; `None`: no prediction.
+    made_for: Option<usize>,
+    lower: LowerRows,
+    /// Vertices whose constraint, target or load changed since.
+    changed: Vec<u32>,
+    /// Per vertex: in `rows` (or, between steps, in `changed`).
+    in_rows: Vec<bool>,
+    in_changed: Vec<bool>,
+    /// The rows recomputed at the current sub-step.
+    rows: Vec<u32>,
+}
+
+impl Prediction {
+    /// Whether a prediction for `substeps` sub-steps is waiting.
+    pub(in crate::tensor_mass) fn ready(&self, substeps: usize) -> bool {
+        self.made_for == Some(substeps)
+    }
+
+    /// Drops the prediction (a cut, a new state, a new sub-step count).
+    pub(in crate::tensor_mass) fn forget(&mut self) {
+        if self.made_for.take().is_some() {
+            for &v in &self.changed {
+                self.in_changed[v as usize] = false;
+            }
+            self.changed.clear();
+        }
+    }
+
+    /// Vertex `v`'s constraint, target or load changed after the
+    /// prediction: its row is recomputed at every sub-step.
+    pub(in crate::tensor_mass) fn touch(&mut self, v: usize) {
+        if self.made_for.is_some() && !self.in_changed[v] {
+            self.in_changed[v] = true;
+            self.changed.push(v as u32);
+        }
+    }
+
+    /// Computes P_1 .. P_S from U(t-1) = `prev`, U(t) = `now` with
+    /// `inputs` (whose `u` is ignored, `fmem` and `fnl` taken as zero),
+    /// `run` being one kernel pass writing U(t+1) over U(t-1) in place.
+    pub(in crate::tensor_mass) fn predict<S: Storage>(
+        &mut self,
+        kernel: &Kernel<S>,
+        substeps: usize,
+        prev: &mut Vec<V3>,
+        now: &mut Vec<V3>,
+        mut run: impl FnMut(&[V3], &mut [V3]),
+    ) {
+        let n = now.len();
+        if !self.lower.fits(n) {
+            self.lower = LowerRows::new(kernel);
+            self.in_rows = vec![false; n];
+            self.in_changed = vec![false; n];
+            // Each lists a vertex at most once: no step allocates.
+            self.rows = Vec::with_capacity(n);
+            self.changed = Vec::with_capacity(n);
+        }
+        self.traj.resize_with(substeps + 2, Vec::new);
+        for b in &mut self.traj[2..] {
+            if b.len() != n {
+                *b = huge_vec(n, [0.0; 3]);
+            }
+        }
+        std::mem::swap(prev, &mut self.traj[0]);
+        std::mem::swap(now, &mut self.traj[1]);
+        for k in 0..substeps {
+            // P_(k+1) over a copy of P_(k-1), from P_k.
+            let (before, after) = self.traj.split_at_mut(k + 2);
+            after[0].copy_from_slice(&before[k]);
+            run(&before[k + 1], &mut after[0]);
+        }
+        std::mem::swap(prev, &mut self.traj[0]);
+        std::mem::swap(now, &mut self.traj[1]);
+        self.made_for = Some(substeps);
+    }
+
+    /// Starts finishing the predicted step: takes the state's arrays
+    /// (U(t-1), U(t)) into the trajectory and marks the first sub-step's
+    /// rows: the changed vertices and `contact` ones.
+    pub(in crate::tensor_mass) fn begin(
+        &mut self,
+        prev: &mut Vec<V3>,
+        now: &mut Vec<V3>,
+        contact: impl Iterator<Item = u32>,
+    ) {
+        std::mem::swap(prev, &mut self.traj[0]);
+        std::mem::swap(now, &mut self.traj[1]);
+        for c in 0..self.changed.len() {
+            let v = self.changed[c];
+            self.in_changed[v as usize] = false;
+            self.mark(v);
+        }
+        // Cleared, not taken: its capacity serves every step.
+        self.changed.clear();
+        for v in contact {
+            self.mark(v);
+        }
+    }
+
+    fn mark(&mut self, v: u32) {
+        if !self.in_rows[v as usize] {
+            self.in_rows[v as usize] = true;
+            self.rows.push(v);
+        }
+    }
+
+    /// Adds the neighbours of every marked row (the next sub-step's rows).
+    pub(in crate::tensor_mass) fn grow<S: Storage>(&mut self, kernel: &Kernel<S>) {
+        let (_, _, edges) = kernel.parts();
+        let count = self.rows.len();
+        for r in 0..count {
+            let i = self.rows[r] as usize;
+            for slot in kernel.row(i) {
+                self.mark(edges[slot].col);
+            }
+            let lower = self.lower.start[i] as usize..self.lower.start[i + 1] as usize;
+            for e in lower {
+                self.mark(self.lower.entries[e][0]);
+            }
+        }
+    }
+
+    /// Sub-step `k`'s arrays: U(t_k - h), U(t_k) and U(t_k + h) (holding
+    /// the prediction).
+    pub(in crate::tensor_mass) fn substep(&mut self, k: usize) -> (&[V3], &[V3], &mut [V3]) {
+        let (before, after) = self.traj.split_at_mut(k + 2);
+        (&before[k], &before[k + 1], &mut after[0])
+    }
+
+    /// Recomputes the marked rows of sub-step `k`: U(t_k + h) from U(t_k)
+    /// and U(t_k - h) with `base`'s coefficients, constraints and forces
+    /// (its `u` is ignored).
+    pub(in crate::tensor_mass) fn correct_rows<S: Storage>(
+        &mut self,
+        kernel: &Kernel<S>,
+        k: usize,
+        base: &StepInputs<'_>,
+    ) {
+        let (before, after) = self.traj.split_at_mut(k + 2);
+        let (prev, now, out) = (&before[k], &before[k + 1], &mut after[0]);
+        let inputs = StepInputs {
+            u: now,
+            coef: base.coef,
+            kind: base.kind,
+            target: base.target,
+            fext: base.fext,
+            fmem: base.fmem,
+            fnl: base.fnl,
+        };
+        for &r in &self.rows {
+            let i = r as usize;
+            let ku = row_product(kernel, &self.lower, now, i);
+            let mut next = prev[i];
+            inputs.integrate(i, ku, &mut next);
+            out[i] = next;
+        }
+    }
+
+    /// Ends the step: U(t) and U(t-1) back to the state (`now`, `prev`:
+    /// P_S and P_(S-1)), the other arrays kept for the next prediction.
+    pub(in crate::tensor_mass) fn end(&mut self, prev: &mut Vec<V3>, now: &mut Vec<V3>) {
+        let s = self.traj.len() - 2;
+        std::mem::swap(now, &mut self.traj[s + 1]);
+        std::mem::swap(prev, &mut self.traj[s]);
+        // The two emptied slots become 0 and 1.
+        let mut empty = 0;
+        for k in 0..self.traj.len() {
+            if self.traj[k].is_empty() {
+                self.traj.swap(k, empty);
+                empty += 1;
+            }
+        }
+        for &r in &self.rows {
+            self.in_rows[r as usize] = false;
+        }
+        self.rows.clear();
+        self.made_for = None;
+    }
+}
+
+impl<S: Storage> Explicit<S> {
+    /// [`Explicit::prepare_step`] where every row's force is the linear
+    /// kernel's: the whole step without the tools (this module).
+    pub(super) fn predict(&mut self) {
+        if self.prediction.ready(self.substeps) {
+            return;
+        }
+        let n = self.u.len();
+        let Self {
+            kernel,
+            u,
+            next,
+            coef,
+            kind,
+            target,
+            fext,
+            buffers,
+            prediction,
+            substeps,
+            ..
+        } = self;
+        let ring = &mut buffers[0].ring;
+        prediction.predict(kernel, *substeps, next, u, |now, out| {
+            let inputs = StepInputs {
+                u: now,
+                coef,
+                kind,
+                target,
+                fext,
+                fmem: &[],
+                fnl: &[],
+            };
+            kernel.run_part(
+                &inputs,
+                Part {
+                    start: 0,
+                    end: n,
+                    deferred_end: 0,
+                    ring,
+                    deferred: &mut [],
+                    next: out,
+                    spill: &mut [],
+                },
+            );
+        });
+    }
+
+    /// The predicted step finished with the tools: `field`'s forces (if
+    /// any) at every sub-step, and the rows they and the changed vertices
+    /// reach recomputed (the same arithmetic as the plain step).
+    pub(super) fn finish_predicted(
+        &mut self,
+        mut field: Option<&mut crate::contact::ContactField>,
+    ) {
+        let substeps = self.substeps;
+        let h = self.dt_s / substeps as Real;
+        let Self {
+            kernel,
+            u,
+            next,
+            coef,
+            kind,
+            target,
+            fext,
+            fmem,
+            prediction,
+            model,
+            dt_s,
+            ..
+        } = self;
+        let contact = field
+            .as_deref()
+            .into_iter()
+            .flat_map(|f| f.points().iter().flat_map(|p| p.vertices));
+        prediction.begin(next, u, contact);
+        for k in 0..substeps {
+            if k > 0 {
+                prediction.grow(kernel);
+            }
+            if let Some(field) = field.as_deref_mut() {
+                field.zero(fmem);
+                let (prev, now, _) = prediction.substep(k);
+                let at = crate::contact::field::SubStep {
+                    h_s: h,
+                    step_s: *dt_s,
+                    s: (k + 1) as Real / substeps as Real,
+                    masses_kg: model.masses_kg(),
+                };
+                field.add_forces(model.mesh().positions_m(), now, prev, at, fmem);
+            }
+            let base = StepInputs {
+                u: &[],
+                coef,
+                kind,
+                target,
+                fext,
+                fmem,
+                fnl: &[],
+            };
+            prediction.correct_rows(kernel, k, &base);
+            if let Some(field) = field.as_deref_mut()
+                && field.implicit_springs()
+            {
+                let (_, now, out) = prediction.substep(k);
+                let inverse_d = |i: usize| (kind[i] == kind::FREE).then(|| coef[i][0]);
+                field.correct_implicit(inverse_d, now, out);
+            }
+        }
+        prediction.end(next, u);
+        self.predicted_steps += 1;
+        self.steps += 1;
+        self.follow_tangent();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::Material;
+    use crate::material_map::TetMaterials;
+    use crate::math::Vec3;
+    use crate::mesh::{BoxSpec, CellSize};
+    use crate::tensor_mass::model::ElasticModel;
+
+    /// Every row's [`row_product`] is the fused pass's K U to the bit, in
+    /// both storages (the pass with coefficients (1, 0, 0) writes -K U).
+    #[test]
+    fn a_row_alone_adds_up_as_the_pass_does() {
+        check::<f32>();
+        check::<f64>();
+    }
+
+    fn check<S: Storage>() {
+        let mesh = BoxSpec::new(Vec3::new(0.03, 0.02, 0.015), CellSize::EdgeM(0.005))
+            .generate()
+            .unwrap();
+        let mat = Material::isotropic(4500.0, 0.45, 1060.0, 0.0).unwrap();
+        let model =
+            ElasticModel::new(mesh.clone(), TetMaterials::uniform(mat, mesh.tet_count())).unwrap();
+        let kernel = Kernel::<S>::new(&model);
+        let lower = LowerRows::new(&kernel);
+        let n = kernel.rows();
+        let u: Vec<V3> = (0..n)
+            .map(|i| {
+                let x = i as f64;
+                [x.sin() * 1e-4, (0.7 * x).cos() * 3e-5, 1e-6 * x - 2e-5]
+            })
+            .collect();
+        let coef = vec![[1.0, 0.0, 0.0]; n];
+        let kinds = vec![kind::FREE; n];
+        let inputs = StepInputs {
+            u: &u,
+            coef: &coef,
+            kind: &kinds,
+            target: &[],
+            fext: &[],
+            fmem: &[],
+            fnl: &[],
+        };
+        let mut ring = vec![[0.0; 4]; kernel.ring_len()];
+        let mut next = vec![[0.0; 3]; n];
+        kernel.run_part(
+            &inputs,
+            Part {
+                start: 0,
+                end: n,
+                deferred_end: 0,
+                ring: &mut ring,
+                deferred: &mut [],
+                next: &mut next,
+                spill: &mut [],
+            },
+        );
+        let mut nonzero = 0;
+        for (i, negated) in next.iter().enumerate() {
+            let row = row_product(&kernel, &lower, &u, i);
+            let pass = negated.map(|x| -x);
+            assert_eq!(
+                row.map(f64::to_bits),
+                pass.map(f64::to_bits),
+                "row {i}: {row:?} against the pass's {pass:?}"
+            );
+            nonzero += usize::from(row.iter().any(|x| *x != 0.0));
+        }
+        assert!(nonzero > n / 2, "the products must not be trivial");
+    }
+}
