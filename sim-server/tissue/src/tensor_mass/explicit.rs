@@ -533,6 +533,13 @@ impl<S: Storage> Explicit<S> {
         self.predicted_steps
     }
 
+    /// Rows the predicted steps recomputed, summed over their sub-steps
+    /// (against `predicted_steps() * substeps() * vertex count` for full
+    /// passes): how local the correction was.
+    pub fn predicted_rows(&self) -> u64 {
+        self.prediction.rows_total()
+    }
+
     /// Splits each step into `factor` times the sub-steps stability needs
     /// (now and as contact springs come and go): to check a result
     /// against a finer integration.

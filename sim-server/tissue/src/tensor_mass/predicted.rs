@@ -34,7 +34,7 @@
 use super::Explicit;
 use crate::math::Real;
 use crate::tensor_mass::huge_pages::huge_vec;
-use crate::tensor_mass::kernel::{Kernel, Part, StepInputs, Storage, V3, kind, widen};
+use crate::tensor_mass::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind, widen};
 
 /// The kernel's edges seen from their column: for each vertex `i`, the
 /// rows `j < i` whose stored edge reaches it, ascending (the order in
@@ -146,12 +146,22 @@ pub(in crate::tensor_mass) struct Prediction {
     in_changed: Vec<bool>,
     /// The rows recomputed at the current sub-step.
     rows: Vec<u32>,
+    /// Rows recomputed over all finished steps.
+    rows_total: u64,
+    /// The rows reached half the mesh: the rest of the step runs whole
+    /// passes (streaming every row beats gathering most of them).
+    whole: bool,
 }
 
 impl Prediction {
     /// Whether a prediction for `substeps` sub-steps is waiting.
     pub(in crate::tensor_mass) fn ready(&self, substeps: usize) -> bool {
         self.made_for == Some(substeps)
+    }
+
+    /// Rows recomputed over all finished steps (each sub-step's counted).
+    pub(in crate::tensor_mass) fn rows_total(&self) -> u64 {
+        self.rows_total
     }
 
     /// Drops the prediction (a cut, a new state, a new sub-step count).
@@ -244,6 +254,9 @@ impl Prediction {
 
     /// Adds the neighbours of every marked row (the next sub-step's rows).
     pub(in crate::tensor_mass) fn grow<S: Storage>(&mut self, kernel: &Kernel<S>) {
+        if self.whole {
+            return;
+        }
         let (_, _, edges) = kernel.parts();
         let count = self.rows.len();
         for r in 0..count {
@@ -267,13 +280,17 @@ impl Prediction {
 
     /// Recomputes the marked rows of sub-step `k`: U(t_k + h) from U(t_k)
     /// and U(t_k - h) with `base`'s coefficients, constraints and forces
-    /// (its `u` is ignored).
+    /// (its `u` is ignored); once they are half the mesh, every row by the
+    /// kernel's pass (with its accumulator `ring`).
     pub(in crate::tensor_mass) fn correct_rows<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
         k: usize,
         base: &StepInputs<'_>,
+        ring: &mut [R4],
     ) {
+        let n = self.in_rows.len();
+        self.whole |= 2 * self.rows.len() > n;
         let (before, after) = self.traj.split_at_mut(k + 2);
         let (prev, now, out) = (&before[k], &before[k + 1], &mut after[0]);
         let inputs = StepInputs {
@@ -285,6 +302,25 @@ impl Prediction {
             fmem: base.fmem,
             fnl: base.fnl,
         };
+        if self.whole {
+            self.rows_total += n as u64;
+            // The plain step's pass: U(t_k - h) overwritten in place.
+            out.copy_from_slice(prev);
+            kernel.run_part(
+                &inputs,
+                Part {
+                    start: 0,
+                    end: n,
+                    deferred_end: 0,
+                    ring,
+                    deferred: &mut [],
+                    next: out,
+                    spill: &mut [],
+                },
+            );
+            return;
+        }
+        self.rows_total += self.rows.len() as u64;
         for &r in &self.rows {
             let i = r as usize;
             let ku = row_product(kernel, &self.lower, now, i);
@@ -312,6 +348,7 @@ impl Prediction {
             self.in_rows[r as usize] = false;
         }
         self.rows.clear();
+        self.whole = false;
         self.made_for = None;
     }
 }
@@ -384,6 +421,7 @@ impl<S: Storage> Explicit<S> {
             prediction,
             model,
             dt_s,
+            buffers,
             ..
         } = self;
         let contact = field
@@ -415,7 +453,7 @@ impl<S: Storage> Explicit<S> {
                 fmem,
                 fnl: &[],
             };
-            prediction.correct_rows(kernel, k, &base);
+            prediction.correct_rows(kernel, k, &base, &mut buffers[0].ring);
             if let Some(field) = field.as_deref_mut()
                 && field.implicit_springs()
             {
