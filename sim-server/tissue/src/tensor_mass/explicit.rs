@@ -968,4 +968,4 @@ fn run_parts<S: Storage>(
 }
 
 #[path = "predicted.rs"]
-mod predicted;
+pub(in crate::tensor_mass) mod predicted;

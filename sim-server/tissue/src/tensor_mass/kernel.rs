@@ -527,9 +527,11 @@ mod tests {
     use crate::material_map::TetMaterials;
     use crate::math::Vec3;
     use crate::mesh::{BoxSpec, CellSize};
+    use crate::tensor_mass::explicit::predicted::{LowerRows, row_product};
 
     /// The dispatched (AVX2 where available) and portable passes agree bit
-    /// for bit, and both equal the plain product, in both storages.
+    /// for bit, and both equal the plain product, in both storages; so
+    /// does each row computed alone.
     #[test]
     fn dispatched_and_portable_passes_are_identical() {
         check_passes::<f32>();
@@ -585,6 +587,17 @@ mod tests {
         };
         let (a, b) = (run(false), run(true));
         assert_eq!(a, b);
+        // A row alone (the predicted step's corrector) adds up as the pass
+        // does, to the bit: -K U is what the pass wrote.
+        let lower = LowerRows::new(&kernel);
+        for (i, negated) in a.iter().enumerate() {
+            let row = row_product(&kernel, &lower, &u, i);
+            assert_eq!(
+                row.map(f64::to_bits),
+                negated.map(|x| (-x).to_bits()),
+                "row {i} alone against the pass"
+            );
+        }
         let mut ku = vec![[0.0; 3]; n];
         kernel.apply(&u, &mut ku);
         for (x, y) in a.iter().zip(&ku) {
