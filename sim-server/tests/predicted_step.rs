@@ -123,4 +123,6 @@ fn gripping_lifting_and_cutting_after_a_prediction_change_nothing() {
     };
     let (p, _) = lockstep(scene("grasper", ""), scene("grasper", ""), 620, tip, jaw);
     assert!(p.sim.model().topology().alive_count() < p.sim.model().mesh().tet_count());
+    // The cut's step too: its elements' rows are recomputed, not the step.
+    assert_eq!(p.sim.predicted_steps(), 620);
 }

@@ -587,8 +587,9 @@ impl<S: Storage> Explicit<S> {
     /// ring of neighbours a sub-step (`tensor_mass/predicted.rs`). Otherwise: the
     /// first sub-step's K U (the kernel's deferred-row path). Either way
     /// the step's result is identical to the bit (tests). One part only
-    /// (with worker threads it does nothing); a cut, a new sub-step count,
-    /// cleared loads or [`Explicit::set_state`] before the step discard it.
+    /// (with worker threads it does nothing); a cut before the step has
+    /// its element's rows recomputed (and discards a K U ahead); a new
+    /// sub-step count, cleared loads or [`Explicit::set_state`] discard it.
     /// The first call allocates its arrays.
     pub fn prepare_step(&mut self) {
         if self.plans.len() != 1 || self.ku_ready {
@@ -785,10 +786,15 @@ impl<S: Storage> Explicit<S> {
     }
 
     fn after_cut(&mut self, change: &CutChange) {
-        self.forget_prepared();
+        // K U ahead is stale; a prediction is not: only the removed
+        // element's four rows read its tensors (its edges join only those
+        // vertices) and their masses, so they are recomputed like rows
+        // whose hold changed.
+        self.ku_ready = false;
         self.kernel.update(&self.model, change);
         for v in change.vertices {
             self.refresh_vertex(v.idx());
+            self.prediction.touch(v.idx());
         }
     }
 

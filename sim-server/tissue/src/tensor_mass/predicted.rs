@@ -11,7 +11,8 @@
 //!
 //! ```text
 //! R_0 = contact vertices of the field's points + vertices whose constraint,
-//!       target or load changed since the prediction
+//!       target or load changed since the prediction, or whose element was
+//!       cut (a cut changes only the tensors among its four vertices)
 //! R_k = R_(k-1) + their neighbours         (one ring a sub-step)
 //! ```
 //!
@@ -188,7 +189,7 @@ impl Prediction {
         self.rows_total
     }
 
-    /// Drops the prediction (a cut, a new state, a new sub-step count).
+    /// Drops the prediction (a new state, a new sub-step count, cleared loads).
     pub(in crate::tensor_mass) fn forget(&mut self) {
         if self.made_for.take().is_some() {
             for &v in &self.changed {

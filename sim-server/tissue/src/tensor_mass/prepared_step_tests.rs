@@ -62,6 +62,8 @@ fn prepared_steps_equal_plain_ones<S: Storage>() {
         sim.step();
     }
     same(&plain, &prepared, "after a cut");
+    // The cut's rows were recomputed; the rest of the prediction served.
+    assert_eq!(prepared.predicted_steps(), 21);
     // A new state after the preparation: K U of the new state.
     prepared.prepare_step();
     let u: Vec<Vec3> = plain
@@ -74,6 +76,7 @@ fn prepared_steps_equal_plain_ones<S: Storage>() {
         sim.step();
     }
     same(&plain, &prepared, "after set_state");
+    assert_eq!(prepared.predicted_steps(), 21, "a new state discards it");
     // Preparing twice is preparing once.
     prepared.prepare_step();
     prepared.prepare_step();
