@@ -3,6 +3,7 @@
 //! and a preallocated lateness histogram.
 
 use shared::monotonic_ns;
+pub use shared::rt::{minimal_timer_slack, set_fifo};
 
 /// Paces a loop on absolute deadlines: drift-free, and a late tick does not
 /// make the next ones early (missed deadlines are skipped and counted).
@@ -102,9 +103,7 @@ impl RtReport {
             ));
         }
         if let Some(Err(e)) = &self.sched_fifo {
-            w.push(format!(
-                "SCHED_FIFO refused ({e}): running at normal priority, expect larger lateness; grant CAP_SYS_NICE (setcap cap_sys_nice+ep) or an rtprio limit"
-            ));
+            w.push(shared::rt::fifo_refused_hint(e));
         }
         if let Some(Err(e)) = &self.affinity {
             w.push(format!(
@@ -119,34 +118,11 @@ fn errno_string() -> String {
     std::io::Error::last_os_error().to_string()
 }
 
-/// Sets the calling thread's timer slack to 1 ns: by default Linux may wake
-/// a normal thread up to 50 us after its deadline to batch wake-ups (real-
-/// time threads already get none).
-pub fn minimal_timer_slack() -> Result<(), String> {
-    // SAFETY: plain prctl with integer arguments.
-    let rc = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
-    if rc == 0 { Ok(()) } else { Err(errno_string()) }
-}
-
 /// Locks memory (process-wide).
 pub fn lock_memory() -> Result<(), String> {
     // SAFETY: plain system call with constant flags.
     let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
     if rc == 0 { Ok(()) } else { Err(errno_string()) }
-}
-
-/// Puts the calling thread under SCHED_FIFO at `priority` (1-99).
-pub fn set_fifo(priority: i32) -> Result<i32, String> {
-    let param = libc::sched_param {
-        sched_priority: priority,
-    };
-    // SAFETY: `param` is valid for the call; pid 0 = the calling thread.
-    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
-    if rc == 0 {
-        Ok(priority)
-    } else {
-        Err(errno_string())
-    }
 }
 
 /// Gives the calling thread the lowest normal priority (nice 19): it runs

@@ -18,6 +18,7 @@ mod clock;
 pub mod protocol;
 pub mod reaper;
 pub mod remote;
+pub mod rt;
 pub mod services;
 mod session;
 pub mod source;

@@ -775,3 +775,41 @@ fn run_takes_the_step_from_the_command_line() {
         );
     }
 }
+
+#[test]
+fn run_asks_for_sched_fifo_and_says_what_it_got() {
+    let dir = scratch_dir("run-rt");
+    let json = dir.join("rt.json");
+    let session = format!("rt{}", std::process::id());
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--headless", "--quiet", "--steps", "50"])
+        .args(["--rt-priority", "10", "--session", &session])
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run sim-server");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let v = read_json(&json);
+    assert_eq!(v["steps"], 50);
+    // Granted where the user may (root, CAP_SYS_NICE, an rtprio limit);
+    // refused, the run goes on at normal priority and says how to grant it.
+    match v["rt_priority"].as_i64() {
+        Some(10) => assert!(!err.contains("SCHED_FIFO refused"), "{err}"),
+        Some(0) => assert!(
+            err.contains("SCHED_FIFO refused") && err.contains("CAP_SYS_NICE"),
+            "{err}"
+        ),
+        other => panic!("rt_priority {other:?}"),
+    }
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--headless", "--steps", "1", "--rt-priority", "99"])
+        .output()
+        .expect("run sim-server");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--rt-priority") && err.contains("0..=98"),
+        "{err}"
+    );
+}

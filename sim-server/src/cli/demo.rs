@@ -277,6 +277,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         pose_timeout_ns: crate::server::poses::DEFAULT_POSE_TIMEOUT_NS,
         save_frames: args.save_frames.clone(),
         scene_name: src.name.clone(),
+        rt_priority: 0,
     };
     let result = super::run_scene(scene, backend, &cfg, stop.clone());
     if let Some(v) = &mut viewer {

@@ -59,6 +59,13 @@ pub struct RunArgs {
     /// README, Measurements, Latency.
     #[arg(long)]
     pub dt_s: Option<f64>,
+    /// Run the stepping loop under SCHED_FIFO at this priority (1-98; 0:
+    /// normal). Below the haptic daemon's RT thread (80 by default): the
+    /// loop then wakes for a pose and steps without waiting for other
+    /// processes' time slices. Needs CAP_SYS_NICE or an rtprio limit;
+    /// refused, it runs at normal priority and says so.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=98))]
+    pub rt_priority: i32,
 }
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
@@ -92,6 +99,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         pose_timeout_ns: (args.pose_timeout_ms * 1e6).round() as u64,
         save_frames: args.save_frames.clone(),
         scene_name: src.name.clone(),
+        rt_priority: args.rt_priority,
     };
     let summary = match super::run_scene(scene, backend, &cfg, stop) {
         Ok(summary) => summary,

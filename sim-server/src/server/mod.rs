@@ -56,6 +56,8 @@ pub struct RunConfig {
     pub save_frames: Option<std::path::PathBuf>,
     /// The scene's name, for clients ([`scene_out`]).
     pub scene_name: String,
+    /// SCHED_FIFO priority for the stepping loop (0: normal priority).
+    pub rt_priority: i32,
 }
 
 /// A scripted tool: tip position and jaw opening against simulated time,
@@ -155,6 +157,9 @@ pub struct RunSummary {
     pub local_problems: u64,
     /// See `local_problems`.
     pub local_problems_dropped: u64,
+    /// The stepping loop's SCHED_FIFO priority (`--rt-priority`; 0: normal
+    /// priority, as asked or because it was refused).
+    pub rt_priority: i32,
     /// With `--save-frames`: frames not written because the disk was
     /// behind (the step is never delayed for them).
     pub frames_dropped: u64,
@@ -218,6 +223,14 @@ pub fn run<B: Backend>(
     stop: Arc<AtomicBool>,
 ) -> Result<RunSummary, RunError> {
     let mut l = run_loop::RunLoop::open(prepared, cfg, stop)?;
+    if cfg.rt_priority > 0 {
+        // After the worker threads started (and, reset on fork, not
+        // passed to any started later).
+        match shared::rt::set_fifo(cfg.rt_priority) {
+            Ok(p) => l.summary_mut().rt_priority = p,
+            Err(e) => eprintln!("sim-server: {}", shared::rt::fifo_refused_hint(&e)),
+        }
+    }
     while !l.done() {
         let pose = l.intake()?;
         let step = l.step();

@@ -126,8 +126,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         };
         if !cfg.headless {
             // Wake-ups at the requested time, not up to 50 us later.
-            // SAFETY: prctl(2) on this thread's timer slack; no pointers.
-            unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1u64) };
+            let _ = shared::rt::minimal_timer_slack();
         }
         let start_ns = monotonic_ns();
         Ok(Self {
@@ -410,6 +409,11 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 }
             }
         }
+    }
+
+    /// The summary so far, for what the loop's caller records in it.
+    pub fn summary_mut(&mut self) -> &mut RunSummary {
+        &mut self.summary
     }
 
     /// The run's summary (and the frame recorder stopped), or

@@ -65,6 +65,13 @@ pub struct Args {
     /// --quasi-static`).
     #[arg(long)]
     pub quasi_static: bool,
+    /// Both processes under SCHED_FIFO: the daemon's RT thread at this
+    /// priority, the simulation's stepping loop 10 below (`--rt-priority`
+    /// of each), the observer 5 above; 0: the daemon without it and the
+    /// simulation at normal priority (the default). Needs CAP_SYS_NICE or
+    /// an rtprio limit.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=99))]
+    pub rt_priority: i32,
     /// The daemon on the far side of `sim-server bridge` (zenoh over
     /// loopback TCP, `--connect`), force samples observed where it receives
     /// them, beside a bare zenoh baseline.
@@ -133,6 +140,11 @@ struct Report {
     sim_steps_on_pose: u64,
     /// Steps the simulation took.
     sim_steps: u64,
+    /// The SCHED_FIFO priorities asked (`--rt-priority`) and granted: the
+    /// simulation's loop (its run summary's `rt_priority`, 0 when refused
+    /// or not asked).
+    rt_priority_asked: i32,
+    sim_rt_priority: serde_json::Value,
 }
 
 pub(crate) fn spawn(args: &[&str], bin: PathBuf) -> Result<Child> {
@@ -249,6 +261,10 @@ pub fn run(args: &Args) -> Result<()> {
         sim_args.push("--dt-s".to_string());
         sim_args.push(dt.to_string());
     }
+    if args.rt_priority > 10 {
+        sim_args.push("--rt-priority".to_string());
+        sim_args.push((args.rt_priority - 10).min(98).to_string());
+    }
     let sim_args: Vec<&str> = sim_args.iter().map(String::as_str).collect();
     let mut sim = spawn(&sim_args, sibling("sim-server")?)?;
     std::thread::sleep(Duration::from_millis(500));
@@ -267,6 +283,7 @@ pub fn run(args: &Args) -> Result<()> {
         .map(|b| b.endpoint.clone())
         .unwrap_or_default();
     let (daemon_for_s, io_spin_us) = ((d + 0.5).to_string(), args.io_spin_us.to_string());
+    let daemon_priority = args.rt_priority.to_string();
     let daemon_json = std::env::temp_dir().join(format!("hapbench-latency-daemon{pid}.json"));
     let daemon_json_arg = daemon_json.display().to_string();
     let mut daemon = spawn(
@@ -274,7 +291,7 @@ pub fn run(args: &Args) -> Result<()> {
             "run",
             "--quiet",
             "--rt-priority",
-            "0",
+            &daemon_priority,
             "--session",
             &session_name,
             "--duration-s",
@@ -292,6 +309,15 @@ pub fn run(args: &Args) -> Result<()> {
         .collect::<Vec<_>>(),
         sibling("haptic-daemon")?,
     )?;
+    if args.rt_priority > 0 {
+        // The observer above both processes: at normal priority it waited
+        // for their real-time threads' turns, and its receive times (daemon
+        // -> sim, device -> force) grew by ~200 us that the processes did
+        // not take.
+        if let Err(e) = shared::rt::set_fifo((args.rt_priority + 5).min(99)) {
+            eprintln!("hapbench: {}", shared::rt::fifo_refused_hint(&e));
+        }
+    }
     // What queued while the processes started is not latency: drop it.
     while let Ok(Some(_)) = forces.receive() {}
     while let Ok(Some(_)) = poses.receive() {}
@@ -398,6 +424,8 @@ pub fn run(args: &Args) -> Result<()> {
         sim_step_us: sim_summary["step_us"].clone(),
         sim_turnaround_us: sim_summary["turnaround_us"].clone(),
         sim_pose_wait_us: sim_summary["pose_wait_us"].clone(),
+        rt_priority_asked: args.rt_priority,
+        sim_rt_priority: sim_summary["rt_priority"].clone(),
         sim_steps_on_pose: sim_summary["steps_on_pose"].as_u64().unwrap_or(0),
         sim_steps: sim_summary["steps"].as_u64().unwrap_or(0),
     };
@@ -432,6 +460,14 @@ pub fn run(args: &Args) -> Result<()> {
             at("p99"),
             at("p999"),
             at("max")
+        );
+    }
+    if args.rt_priority > 0 {
+        println!(
+            "SCHED_FIFO: daemon RT thread asked {}, simulation loop {} (granted: {})",
+            args.rt_priority,
+            args.rt_priority - 10,
+            report.sim_rt_priority
         );
     }
     if let (Some(o), Some(r)) = (report.daemon_clock_offset_us, report.daemon_clock_rtt_us) {
