@@ -108,7 +108,10 @@ struct RunArgs {
     /// Record every tick to this CSV.
     #[arg(long)]
     record: Option<PathBuf>,
-    /// SCHED_FIFO priority to ask for (0 = do not ask).
+    /// SCHED_FIFO priority to ask for the RT thread (0 = do not ask); the
+    /// I/O thread, which publishes each pose, asks for 5 less (when above
+    /// 5, and not with --io-spin-us), so that no normal thread delays a
+    /// pose on its way.
     #[arg(long, default_value_t = 80)]
     rt_priority: i32,
     /// Pin the loop to this CPU.
@@ -315,12 +318,20 @@ fn main() -> Result<()> {
     } else {
         (None, None)
     };
+    // Not when it polls (--io-spin-us): a spinning FIFO thread would hold
+    // its core from the simulation.
+    let io_priority = if io_spin.is_some() {
+        0
+    } else {
+        (args.rt_priority - 5).clamp(0, 94)
+    };
     let io = {
         let cfg = IoConfig {
             transport: transport.clone(),
             session: session.clone(),
             record: args.record.clone(),
             spin: io_spin,
+            rt_priority: io_priority,
         };
         let (shared, stats) = (shared.clone(), stats.clone());
         std::thread::Builder::new()
@@ -436,31 +447,37 @@ fn main() -> Result<()> {
         }
         if !args.quiet && last_status.elapsed() >= Duration::from_secs(1) {
             last_status = Instant::now();
-            let s = stats.lock().expect("stats");
-            let rate = s.rate_hz();
-            let age = if s.last_age_ns == u64::MAX {
-                "none".to_string()
-            } else {
-                format!("{:.1} ms", s.last_age_ns as f64 / 1e6)
-            };
-            let f = s.last_force_n;
-            say!(
-                "{rate:7.0} Hz | lateness p50 {:.0} us p99 {:.0} us max {:.0} us | sample age {age} | force {:+.3} {:+.3} {:+.3} N | rejected {} poses, {} samples | passivity {} ticks | {}",
-                s.lateness.quantile_us(0.5),
-                s.lateness.quantile_us(0.99),
-                s.lateness.max_us(),
-                f[0],
-                f[1],
-                f[2],
-                shared.poses_rejected.load(Ordering::Relaxed),
-                shared.samples_not_live.load(Ordering::Relaxed),
-                shared.passivity_ticks.load(Ordering::Relaxed),
-                if shared.flags.peer_alive.load(Ordering::Relaxed) {
-                    "sim connected"
+            // Formatted under the lock, printed after it: the I/O thread
+            // (SCHED_FIFO when granted) takes this lock every batch and
+            // must not wait on a slow terminal.
+            let line = {
+                let s = stats.lock().expect("stats");
+                let rate = s.rate_hz();
+                let age = if s.last_age_ns == u64::MAX {
+                    "none".to_string()
                 } else {
-                    "no sim"
-                }
-            );
+                    format!("{:.1} ms", s.last_age_ns as f64 / 1e6)
+                };
+                let f = s.last_force_n;
+                format!(
+                    "{rate:7.0} Hz | lateness p50 {:.0} us p99 {:.0} us max {:.0} us | sample age {age} | force {:+.3} {:+.3} {:+.3} N | rejected {} poses, {} samples | passivity {} ticks | {}",
+                    s.lateness.quantile_us(0.5),
+                    s.lateness.quantile_us(0.99),
+                    s.lateness.max_us(),
+                    f[0],
+                    f[1],
+                    f[2],
+                    shared.poses_rejected.load(Ordering::Relaxed),
+                    shared.samples_not_live.load(Ordering::Relaxed),
+                    shared.passivity_ticks.load(Ordering::Relaxed),
+                    if shared.flags.peer_alive.load(Ordering::Relaxed) {
+                        "sim connected"
+                    } else {
+                        "no sim"
+                    }
+                )
+            };
+            say!("{line}");
         }
     }
     let rt_result = rt

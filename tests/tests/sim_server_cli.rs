@@ -781,8 +781,16 @@ fn run_asks_for_sched_fifo_and_says_what_it_got() {
     let dir = scratch_dir("run-rt");
     let json = dir.join("rt.json");
     let session = format!("rt{}", std::process::id());
+    // Real time only: a headless run never sleeps and would hold a core.
     let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--quiet", "--steps", "50"])
+        .args(["run", "--headless", "--steps", "1", "--rt-priority", "10"])
+        .output()
+        .expect("run sim-server");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--rt-priority") && err.contains("--headless"), "{err}");
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--steps", "50"])
         .args(["--rt-priority", "10", "--session", &session])
         .arg("--json")
         .arg(&json)

@@ -79,6 +79,12 @@ pub fn run(args: RunArgs) -> Result<()> {
     {
         bail!("--duration-s must be a positive number of seconds, got {d}");
     }
+    if args.headless && args.rt_priority > 0 {
+        // Headless never sleeps: under SCHED_FIFO it would hold its core.
+        bail!(
+            "--rt-priority is for real-time runs: --headless steps without pause and would hold a core under SCHED_FIFO"
+        );
+    }
     if !(args.pose_timeout_ms.is_finite() && args.pose_timeout_ms > 0.0) {
         bail!("--pose-timeout-ms must be a positive number of milliseconds");
     }

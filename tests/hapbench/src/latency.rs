@@ -66,10 +66,10 @@ pub struct Args {
     #[arg(long)]
     pub quasi_static: bool,
     /// Both processes under SCHED_FIFO: the daemon's RT thread at this
-    /// priority, the simulation's stepping loop 10 below (`--rt-priority`
-    /// of each), the observer 5 above; 0: the daemon without it and the
-    /// simulation at normal priority (the default). Needs CAP_SYS_NICE or
-    /// an rtprio limit.
+    /// priority (its I/O thread 5 below), the simulation's stepping loop 10
+    /// below (`--rt-priority` of each), the observer 3 below; 0: the daemon
+    /// without it and the simulation at normal priority (the default).
+    /// Needs CAP_SYS_NICE or an rtprio limit.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
     /// The daemon on the far side of `sim-server bridge` (zenoh over
@@ -309,12 +309,13 @@ pub fn run(args: &Args) -> Result<()> {
         .collect::<Vec<_>>(),
         sibling("haptic-daemon")?,
     )?;
-    if args.rt_priority > 0 {
-        // The observer above both processes: at normal priority it waited
-        // for their real-time threads' turns, and its receive times (daemon
-        // -> sim, device -> force) grew by ~200 us that the processes did
-        // not take.
-        if let Err(e) = shared::rt::set_fifo((args.rt_priority + 5).min(99)) {
+    if args.rt_priority > 3 {
+        // The observer above the simulation's loop and the daemon's I/O
+        // thread, below its RT thread (whose ticks it must not delay): at
+        // normal priority it waited for their turns, and its receive times
+        // (daemon -> sim, device -> force) grew by ~200 us that the
+        // processes did not take.
+        if let Err(e) = shared::rt::set_fifo(args.rt_priority - 3) {
             eprintln!("hapbench: {}", shared::rt::fifo_refused_hint(&e));
         }
     }
@@ -462,7 +463,7 @@ pub fn run(args: &Args) -> Result<()> {
             at("max")
         );
     }
-    if args.rt_priority > 0 {
+    if args.rt_priority > 10 {
         println!(
             "SCHED_FIFO: daemon RT thread asked {}, simulation loop {} (granted: {})",
             args.rt_priority,

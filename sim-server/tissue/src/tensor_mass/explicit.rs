@@ -109,6 +109,11 @@ pub fn substeps_for(
 /// never ends).
 pub const MAX_SUBSTEPS: usize = 4096;
 
+/// Sub-steps at most for which [`Explicit::prepare_step`] predicts the
+/// whole step (it keeps an array per sub-step); above, it computes the
+/// first sub-step's K U ahead.
+pub const PREDICTED_SUBSTEPS_MAX: usize = 8;
+
 /// How fast the sub-steps a stretched nonlinear body needed are given back
 /// once it eases (per step): each change of the count rescales U(t-1) to
 /// keep the velocity, which is not symplectic, and an undamped StVK body
@@ -198,6 +203,9 @@ pub struct Explicit<S: Storage> {
     prediction: Prediction,
     /// Steps finished from a prediction.
     predicted_steps: u64,
+    /// The contact field's re-selection period of the last contact step
+    /// (a prediction is not made for steps it would split).
+    resample_every_s: Option<Real>,
 }
 
 impl<S: Storage> Explicit<S> {
@@ -303,6 +311,7 @@ impl<S: Storage> Explicit<S> {
             ku_ready: false,
             prediction: Prediction::default(),
             predicted_steps: 0,
+            resample_every_s: None,
             model,
         };
         for v in 0..n {
@@ -410,6 +419,7 @@ impl<S: Storage> Explicit<S> {
         }
         let mut h = self.dt_s / self.substeps as Real;
         let mut every = ((resample_every_s / h).floor() as usize).max(1);
+        self.resample_every_s = Some(resample_every_s);
         if self.prediction.ready(self.substeps) {
             // The prediction cannot re-select points inside the step.
             if every >= self.substeps {
@@ -595,7 +605,19 @@ impl<S: Storage> Explicit<S> {
         if self.plans.len() != 1 || self.ku_ready {
             return;
         }
-        if self.large.is_none() && self.capsule_vertices.is_empty() && self.kernel.is_elastic() {
+        // A whole step ahead where the correction can use it: linear rows,
+        // few sub-steps (an array each), and no re-selection of contact
+        // points inside the step (the last contact step's period says).
+        let h = self.dt_s / self.substeps as Real;
+        let resamples = self
+            .resample_every_s
+            .is_some_and(|r| ((r / h).floor() as usize).max(1) < self.substeps);
+        if self.large.is_none()
+            && self.capsule_vertices.is_empty()
+            && self.kernel.is_elastic()
+            && self.substeps <= PREDICTED_SUBSTEPS_MAX
+            && !resamples
+        {
             self.predict();
             return;
         }

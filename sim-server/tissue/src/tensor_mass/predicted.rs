@@ -159,7 +159,8 @@ fn whole_pass<S: Storage>(
 pub(in crate::tensor_mass) struct Prediction {
     /// While a step is finished: U(t-1), U(t), then P_1 .. P_S (each
     /// corrected in place). Between steps slots 0 and 1 are empty (the
-    /// state's own arrays) and 2.. hold the prediction.
+    /// state's own arrays) and 2.. hold the prediction (and arrays kept
+    /// from a larger sub-step count).
     traj: Vec<Vec<V3>>,
     /// The sub-step count it was made for; `None`: no prediction.
     made_for: Option<usize>,
@@ -228,8 +229,12 @@ impl Prediction {
             self.rows = Vec::with_capacity(n);
             self.changed = Vec::with_capacity(n);
         }
-        self.traj.resize_with(substeps + 2, Vec::new);
-        for b in &mut self.traj[2..] {
+        // Never shrunk: a sub-step count that comes and goes (explicit
+        // contact springs) reuses its arrays instead of reallocating them.
+        if self.traj.len() < substeps + 2 {
+            self.traj.resize_with(substeps + 2, Vec::new);
+        }
+        for b in &mut self.traj[2..substeps + 2] {
             if b.len() != n {
                 *b = huge_vec(n, [0.0; 3]);
             }
@@ -347,7 +352,7 @@ impl Prediction {
     /// Ends the step: U(t) and U(t-1) back to the state (`now`, `prev`:
     /// P_S and P_(S-1)), the other arrays kept for the next prediction.
     pub(in crate::tensor_mass) fn end(&mut self, prev: &mut Vec<V3>, now: &mut Vec<V3>) {
-        let s = self.traj.len() - 2;
+        let s = self.made_for.unwrap_or(self.traj.len() - 2);
         std::mem::swap(now, &mut self.traj[s + 1]);
         std::mem::swap(prev, &mut self.traj[s]);
         // The two emptied slots become 0 and 1.

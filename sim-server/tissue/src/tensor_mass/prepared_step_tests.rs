@@ -14,6 +14,11 @@ use crate::mesh::{BoxSpec, CellSize};
 /// A 2 x 1 x 1 cm block held at x = 0, pulled and pushed at x = 2 cm,
 /// stepped at 3 ms (several sub-steps).
 fn block<S: Storage>() -> Explicit<S> {
+    block_at(3e-3)
+}
+
+/// [`block`] stepping `dt_s` at a time.
+fn block_at<S: Storage>(dt_s: f64) -> Explicit<S> {
     let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
         .generate()
         .unwrap();
@@ -22,7 +27,7 @@ fn block<S: Storage>() -> Explicit<S> {
     let mats = TetMaterials::uniform(material, mesh.tet_count());
     let model = ElasticModel::new(mesh, mats).unwrap();
     let rest: Vec<Vec3> = model.mesh().positions_m().to_vec();
-    let mut sim = Explicit::<S>::new(model, ExplicitConfig::new(3e-3)).unwrap();
+    let mut sim = Explicit::<S>::new(model, ExplicitConfig::new(dt_s)).unwrap();
     assert!(sim.substeps() > 1, "the test wants several sub-steps");
     for (v, x) in rest.iter().enumerate() {
         if x.x < 1e-9 {
@@ -145,4 +150,19 @@ fn check_changes<S: Storage>() {
     }
     assert_eq!(prepared.predicted_steps(), 40);
     assert_eq!(plain.predicted_steps(), 0);
+}
+
+#[test]
+fn many_sub_steps_compute_only_the_first_ahead() {
+    // Above PREDICTED_SUBSTEPS_MAX a whole step is not predicted (an array
+    // a sub-step): the first sub-step's K U is, and the step is unchanged.
+    let (mut plain, mut prepared) = (block_at::<f32>(0.03), block_at::<f32>(0.03));
+    assert!(prepared.substeps() > super::explicit::PREDICTED_SUBSTEPS_MAX);
+    for k in 0..10 {
+        plain.step();
+        prepared.prepare_step();
+        prepared.step();
+        same(&plain, &prepared, &format!("after step {k}"));
+    }
+    assert_eq!(prepared.predicted_steps(), 0);
 }
