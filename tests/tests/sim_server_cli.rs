@@ -788,7 +788,10 @@ fn run_asks_for_sched_fifo_and_says_what_it_got() {
         .expect("run sim-server");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("--rt-priority") && err.contains("--headless"), "{err}");
+    assert!(
+        err.contains("--rt-priority") && err.contains("--headless"),
+        "{err}"
+    );
     let out = Command::new(binary("sim-server"))
         .args(["run", "--quiet", "--steps", "50"])
         .args(["--rt-priority", "10", "--session", &session])
