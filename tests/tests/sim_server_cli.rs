@@ -803,6 +803,9 @@ fn run_asks_for_sched_fifo_and_says_what_it_got() {
     assert!(out.status.success(), "{err}");
     let v = read_json(&json);
     assert_eq!(v["steps"], 50);
+    // Every step after the first was predicted while the loop waited.
+    assert_eq!(v["predicted_steps"], 49, "{v}");
+    assert!(v["predicted_rows"].is_u64(), "{v}");
     // Granted where the user may (root, CAP_SYS_NICE, an rtprio limit);
     // refused, the run goes on at normal priority and says how to grant it.
     match v["rt_priority"].as_i64() {

@@ -104,6 +104,11 @@ struct DemoJson {
     sim_dropped_time_s: f64,
     /// The simulation's step time (us).
     sim_step_us: sim_server::step_time::StepPercentiles,
+    /// Steps finished from the prediction made while the simulation
+    /// waited for the pose (the rest ran whole).
+    sim_predicted_steps: u64,
+    /// The simulation's steps.
+    sim_steps: u64,
 }
 
 /// A pipe (both ends close on exec).
@@ -327,6 +332,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         contact_fraction: summary.contact_fraction,
         sim_dropped_time_s: summary.dropped_time_s,
         sim_step_us: summary.step_us,
+        sim_predicted_steps: summary.predicted_steps,
+        sim_steps: summary.steps,
     };
     println!(
         "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed, tools {:.1}% of the step | max rendered force {:.3} N (device limit {} N)",

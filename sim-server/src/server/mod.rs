@@ -160,6 +160,12 @@ pub struct RunSummary {
     /// The stepping loop's SCHED_FIFO priority (`--rt-priority`; 0: normal
     /// priority, as asked or because it was refused).
     pub rt_priority: i32,
+    /// Steps finished from the prediction made while the loop waited for
+    /// the pose (the tensor-mass backend, one thread; the rest ran whole),
+    /// and the rows they recomputed in all.
+    pub predicted_steps: u64,
+    /// See `predicted_steps`.
+    pub predicted_rows: u64,
     /// With `--save-frames`: frames not written because the disk was
     /// behind (the step is never delayed for them).
     pub frames_dropped: u64,

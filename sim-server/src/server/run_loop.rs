@@ -423,6 +423,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let secs = ((monotonic_ns() - self.start_ns) as Real * 1e-9).max(1e-9);
         summary.steps_per_s = summary.steps as Real / secs;
         summary.sim_time_s = summary.steps as Real * self.dt_s;
+        if let Some((steps, rows)) = self.sim.predicted() {
+            (summary.predicted_steps, summary.predicted_rows) = (steps, rows);
+        }
         summary.tets_removed = self.removed_total;
         summary.contact_fraction =
             summary.contact_s / (summary.contact_s + summary.step_s).max(1e-12);

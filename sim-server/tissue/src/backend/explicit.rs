@@ -18,6 +18,9 @@ impl<S: Storage> Backend for Explicit<S> {
     fn prepare_step(&mut self) {
         Explicit::prepare_step(self);
     }
+    fn predicted(&self) -> Option<(u64, u64)> {
+        Some((self.predicted_steps(), self.predicted_rows()))
+    }
     fn dt_s(&self) -> Real {
         Explicit::dt_s(self)
     }

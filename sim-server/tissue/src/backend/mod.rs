@@ -110,6 +110,12 @@ pub trait Backend {
     /// the step's result is unchanged. A loop
     /// calls it while it waits for the next pose. Others: nothing.
     fn prepare_step(&mut self) {}
+    /// Steps finished from a whole-step prediction ([`Backend::prepare_step`]),
+    /// and the rows they recomputed (summed over sub-steps); `None` for
+    /// backends that do not predict.
+    fn predicted(&self) -> Option<(u64, u64)> {
+        None
+    }
     /// Makes the coming steps stable with contact springs adding up to
     /// `omega2` (rad^2/s^2) to omega_max^2 (sub-stepping as needed).
     /// Backends that do not integrate contact ignore it.
