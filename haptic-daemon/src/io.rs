@@ -158,11 +158,6 @@ pub struct IoConfig {
     pub record: Option<PathBuf>,
     /// Poll for poses around their due time instead of waiting to be woken.
     pub spin: Option<IoSpin>,
-    /// SCHED_FIFO priority for this thread (0: normal priority). Below the
-    /// RT thread's: at normal priority, on two cores beside real-time
-    /// threads (the RT thread, a simulation loop under `--rt-priority`),
-    /// each pose waited for their turns before it was published.
-    pub rt_priority: i32,
 }
 
 /// Runs until the RT thread is done and the queue is drained.
@@ -172,14 +167,8 @@ pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> R
         session,
         record,
         spin,
-        rt_priority,
     } = cfg;
     let ports = IoPorts::open(&transport, &session)?;
-    if rt_priority > 0 {
-        // Refused: silently normal (the RT thread's request, with the same
-        // privilege, already warned how to grant it).
-        let _ = crate::rt::set_fifo(rt_priority);
-    }
     // From here on the RT thread wakes this thread after each pose.
     let _ = shared.io_thread.set(std::thread::current());
     let mut writer = match &record {

@@ -66,7 +66,7 @@ pub struct Args {
     #[arg(long)]
     pub quasi_static: bool,
     /// Both processes under SCHED_FIFO: the daemon's RT thread at this
-    /// priority (its I/O thread 5 below), the simulation's stepping loop 10
+    /// priority, the simulation's stepping loop 10
     /// below (`--rt-priority` of each), the observer 3 below; 0: the daemon
     /// without it and the simulation at normal priority (the default).
     /// Needs CAP_SYS_NICE or an rtprio limit.
