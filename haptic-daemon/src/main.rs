@@ -440,8 +440,8 @@ fn main() -> Result<()> {
         if !args.quiet && last_status.elapsed() >= Duration::from_secs(1) {
             last_status = Instant::now();
             // Formatted under the lock, printed after it: the I/O thread
-            // (SCHED_FIFO when granted) takes this lock every batch and
-            // must not wait on a slow terminal.
+            // takes this lock every batch and must not wait on a slow
+            // terminal.
             let line = {
                 let s = stats.lock().expect("stats");
                 let rate = s.rate_hz();

@@ -167,8 +167,9 @@ pub(in crate::tensor_mass) struct Prediction {
     lower: LowerRows,
     /// Vertices whose constraint, target or load changed since.
     changed: Vec<u32>,
-    /// Per vertex: in `rows` (or, between steps, in `changed`).
+    /// Per vertex: in `rows`.
     in_rows: Vec<bool>,
+    /// Per vertex: in `changed`.
     in_changed: Vec<bool>,
     /// The rows recomputed at the current sub-step.
     rows: Vec<u32>,
@@ -209,9 +210,9 @@ impl Prediction {
         }
     }
 
-    /// Computes P_1 .. P_S from U(t-1) = `prev`, U(t) = `now` with
-    /// `inputs` (whose `u` is ignored, `fmem` and `fnl` taken as zero),
-    /// `run` being one kernel pass writing U(t+1) over U(t-1) in place.
+    /// Computes P_1 .. P_S from U(t-1) = `prev`, U(t) = `now`, `run(u,
+    /// next)` being one kernel pass without contact forces that writes
+    /// U(t+1) over U(t-1) (held in `next`) from U(t) = `u`.
     pub(in crate::tensor_mass) fn predict<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
