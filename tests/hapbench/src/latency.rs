@@ -67,11 +67,17 @@ pub struct Args {
     pub quasi_static: bool,
     /// Both processes under SCHED_FIFO: the daemon's RT thread at this
     /// priority, the simulation's stepping loop 10
-    /// below (`--rt-priority` of each), the observer 3 below; 0: the daemon
-    /// without it and the simulation at normal priority (the default).
+    /// below (`--rt-priority` of each), the observer 3 below (only when the
+    /// simulation is real-time too); 0: the daemon without it and the
+    /// simulation at normal priority (the default).
     /// Needs CAP_SYS_NICE or an rtprio limit.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
+    /// The simulation's loop priority instead of `--rt-priority` - 10 (0:
+    /// normal priority, e.g. to time the daemon's default beside a
+    /// normal-priority simulation).
+    #[arg(long, value_parser = clap::value_parser!(i32).range(0..=98))]
+    pub sim_rt_priority: Option<i32>,
     /// The daemon on the far side of `sim-server bridge` (zenoh over
     /// loopback TCP, `--connect`), force samples observed where it receives
     /// them, beside a bare zenoh baseline.
@@ -261,9 +267,12 @@ pub fn run(args: &Args) -> Result<()> {
         sim_args.push("--dt-s".to_string());
         sim_args.push(dt.to_string());
     }
-    if args.rt_priority > 10 {
+    let sim_priority = args
+        .sim_rt_priority
+        .unwrap_or((args.rt_priority - 10).clamp(0, 98));
+    if sim_priority > 0 {
         sim_args.push("--rt-priority".to_string());
-        sim_args.push((args.rt_priority - 10).min(98).to_string());
+        sim_args.push(sim_priority.to_string());
     }
     let sim_args: Vec<&str> = sim_args.iter().map(String::as_str).collect();
     let mut sim = spawn(&sim_args, sibling("sim-server")?)?;
@@ -309,7 +318,9 @@ pub fn run(args: &Args) -> Result<()> {
         .collect::<Vec<_>>(),
         sibling("haptic-daemon")?,
     )?;
-    if args.rt_priority > 3 {
+    // Real-time only beside a real-time simulation: beside a normal one
+    // it would take the simulation's share instead.
+    if args.rt_priority > 3 && sim_priority > 0 {
         // The observer above the simulation's loop and the daemon's I/O
         // thread, below its RT thread (whose ticks it must not delay): at
         // normal priority it waited for their turns, and its receive times
@@ -463,12 +474,10 @@ pub fn run(args: &Args) -> Result<()> {
             at("max")
         );
     }
-    if args.rt_priority > 10 {
+    if args.rt_priority > 0 || sim_priority > 0 {
         println!(
-            "SCHED_FIFO: daemon RT thread asked {}, simulation loop {} (granted: {})",
-            args.rt_priority,
-            args.rt_priority - 10,
-            report.sim_rt_priority
+            "SCHED_FIFO: daemon RT thread asked {}, simulation loop {sim_priority} (granted: {})",
+            args.rt_priority, report.sim_rt_priority
         );
     }
     if let (Some(o), Some(r)) = (report.daemon_clock_offset_us, report.daemon_clock_rtt_us) {
