@@ -23,5 +23,5 @@ pub mod services;
 mod session;
 pub mod source;
 
-pub use clock::{NS_PER_S, monotonic_ns};
+pub use clock::{NS_PER_S, monotonic_ns, thread_cpu_ns};
 pub use session::{SessionName, SessionNameError};

@@ -155,6 +155,20 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
         assert!(v > 0.0 && v.is_finite(), "step_us.{key}: {s}");
     }
     assert!(s["step_us"]["p50"].as_f64() <= s["step_us"]["max"].as_f64());
+    // The CPU time of a step's whole work contains the step itself (the
+    // median step is not preempted), and never the stall: a stopped
+    // process runs no CPU, wherever in the loop the signal found it.
+    let cpu = &s["step_cpu_us"];
+    let (cpu_p50, cpu_max) = (cpu["p50"].as_f64().unwrap(), cpu["max"].as_f64().unwrap());
+    assert!(
+        cpu_p50 >= 0.5 * s["step_us"]["p50"].as_f64().unwrap(),
+        "step_cpu_us {cpu} against step_us {}",
+        s["step_us"]
+    );
+    assert!(
+        cpu_max < 0.5 * dropped * 1e6,
+        "step_cpu_us {cpu}, dropped {dropped} s"
+    );
     // Simulated time + dropped time = wall time, to the other stalls a
     // busy machine adds (all counted in dropped) and the start-up.
     let wall = s["steps"].as_f64().unwrap() / s["steps_per_s"].as_f64().unwrap();

@@ -104,6 +104,9 @@ struct DemoJson {
     sim_dropped_time_s: f64,
     /// The simulation's step time (us).
     sim_step_us: sim_server::step_time::StepPercentiles,
+    /// The stepping thread's CPU time per step's whole work (us; the run
+    /// summary's `step_cpu_us`): the step's own cost, without preemption.
+    sim_step_cpu_us: sim_server::step_time::StepPercentiles,
     /// Steps finished from the prediction made while the simulation
     /// waited for the pose (the rest ran whole).
     sim_predicted_steps: u64,
@@ -332,6 +335,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         contact_fraction: summary.contact_fraction,
         sim_dropped_time_s: summary.dropped_time_s,
         sim_step_us: summary.step_us,
+        sim_step_cpu_us: summary.step_cpu_us,
         sim_predicted_steps: summary.predicted_steps,
         sim_steps: summary.steps,
     };

@@ -120,7 +120,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         }
     };
     println!(
-        "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N | step us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0}{}",
+        "{}: {} steps ({:.0} steps/s, {:.2} s simulated) | {} poses in, {} force samples out | {} contact steps, {} tetrahedra removed, max force {:.3} N | step us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} (CPU per step's work p50 {:.0} p99.9 {:.0}){}",
         src.name,
         summary.steps,
         summary.steps_per_s,
@@ -134,6 +134,8 @@ pub fn run(args: RunArgs) -> Result<()> {
         summary.step_us.p99,
         summary.step_us.p999,
         summary.step_us.max,
+        summary.step_cpu_us.p50,
+        summary.step_cpu_us.p999,
         if summary.stalls > 0 {
             format!(
                 " | {} stalls: {:.3} s of simulated time dropped",

@@ -119,6 +119,13 @@ pub struct RunSummary {
     pub contact_fraction: Real,
     /// Wall time of each physics step (us): p50, p99, p99.9, max.
     pub step_us: StepPercentiles,
+    /// The stepping thread's CPU time for each step's whole work (us):
+    /// from its wake-up through pose intake and the tools, the step, the
+    /// sample, the hand-over and the next step's prediction, without the
+    /// wait. Unlike the wall times it leaves out what the machine took
+    /// away (preemption by other threads or the hypervisor): a long step
+    /// here is the simulation's own work, a long `step_us` alone is not.
+    pub step_cpu_us: StepPercentiles,
     /// Wall time from the loop's wake-up (a pose or the step's due time)
     /// to its force sample sent (us): pose intake and the tools' update,
     /// the step, the sample; the simulation's share of device -> force.

@@ -62,6 +62,10 @@ pub struct RunLoop<'a, B: Backend> {
     last_pose_seq: Option<u64>,
     /// When the loop woke for this step (ns).
     woke_ns: u64,
+    /// The thread's CPU clock then (ns).
+    woke_cpu_ns: u64,
+    /// The CPU time of each step's whole work, wake-up to prediction.
+    work_cpu_times: StepHistogram,
     start_ns: u64,
     pacing: Pacing,
     stalls_told: u64,
@@ -151,6 +155,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             pose_wait_times: StepHistogram::new(),
             last_pose_seq: None,
             woke_ns: 0,
+            woke_cpu_ns: 0,
+            work_cpu_times: StepHistogram::new(),
             start_ns,
             stalls_told: 0,
             last_stall_told: 0,
@@ -176,6 +182,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
     /// into the tools: contact detected and imposed before the step.
     pub fn intake(&mut self) -> Result<Option<PoseMsg>, RunError> {
         self.woke_ns = monotonic_ns();
+        self.woke_cpu_ns = shared::thread_cpu_ns();
         self.poses.drain()?;
         let t0 = monotonic_ns();
         let pose = self.poses.active(t0);
@@ -325,6 +332,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let t0 = monotonic_ns();
         self.sim.prepare_step();
         s.step_s += (monotonic_ns() - t0) as Real * 1e-9;
+        self.work_cpu_times
+            .record(shared::thread_cpu_ns().saturating_sub(self.woke_cpu_ns));
         Ok(())
     }
 
@@ -432,6 +441,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.poses_received = self.poses.received;
         summary.pose_timeouts = self.poses.timeouts;
         summary.step_us = self.step_times.percentiles_us();
+        summary.step_cpu_us = self.work_cpu_times.percentiles_us();
         summary.turnaround_us = self.turnaround_times.percentiles_us();
         summary.hand_over_us = self.hand_over_times.percentiles_us();
         summary.pose_wait_us = self.pose_wait_times.percentiles_us();
