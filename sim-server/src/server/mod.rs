@@ -120,9 +120,9 @@ pub struct RunSummary {
     /// Wall time of each physics step (us): p50, p99, p99.9, max.
     pub step_us: StepPercentiles,
     /// The stepping thread's CPU time for each step's whole work (us):
-    /// from its wake-up through pose intake and the tools, the step, the
-    /// sample, the hand-over and the next step's prediction, without the
-    /// wait. Unlike the wall times it leaves out what the machine took
+    /// pose intake and the tools, the step, the sample, the hand-over, the
+    /// next step's prediction and the status line, from one step's end to
+    /// the next's (the blocking wait between them costs only its wake-up). Unlike the wall times it leaves out what the machine took
     /// away (preemption by other threads or the hypervisor): a long step
     /// here is the simulation's own work, a long `step_us` alone is not.
     pub step_cpu_us: StepPercentiles,
