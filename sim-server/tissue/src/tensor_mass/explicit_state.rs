@@ -1,0 +1,195 @@
+//! What a caller sets and reads on [`Explicit`] between steps: holds,
+//! loads, cuts (each telling the prediction which rows it touched), the
+//! state, and the displacements, velocities and energy.
+
+use super::Explicit;
+use crate::ids::{TetId, VertexId};
+use crate::math::{Real, Vec3};
+use crate::tensor_mass::huge_pages::huge_vec;
+use crate::tensor_mass::kernel::{Kernel, Storage, V3, kind};
+use crate::tensor_mass::large_strain::VertexForce;
+use crate::tensor_mass::model::{CutChange, CutError, ElasticModel};
+use crate::tensor_mass::stability::StableStep;
+
+impl<S: Storage> Explicit<S> {
+    /// Fixes vertex `v` at its rest position.
+    pub fn fix(&mut self, v: VertexId) {
+        self.prescribe(v, Vec3::ZERO);
+    }
+
+    /// Imposes displacement `d_m` on vertex `v` from the next step on.
+    pub fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        self.constraint[v.idx()] = kind::PRESCRIBED;
+        self.target[v.idx()] = d_m.to_array();
+        self.refresh_vertex(v.idx());
+        self.prediction.touch(v.idx());
+    }
+
+    /// Frees vertex `v` (its current displacement and velocity are kept).
+    pub fn release(&mut self, v: VertexId) {
+        self.constraint[v.idx()] = kind::FREE;
+        self.refresh_vertex(v.idx());
+        self.prediction.touch(v.idx());
+    }
+
+    /// Sets the external force (N) on vertex `v`. The first call allocates the
+    /// force array; a simulation without loads never reads one.
+    pub fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
+        if self.fext.is_empty() {
+            self.fext = huge_vec(self.u.len(), [0.0; 3]);
+        }
+        self.fext[v.idx()] = f_n.to_array();
+        self.prediction.touch(v.idx());
+    }
+
+    /// Removes all external forces.
+    pub fn clear_external_forces(&mut self) {
+        self.forget_prepared();
+        self.fext = Vec::new();
+    }
+
+    /// Sets U(t) and U(t-1) (m), e.g. to start with an initial velocity
+    /// (U(t) - U(t-1)) / dt.
+    pub fn set_state(&mut self, u_m: &[Vec3], u_prev_m: &[Vec3]) {
+        self.forget_prepared();
+        for (d, s) in self.u.iter_mut().zip(u_m) {
+            *d = s.to_array();
+        }
+        for (d, s) in self.next.iter_mut().zip(u_prev_m) {
+            *d = s.to_array();
+        }
+    }
+
+    /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
+    pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        let change = self.model.remove_tet(t)?;
+        if let Some(large) = &mut self.large {
+            large.set_alive(t, false);
+        }
+        self.after_cut(&change);
+        Ok(change)
+    }
+
+    /// Adds a removed tetrahedron back.
+    pub fn restore_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        let change = self.model.restore_tet(t)?;
+        if let Some(large) = &mut self.large {
+            large.set_alive(t, true);
+        }
+        self.after_cut(&change);
+        Ok(change)
+    }
+
+    fn after_cut(&mut self, change: &CutChange) {
+        // K U ahead is stale; a prediction is not: only the removed
+        // element's four rows read its tensors (its edges join only those
+        // vertices) and their masses, so they are recomputed like rows
+        // whose hold changed.
+        self.ku_ready = false;
+        self.kernel.update(&self.model, change);
+        for v in change.vertices {
+            self.refresh_vertex(v.idx());
+            self.prediction.touch(v.idx());
+        }
+    }
+
+    /// Displacement of vertex `v` (m).
+    pub fn displacement(&self, v: VertexId) -> Vec3 {
+        Vec3::from_array(self.u[v.idx()])
+    }
+
+    /// All displacements (m).
+    pub fn displacements(&self) -> &[V3] {
+        &self.u
+    }
+
+    /// Current position of vertex `v` (m).
+    pub fn position(&self, v: VertexId) -> Vec3 {
+        self.model.mesh().positions_m()[v.idx()] + self.displacement(v)
+    }
+
+    /// The model (tensors, topology, surface).
+    pub fn model(&self) -> &ElasticModel {
+        &self.model
+    }
+
+    /// The nonlinear elements' force at vertex `v` from the last pass (the
+    /// state at the start of the last sub-step), `None` in a linear model.
+    pub fn nonlinear_force_n(&self, v: VertexId) -> Option<VertexForce> {
+        let large = self.large.as_ref()?;
+        let f = Vec3::from_array(self.fnl[v.idx()]);
+        Some(if large.computes_whole_forces() {
+            VertexForce::Whole(f)
+        } else {
+            VertexForce::Correction(f)
+        })
+    }
+
+    /// The hot kernel (without elastic tensors when every element is
+    /// nonlinear: see [`Kernel::without_elastic`]).
+    pub fn kernel(&self) -> &Kernel<S> {
+        &self.kernel
+    }
+
+    /// The enforced stability bound.
+    pub fn stable_step(&self) -> StableStep {
+        self.stable
+    }
+
+    /// Sub-steps per step (1 when dt is under the bound).
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+
+    /// The step (s).
+    pub fn dt_s(&self) -> Real {
+        self.dt_s
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Velocity of `v` (m/s): the last sub-step's backward difference.
+    pub fn velocity(&self, v: VertexId) -> Vec3 {
+        let h = self.dt_s / self.substeps as Real;
+        (Vec3::from_array(self.u[v.idx()]) - Vec3::from_array(self.next[v.idx()])) / h
+    }
+
+    /// Kinetic plus elastic energy (J), velocities by the centred difference
+    /// of the last two states (for tests and diagnostics; allocates).
+    pub fn energy_j(&self) -> Real {
+        let h = self.dt_s / self.substeps as Real;
+        let u: Vec<Vec3> = self.u.iter().map(|a| Vec3::from_array(*a)).collect();
+        let kinetic: Real = self
+            .u
+            .iter()
+            .zip(&self.next)
+            .zip(self.model.masses_kg())
+            .map(|((a, b), m)| {
+                let v = (Vec3::from_array(*a) - Vec3::from_array(*b)) / h;
+                0.5 * m * v.length_squared()
+            })
+            .sum();
+        kinetic + self.model.energy_j(&u)
+    }
+
+    /// Bytes the step streams per sub-step: the kernel's tensors and indices
+    /// plus the state arrays (U read, U(t-1) read and U(t+1) written in its
+    /// place, coefficients and kinds read), and the nonlinear pass's rest
+    /// data, forces and rotations. The K U accumulators live in a
+    /// cache-sized ring and are not counted.
+    pub fn bytes_per_substep(&self) -> usize {
+        let n = self.u.len();
+        // The nonlinear pass's rest data and buffers, and the vertex
+        // forces it hands the step.
+        let large = self.large.as_ref().map_or(0, |l| l.bytes() + n * 24);
+        self.kernel.bytes() + n * (24 + 48 + 24 + 1) + large
+    }
+
+    /// The number of parts a step is split into.
+    pub fn parts(&self) -> usize {
+        self.plans.len()
+    }
+}
