@@ -3,18 +3,17 @@
 //! the scene declares is built.
 
 use super::materials::resolve;
-use super::select::{Region, Tags, distance_to_segment, segment_crosses_tet};
-use super::spec::{
-    BackendName, BoundName, DtPolicyName, LatticeKind, MaterialModelName, MembraneModelName,
-    PrecisionName, SceneSpec, ShapeKind,
-};
+use super::mesh_load::{LoadedMesh, load_mesh};
+use super::select::{Region, distance_to_segment, segment_crosses_tet};
+use super::settings::{backend_runs_models, contact_config, settings};
+use super::spec::{BackendName, MembraneModelName, SceneSpec};
 use super::{SceneError, SceneSource};
 use crate::contact::Friction;
 use crate::ids::{TetId, VertexId};
 use crate::material_map::TetMaterials;
 use crate::math::{Real, Vec3};
 use crate::membrane::MembraneModel;
-use crate::mesh::{BoxSpec, CellSize, TetMesh, io, rcm_order, shapes};
+
 use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
 use serde::Serialize;
 use toml::Spanned;
@@ -117,7 +116,11 @@ fn describe(m: &crate::material::Material) -> String {
     s
 }
 
-fn positive(src: &SceneSource, v: &toml::Spanned<Real>, what: &str) -> Result<Real, SceneError> {
+pub(super) fn positive(
+    src: &SceneSource,
+    v: &toml::Spanned<Real>,
+    what: &str,
+) -> Result<Real, SceneError> {
     let x = *v.get_ref();
     if x.is_finite() && x > 0.0 {
         Ok(x)
@@ -169,176 +172,6 @@ fn unit(src: &SceneSource, v: &toml::Spanned<[Real; 3]>, what: &str) -> Result<V
         Some(n) if a.is_finite() && largest > 0.0 => Ok(n),
         _ => Err(src.error(v.span(), format!("{what} must be a finite non-zero vector"))),
     }
-}
-
-/// The factor `[mesh] scale` or `units` asks for (`None`: metres as read).
-fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Real>, SceneError> {
-    match (&m.scale, &m.units) {
-        (Some(_), Some(u)) => Err(src.error(u.span(), "give `scale` or `units`, not both")),
-        (Some(s), None) => positive(src, s, "scale").map(Some),
-        (None, Some(u)) => match u.get_ref().as_str() {
-            "m" => Ok(None),
-            "cm" => Ok(Some(0.01)),
-            "mm" => Ok(Some(0.001)),
-            other => Err(src.error(
-                u.span(),
-                format!("units must be \"m\", \"cm\" or \"mm\", got {other:?}"),
-            )),
-        },
-        (None, None) => Ok(None),
-    }
-}
-
-/// `mesh` with every coordinate multiplied by `s`.
-fn scaled(mesh: &TetMesh, s: Real) -> Result<TetMesh, crate::mesh::MeshError> {
-    TetMesh::new(
-        mesh.positions_m().iter().map(|p| *p * s).collect(),
-        mesh.tets().iter().map(|t| t.map(|v| v.0)).collect(),
-    )
-}
-
-/// A scene's mesh, renumbered, with what it said about itself.
-struct LoadedMesh {
-    mesh: TetMesh,
-    /// Physical tags of tetrahedra and surface triangles.
-    physical: Tags,
-    /// Per vertex, its index before renumbering (`None`: not renumbered).
-    original_ids: Option<Vec<u32>>,
-}
-
-fn load_mesh(
-    src: &SceneSource,
-    spec: &SceneSpec,
-    report: &mut SceneReport,
-) -> Result<LoadedMesh, SceneError> {
-    let m = spec.mesh.get_ref();
-    let (mesh, physical) = match (&m.file, &m.generate) {
-        (Some(file), None) => {
-            let path = src.dir.join(file.get_ref());
-            let imported =
-                io::read_mesh(&path).map_err(|e| src.error(file.span(), e.to_string()))?;
-            report.mesh_source = path.display().to_string();
-            report.warnings.extend(imported.warnings);
-            let mesh = match mesh_scale(src, m)? {
-                Some(s) => {
-                    scaled(&imported.mesh, s).map_err(|e| src.error(file.span(), e.to_string()))?
-                }
-                None => imported.mesh,
-            };
-            let tags = Tags {
-                tets: imported.tet_physical,
-                surface: imported
-                    .surface_physical
-                    .into_iter()
-                    .map(|(t, tag)| (t.map(VertexId), tag))
-                    .collect(),
-            };
-            (mesh, tags)
-        }
-        (None, Some(g)) if m.scale.is_some() || m.units.is_some() => {
-            return Err(src.error(
-                g.span(),
-                "`scale` and `units` convert a mesh file; a generated mesh is given in metres",
-            ));
-        }
-        (None, Some(g)) => {
-            let gen_span = g.span();
-            let g = g.get_ref();
-            let cell = g
-                .cell_m
-                .as_ref()
-                .map(|c| positive(src, c, "cell_m"))
-                .transpose()?;
-            let need_cell =
-                || cell.ok_or_else(|| src.error(gen_span.clone(), "this generator needs `cell_m`"));
-            let lattice = match g.lattice.unwrap_or(LatticeKind::Bcc) {
-                LatticeKind::Bcc => shapes::Lattice::BodyCentred,
-                LatticeKind::Cubic => shapes::Lattice::Cubic,
-            };
-            let fail = |e: crate::mesh::GenerateError| src.error(gen_span.clone(), e.to_string());
-            let mesh = match g.shape {
-                ShapeKind::Box => {
-                    let size = g.size_m.as_ref().ok_or_else(|| {
-                        src.error(gen_span.clone(), "shape \"box\" needs `size_m`")
-                    })?;
-                    let cells = match (cell, &g.tets) {
-                        (Some(h), None) => CellSize::EdgeM(h),
-                        (None, Some(n)) => CellSize::TargetTets(*n.get_ref()),
-                        _ => {
-                            return Err(src.error(
-                                gen_span.clone(),
-                                "shape \"box\" needs exactly one of `cell_m`, `tets`",
-                            ));
-                        }
-                    };
-                    let spec = BoxSpec {
-                        origin_m: Vec3::from_array(g.origin_m.unwrap_or([0.0; 3])),
-                        size_m: Vec3::from_array(*size.get_ref()),
-                        cells,
-                    };
-                    spec.generate()
-                        .map_err(|e| src.error(size.span(), e.to_string()))?
-                }
-                ShapeKind::Ellipsoid => {
-                    let radii = g.radii_m.as_ref().ok_or_else(|| {
-                        src.error(gen_span.clone(), "shape \"ellipsoid\" needs `radii_m`")
-                    })?;
-                    let centre = Vec3::from_array(g.center_m.unwrap_or([0.0; 3]));
-                    shapes::ellipsoid(
-                        centre,
-                        Vec3::from_array(*radii.get_ref()),
-                        need_cell()?,
-                        lattice,
-                    )
-                    .map_err(fail)?
-                }
-                ShapeKind::Liver => shapes::liver(need_cell()?, lattice).map_err(fail)?,
-            };
-            if g.shape != ShapeKind::Box && g.tets.is_some() {
-                return Err(src.error(
-                    gen_span,
-                    "`tets` only sizes the box generator; use `cell_m`",
-                ));
-            }
-            report.mesh_source = format!("generated {:?}", g.shape).to_lowercase();
-            let n = mesh.tet_count();
-            let tags = Tags {
-                tets: vec![0; n],
-                surface: Vec::new(),
-            };
-            (mesh, tags)
-        }
-        _ => {
-            return Err(src.error(
-                spec.mesh.span(),
-                "[mesh] needs exactly one of `file`, `generate`",
-            ));
-        }
-    };
-    if mesh.reoriented() > 0 {
-        report.warnings.push(format!(
-            "{} inverted tetrahedra were reoriented",
-            mesh.reoriented()
-        ));
-    }
-    if !m.reorder.unwrap_or(true) {
-        return Ok(LoadedMesh {
-            mesh,
-            physical,
-            original_ids: None,
-        });
-    }
-    let order = rcm_order(&mesh);
-    let new_of_old = crate::mesh::new_of_old(&order, mesh.vertex_count());
-    let mut physical = physical;
-    for (tri, _) in &mut physical.surface {
-        *tri = tri.map(|v| VertexId(new_of_old[v.idx()]));
-    }
-    Ok(LoadedMesh {
-        mesh: mesh.permuted(&order),
-        physical,
-        original_ids: Some(order.iter().map(|v| v.0).collect()),
-    })
 }
 
 /// Builds everything `spec` declares.
@@ -692,70 +525,6 @@ fn containing_tet(mesh: &crate::mesh::TetMesh, p: Vec3) -> Option<usize> {
     })
 }
 
-/// Why a scene cannot run on the hybrid backend.
-pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] section naming its tensor-mass (cuttable) part, e.g. [hybrid] select = { sphere_m = [x, y, z, r] }; the rest is precomputed";
-
-fn contact_config(
-    src: &SceneSource,
-    spec: &SceneSpec,
-) -> Result<crate::contact::ContactConfig, SceneError> {
-    use crate::contact::{ContactConfig, ContactLaw};
-    use crate::scene::spec::ContactLawName;
-    let mut c = ContactConfig::default();
-    let Some(section) = &spec.contact else {
-        return Ok(c);
-    };
-    let s = section.get_ref();
-    c.law = s.law.as_ref().map(|l| match l.get_ref() {
-        ContactLawName::Penalty => ContactLaw::Penalty,
-        ContactLawName::Projection => ContactLaw::Projection,
-    });
-    let pos = |v: &Option<toml::Spanned<Real>>, key: &str, default: Real| {
-        v.as_ref().map_or(Ok(default), |x| {
-            positive(src, x, &format!("[contact] {key}"))
-        })
-    };
-    c.stiffness_factor = pos(&s.stiffness_factor, "stiffness_factor", c.stiffness_factor)?;
-    c.point_spacing = pos(&s.point_spacing, "point_spacing", c.point_spacing)?;
-    c.max_tool_speed_m_s = pos(
-        &s.max_tool_speed_m_s,
-        "max_tool_speed_m_s",
-        c.max_tool_speed_m_s,
-    )?;
-    c.max_tool_accel_m_s2 = pos(
-        &s.max_tool_accel_m_s2,
-        "max_tool_accel_m_s2",
-        c.max_tool_accel_m_s2,
-    )?;
-    if let Some(springs) = &s.springs {
-        c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
-    }
-    if let Some(d) = &s.damping_s_per_m {
-        let x = *d.get_ref();
-        if !(x.is_finite() && x >= 0.0) {
-            return Err(src.error(
-                d.span(),
-                format!("[contact] damping_s_per_m must be a finite number >= 0, got {x}"),
-            ));
-        }
-        c.damping_s_per_m = x;
-    }
-    if c.point_spacing > 1.0 {
-        let span = s
-            .point_spacing
-            .as_ref()
-            .map_or(section.span(), |x| x.span());
-        return Err(src.error(
-            span,
-            format!(
-                "[contact] point_spacing is a fraction of the tool radius and must be at most 1 (points further apart than the radius miss the tool), got {}",
-                c.point_spacing
-            ),
-        ));
-    }
-    Ok(c)
-}
-
 /// The rotation and the point it turns about of a `rotate` load.
 fn rotation(
     src: &SceneSource,
@@ -784,97 +553,4 @@ fn rotation(
         crate::math::Mat3::from_axis_angle(axis / length, angle.to_radians()),
         origin,
     ))
-}
-
-/// A scene whose backend cannot run its material models is refused at the
-/// first nonlinear `model` key, naming the backend's reason.
-fn backend_runs_models(
-    src: &SceneSource,
-    spec: &SceneSpec,
-    model: &ElasticModel,
-    backend: BackendName,
-    hybrid_tets: Option<&[TetId]>,
-) -> Result<(), SceneError> {
-    let refusal = match backend {
-        BackendName::TensorMass => return Ok(()),
-        BackendName::Implicit => crate::backend::Implicit::check_model(model),
-        BackendName::Precomputed => crate::backend::Precomputed::check_model(model),
-        BackendName::Hybrid => {
-            let mut in_tm = vec![false; model.mesh().tet_count()];
-            for t in hybrid_tets.unwrap_or(&[]) {
-                in_tm[t.idx()] = true;
-            }
-            crate::backend::Hybrid::check_model(model, |t| in_tm[t.idx()])
-        }
-    };
-    let Err(e) = refusal else {
-        return Ok(());
-    };
-    let nonlinear = |m: &Option<Spanned<MaterialModelName>>| {
-        m.as_ref()
-            .filter(|m| *m.get_ref() != MaterialModelName::Linear)
-            .map(Spanned::span)
-    };
-    let span = nonlinear(&spec.material.get_ref().model)
-        .or_else(|| {
-            spec.region
-                .iter()
-                .find_map(|r| nonlinear(&r.get_ref().model))
-        })
-        .or_else(|| {
-            spec.vessel
-                .iter()
-                .find_map(|v| nonlinear(&v.get_ref().model))
-        })
-        .unwrap_or(spec.material.span());
-    Err(src.error(span, e.to_string()))
-}
-
-fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneError> {
-    let mut s = SimSettings {
-        dt_s: None,
-        rate_hz: None,
-        threads: 1,
-        single_precision: true,
-        policy: DtPolicy::Substep,
-        bound: BoundMethod::Element,
-        backend: BackendName::TensorMass,
-    };
-    let Some(sim) = &spec.simulation else {
-        return Ok(s);
-    };
-    let sim = sim.get_ref();
-    if let Some(b) = &sim.backend {
-        if *b.get_ref() == BackendName::Hybrid && spec.hybrid.is_none() {
-            return Err(src.error(b.span(), HYBRID_NEEDS_SPLIT));
-        }
-        s.backend = *b.get_ref();
-    }
-    s.dt_s = sim
-        .dt_s
-        .as_ref()
-        .map(|d| positive(src, d, "[simulation] dt_s"))
-        .transpose()?;
-    s.rate_hz = sim
-        .rate_hz
-        .as_ref()
-        .map(|r| positive(src, r, "[simulation] rate_hz"))
-        .transpose()?;
-    if let Some(t) = &sim.threads {
-        if *t.get_ref() == 0 {
-            return Err(src.error(t.span(), "[simulation] threads must be at least 1"));
-        }
-        s.threads = *t.get_ref();
-    }
-    s.single_precision = sim.precision.unwrap_or(PrecisionName::F32) == PrecisionName::F32;
-    s.policy = match sim.dt_policy.unwrap_or(DtPolicyName::Substep) {
-        DtPolicyName::Refuse => DtPolicy::Refuse,
-        DtPolicyName::Substep => DtPolicy::Substep,
-        DtPolicyName::Unchecked => DtPolicy::Unchecked,
-    };
-    s.bound = match sim.bound.unwrap_or(BoundName::Element) {
-        BoundName::Element => BoundMethod::Element,
-        BoundName::PowerIteration => BoundMethod::PowerIteration,
-    };
-    Ok(s)
 }

@@ -6,10 +6,13 @@
 
 mod build;
 mod materials;
+mod mesh_load;
 mod select;
+mod settings;
 pub mod spec;
 
-pub use build::{BuiltScene, HYBRID_NEEDS_SPLIT, SceneReport, SimSettings, ToolDecl, build_scene};
+pub use build::{BuiltScene, SceneReport, SimSettings, ToolDecl, build_scene};
+pub use settings::HYBRID_NEEDS_SPLIT;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};

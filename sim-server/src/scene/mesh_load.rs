@@ -1,0 +1,181 @@
+//! A scene's `[mesh]`: read from a file (with its physical tags) or
+//! generated, scaled to metres as `scale` or `units` asks, and renumbered
+//! for the kernel (RCM) with each vertex's original index kept.
+
+use super::build::{SceneReport, positive};
+use super::select::Tags;
+use super::spec::{LatticeKind, SceneSpec, ShapeKind};
+use super::{SceneError, SceneSource};
+use crate::ids::VertexId;
+use crate::math::{Real, Vec3};
+use crate::mesh::{BoxSpec, CellSize, TetMesh, io, rcm_order, shapes};
+
+/// The factor `[mesh] scale` or `units` asks for (`None`: metres as read).
+fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Real>, SceneError> {
+    match (&m.scale, &m.units) {
+        (Some(_), Some(u)) => Err(src.error(u.span(), "give `scale` or `units`, not both")),
+        (Some(s), None) => positive(src, s, "scale").map(Some),
+        (None, Some(u)) => match u.get_ref().as_str() {
+            "m" => Ok(None),
+            "cm" => Ok(Some(0.01)),
+            "mm" => Ok(Some(0.001)),
+            other => Err(src.error(
+                u.span(),
+                format!("units must be \"m\", \"cm\" or \"mm\", got {other:?}"),
+            )),
+        },
+        (None, None) => Ok(None),
+    }
+}
+
+/// `mesh` with every coordinate multiplied by `s`.
+fn scaled(mesh: &TetMesh, s: Real) -> Result<TetMesh, crate::mesh::MeshError> {
+    TetMesh::new(
+        mesh.positions_m().iter().map(|p| *p * s).collect(),
+        mesh.tets().iter().map(|t| t.map(|v| v.0)).collect(),
+    )
+}
+
+/// A scene's mesh, renumbered, with what it said about itself.
+pub(super) struct LoadedMesh {
+    pub mesh: TetMesh,
+    /// Physical tags of tetrahedra and surface triangles.
+    pub physical: Tags,
+    /// Per vertex, its index before renumbering (`None`: not renumbered).
+    pub original_ids: Option<Vec<u32>>,
+}
+
+pub(super) fn load_mesh(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    report: &mut SceneReport,
+) -> Result<LoadedMesh, SceneError> {
+    let m = spec.mesh.get_ref();
+    let (mesh, physical) = match (&m.file, &m.generate) {
+        (Some(file), None) => {
+            let path = src.dir.join(file.get_ref());
+            let imported =
+                io::read_mesh(&path).map_err(|e| src.error(file.span(), e.to_string()))?;
+            report.mesh_source = path.display().to_string();
+            report.warnings.extend(imported.warnings);
+            let mesh = match mesh_scale(src, m)? {
+                Some(s) => {
+                    scaled(&imported.mesh, s).map_err(|e| src.error(file.span(), e.to_string()))?
+                }
+                None => imported.mesh,
+            };
+            let tags = Tags {
+                tets: imported.tet_physical,
+                surface: imported
+                    .surface_physical
+                    .into_iter()
+                    .map(|(t, tag)| (t.map(VertexId), tag))
+                    .collect(),
+            };
+            (mesh, tags)
+        }
+        (None, Some(g)) if m.scale.is_some() || m.units.is_some() => {
+            return Err(src.error(
+                g.span(),
+                "`scale` and `units` convert a mesh file; a generated mesh is given in metres",
+            ));
+        }
+        (None, Some(g)) => {
+            let gen_span = g.span();
+            let g = g.get_ref();
+            let cell = g
+                .cell_m
+                .as_ref()
+                .map(|c| positive(src, c, "cell_m"))
+                .transpose()?;
+            let need_cell =
+                || cell.ok_or_else(|| src.error(gen_span.clone(), "this generator needs `cell_m`"));
+            let lattice = match g.lattice.unwrap_or(LatticeKind::Bcc) {
+                LatticeKind::Bcc => shapes::Lattice::BodyCentred,
+                LatticeKind::Cubic => shapes::Lattice::Cubic,
+            };
+            let fail = |e: crate::mesh::GenerateError| src.error(gen_span.clone(), e.to_string());
+            let mesh = match g.shape {
+                ShapeKind::Box => {
+                    let size = g.size_m.as_ref().ok_or_else(|| {
+                        src.error(gen_span.clone(), "shape \"box\" needs `size_m`")
+                    })?;
+                    let cells = match (cell, &g.tets) {
+                        (Some(h), None) => CellSize::EdgeM(h),
+                        (None, Some(n)) => CellSize::TargetTets(*n.get_ref()),
+                        _ => {
+                            return Err(src.error(
+                                gen_span.clone(),
+                                "shape \"box\" needs exactly one of `cell_m`, `tets`",
+                            ));
+                        }
+                    };
+                    let spec = BoxSpec {
+                        origin_m: Vec3::from_array(g.origin_m.unwrap_or([0.0; 3])),
+                        size_m: Vec3::from_array(*size.get_ref()),
+                        cells,
+                    };
+                    spec.generate()
+                        .map_err(|e| src.error(size.span(), e.to_string()))?
+                }
+                ShapeKind::Ellipsoid => {
+                    let radii = g.radii_m.as_ref().ok_or_else(|| {
+                        src.error(gen_span.clone(), "shape \"ellipsoid\" needs `radii_m`")
+                    })?;
+                    let centre = Vec3::from_array(g.center_m.unwrap_or([0.0; 3]));
+                    shapes::ellipsoid(
+                        centre,
+                        Vec3::from_array(*radii.get_ref()),
+                        need_cell()?,
+                        lattice,
+                    )
+                    .map_err(fail)?
+                }
+                ShapeKind::Liver => shapes::liver(need_cell()?, lattice).map_err(fail)?,
+            };
+            if g.shape != ShapeKind::Box && g.tets.is_some() {
+                return Err(src.error(
+                    gen_span,
+                    "`tets` only sizes the box generator; use `cell_m`",
+                ));
+            }
+            report.mesh_source = format!("generated {:?}", g.shape).to_lowercase();
+            let n = mesh.tet_count();
+            let tags = Tags {
+                tets: vec![0; n],
+                surface: Vec::new(),
+            };
+            (mesh, tags)
+        }
+        _ => {
+            return Err(src.error(
+                spec.mesh.span(),
+                "[mesh] needs exactly one of `file`, `generate`",
+            ));
+        }
+    };
+    if mesh.reoriented() > 0 {
+        report.warnings.push(format!(
+            "{} inverted tetrahedra were reoriented",
+            mesh.reoriented()
+        ));
+    }
+    if !m.reorder.unwrap_or(true) {
+        return Ok(LoadedMesh {
+            mesh,
+            physical,
+            original_ids: None,
+        });
+    }
+    let order = rcm_order(&mesh);
+    let new_of_old = crate::mesh::new_of_old(&order, mesh.vertex_count());
+    let mut physical = physical;
+    for (tri, _) in &mut physical.surface {
+        *tri = tri.map(|v| VertexId(new_of_old[v.idx()]));
+    }
+    Ok(LoadedMesh {
+        mesh: mesh.permuted(&order),
+        physical,
+        original_ids: Some(order.iter().map(|v| v.0).collect()),
+    })
+}

@@ -1,0 +1,170 @@
+//! What a scene says about running it: the `[sim]` step and rate, the
+//! `[contact]` law and its limits, and whether the chosen backend can run
+//! the scene's material models.
+
+use super::build::{SimSettings, positive};
+use super::spec::{
+    BackendName, BoundName, DtPolicyName, MaterialModelName, PrecisionName, SceneSpec,
+};
+use super::{SceneError, SceneSource};
+use crate::ids::TetId;
+use crate::math::Real;
+use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
+use toml::Spanned;
+
+/// Why a scene cannot run on the hybrid backend.
+pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] section naming its tensor-mass (cuttable) part, e.g. [hybrid] select = { sphere_m = [x, y, z, r] }; the rest is precomputed";
+
+pub(super) fn contact_config(
+    src: &SceneSource,
+    spec: &SceneSpec,
+) -> Result<crate::contact::ContactConfig, SceneError> {
+    use crate::contact::{ContactConfig, ContactLaw};
+    use crate::scene::spec::ContactLawName;
+    let mut c = ContactConfig::default();
+    let Some(section) = &spec.contact else {
+        return Ok(c);
+    };
+    let s = section.get_ref();
+    c.law = s.law.as_ref().map(|l| match l.get_ref() {
+        ContactLawName::Penalty => ContactLaw::Penalty,
+        ContactLawName::Projection => ContactLaw::Projection,
+    });
+    let pos = |v: &Option<toml::Spanned<Real>>, key: &str, default: Real| {
+        v.as_ref().map_or(Ok(default), |x| {
+            positive(src, x, &format!("[contact] {key}"))
+        })
+    };
+    c.stiffness_factor = pos(&s.stiffness_factor, "stiffness_factor", c.stiffness_factor)?;
+    c.point_spacing = pos(&s.point_spacing, "point_spacing", c.point_spacing)?;
+    c.max_tool_speed_m_s = pos(
+        &s.max_tool_speed_m_s,
+        "max_tool_speed_m_s",
+        c.max_tool_speed_m_s,
+    )?;
+    c.max_tool_accel_m_s2 = pos(
+        &s.max_tool_accel_m_s2,
+        "max_tool_accel_m_s2",
+        c.max_tool_accel_m_s2,
+    )?;
+    if let Some(springs) = &s.springs {
+        c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
+    }
+    if let Some(d) = &s.damping_s_per_m {
+        let x = *d.get_ref();
+        if !(x.is_finite() && x >= 0.0) {
+            return Err(src.error(
+                d.span(),
+                format!("[contact] damping_s_per_m must be a finite number >= 0, got {x}"),
+            ));
+        }
+        c.damping_s_per_m = x;
+    }
+    if c.point_spacing > 1.0 {
+        let span = s
+            .point_spacing
+            .as_ref()
+            .map_or(section.span(), |x| x.span());
+        return Err(src.error(
+            span,
+            format!(
+                "[contact] point_spacing is a fraction of the tool radius and must be at most 1 (points further apart than the radius miss the tool), got {}",
+                c.point_spacing
+            ),
+        ));
+    }
+    Ok(c)
+}
+
+/// A scene whose backend cannot run its material models is refused at the
+/// first nonlinear `model` key, naming the backend's reason.
+pub(super) fn backend_runs_models(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    model: &ElasticModel,
+    backend: BackendName,
+    hybrid_tets: Option<&[TetId]>,
+) -> Result<(), SceneError> {
+    let refusal = match backend {
+        BackendName::TensorMass => return Ok(()),
+        BackendName::Implicit => crate::backend::Implicit::check_model(model),
+        BackendName::Precomputed => crate::backend::Precomputed::check_model(model),
+        BackendName::Hybrid => {
+            let mut in_tm = vec![false; model.mesh().tet_count()];
+            for t in hybrid_tets.unwrap_or(&[]) {
+                in_tm[t.idx()] = true;
+            }
+            crate::backend::Hybrid::check_model(model, |t| in_tm[t.idx()])
+        }
+    };
+    let Err(e) = refusal else {
+        return Ok(());
+    };
+    let nonlinear = |m: &Option<Spanned<MaterialModelName>>| {
+        m.as_ref()
+            .filter(|m| *m.get_ref() != MaterialModelName::Linear)
+            .map(Spanned::span)
+    };
+    let span = nonlinear(&spec.material.get_ref().model)
+        .or_else(|| {
+            spec.region
+                .iter()
+                .find_map(|r| nonlinear(&r.get_ref().model))
+        })
+        .or_else(|| {
+            spec.vessel
+                .iter()
+                .find_map(|v| nonlinear(&v.get_ref().model))
+        })
+        .unwrap_or(spec.material.span());
+    Err(src.error(span, e.to_string()))
+}
+
+pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSettings, SceneError> {
+    let mut s = SimSettings {
+        dt_s: None,
+        rate_hz: None,
+        threads: 1,
+        single_precision: true,
+        policy: DtPolicy::Substep,
+        bound: BoundMethod::Element,
+        backend: BackendName::TensorMass,
+    };
+    let Some(sim) = &spec.simulation else {
+        return Ok(s);
+    };
+    let sim = sim.get_ref();
+    if let Some(b) = &sim.backend {
+        if *b.get_ref() == BackendName::Hybrid && spec.hybrid.is_none() {
+            return Err(src.error(b.span(), HYBRID_NEEDS_SPLIT));
+        }
+        s.backend = *b.get_ref();
+    }
+    s.dt_s = sim
+        .dt_s
+        .as_ref()
+        .map(|d| positive(src, d, "[simulation] dt_s"))
+        .transpose()?;
+    s.rate_hz = sim
+        .rate_hz
+        .as_ref()
+        .map(|r| positive(src, r, "[simulation] rate_hz"))
+        .transpose()?;
+    if let Some(t) = &sim.threads {
+        if *t.get_ref() == 0 {
+            return Err(src.error(t.span(), "[simulation] threads must be at least 1"));
+        }
+        s.threads = *t.get_ref();
+    }
+    s.single_precision = sim.precision.unwrap_or(PrecisionName::F32) == PrecisionName::F32;
+    s.policy = match sim.dt_policy.unwrap_or(DtPolicyName::Substep) {
+        DtPolicyName::Refuse => DtPolicy::Refuse,
+        DtPolicyName::Substep => DtPolicy::Substep,
+        DtPolicyName::Unchecked => DtPolicy::Unchecked,
+    };
+    s.bound = match sim.bound.unwrap_or(BoundName::Element) {
+        BoundName::Element => BoundMethod::Element,
+        BoundName::PowerIteration => BoundMethod::PowerIteration,
+    };
+    Ok(s)
+}
