@@ -1,0 +1,163 @@
+//! The devices `haptic-daemon run` drives, a closed set made from the
+//! `--device` argument, and the real-time loop run on the one chosen.
+
+use crate::run_cmd::Lateness;
+use anyhow::{Result, bail};
+use haptic_daemon::daemon::{ChainConfig, RtLoop, Shared};
+use haptic_daemon::device::{
+    Device, HandModel, Haply, Path, Plugin, Replay, Simulated, Trajectory,
+};
+use haptic_daemon::extrapolate::Method;
+use haptic_daemon::extrapolate::local_problem::LocalProblem;
+use haptic_daemon::rt::Pacer;
+use haptic_daemon::safety::{SafetyConfig, SafetyState};
+use shared::monotonic_ns;
+use shared::protocol::ForceMsg;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+pub(crate) fn make_device(spec: &str, max_force_n: f64) -> Result<DeviceChoice> {
+    let (kind, arg) = spec
+        .split_once(':')
+        .map_or((spec, None), |(k, a)| (k, Some(a)));
+    match (kind, arg) {
+        ("simulated", None) => {
+            let path = Path::Poke {
+                start_m: [0.0, 0.0, 0.05],
+                direction: [0.0, 0.0, -1.0],
+                depth_m: 0.03,
+                period_s: 4.0,
+            };
+            Ok(DeviceChoice::Simulated(Simulated::new(
+                path,
+                HandModel::default(),
+                max_force_n,
+            )))
+        }
+        ("simulated", Some(file)) => {
+            let t = Trajectory::read(std::path::Path::new(file))?;
+            Ok(DeviceChoice::Simulated(Simulated::new(
+                Path::Trajectory(t),
+                HandModel::default(),
+                max_force_n,
+            )))
+        }
+        ("replay", Some(file)) => {
+            let t = Trajectory::read(std::path::Path::new(file))?;
+            Ok(DeviceChoice::Replay(Replay::new(t, max_force_n)))
+        }
+        ("plugin", Some(rest)) => {
+            // plugin:PATH[:ARGS]
+            let (lib, plugin_args) = rest.split_once(':').unwrap_or((rest, ""));
+            Ok(DeviceChoice::Plugin(Plugin::load(
+                std::path::Path::new(lib),
+                plugin_args,
+            )?))
+        }
+        ("haply", url) => Ok(DeviceChoice::Haply(Haply::connect(
+            url.unwrap_or("ws://localhost:10001"),
+        )?)),
+        _ => bail!(
+            "unknown device {spec:?}: use simulated, simulated:FILE.csv, replay:FILE.csv or plugin:LIB.so[:ARGS]"
+        ),
+    }
+}
+
+/// The devices this binary knows, as a closed set (the loop is generic).
+pub(crate) enum DeviceChoice {
+    Simulated(Simulated),
+    Replay(Replay),
+    Plugin(Plugin),
+    Haply(Haply),
+}
+
+impl DeviceChoice {
+    pub(crate) fn specs(&self) -> haptic_daemon::device::DeviceSpecs {
+        match self {
+            DeviceChoice::Simulated(d) => d.specs(),
+            DeviceChoice::Replay(d) => d.specs(),
+            DeviceChoice::Plugin(d) => d.specs(),
+            DeviceChoice::Haply(d) => d.specs(),
+        }
+    }
+
+    /// Runs the real-time loop on this device until it stops (the loop is
+    /// generic over the device: one instance per kind).
+    pub(crate) fn run_loop(self, cfg: LoopConfig) -> Result<RtEnd> {
+        match self {
+            DeviceChoice::Simulated(d) => run_loop(d, cfg),
+            DeviceChoice::Replay(d) => run_loop(d, cfg),
+            DeviceChoice::Plugin(d) => run_loop(d, cfg),
+            DeviceChoice::Haply(d) => run_loop(d, cfg),
+        }
+    }
+}
+
+/// The device's own limit for the simulated and replayed devices (N).
+pub(crate) const SIMULATED_DEVICE_MAX_FORCE_N: f64 = 8.0;
+
+/// What the real-time thread's loop is given, once.
+pub(crate) struct LoopConfig {
+    pub method: Method,
+    pub safety: SafetyConfig,
+    pub chain: ChainConfig,
+    pub sub: shared::source::Source<ForceMsg>,
+    pub local: Option<triple_buffer::Output<LocalProblem>>,
+    pub shared: Arc<Shared>,
+    pub period_ns: u64,
+    pub spin_ns: u64,
+}
+
+/// What the RT thread reports at its end.
+pub(crate) struct RtEnd {
+    pub ticks: u64,
+    pub overruns: u64,
+    /// `local-problem`: each tick's render time.
+    pub render_us: Option<Lateness>,
+}
+
+/// The loop on the RT thread: ticks until stop, then ramps the force to zero
+/// and disables the device. A panic inside is caught so the device is still
+/// zeroed and disabled. Returns the ticks, overruns and render times.
+pub(crate) fn run_loop<D: Device>(device: D, cfg: LoopConfig) -> Result<RtEnd> {
+    let LoopConfig {
+        method,
+        safety,
+        chain,
+        sub,
+        local,
+        shared,
+        period_ns,
+        spin_ns,
+    } = cfg;
+    let mut rt = RtLoop::with_chain(device, method, safety, chain, Some(sub), shared.clone());
+    if let Some(local) = local {
+        rt = rt.with_local_problems(local);
+    }
+    let start = monotonic_ns();
+    rt.enable(start)?;
+    let mut pacer = Pacer::new(period_ns, start).with_spin(spin_ns);
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let mut stopping = false;
+        loop {
+            let (deadline, lateness) = pacer.wait();
+            if !stopping && shared.flags.stop.load(Ordering::Acquire) {
+                rt.shutdown(deadline);
+                stopping = true;
+            }
+            rt.tick(deadline.saturating_add(lateness.max(0) as u64), lateness);
+            if stopping && matches!(rt.safety_state(), SafetyState::Stopped(_)) {
+                break;
+            }
+        }
+    }));
+    rt.disable();
+    if outcome.is_err() {
+        bail!("the real-time loop panicked; the device was zeroed and disabled");
+    }
+    Ok(RtEnd {
+        ticks: rt.ticks(),
+        overruns: pacer.overruns(),
+        render_us: rt.render_times().map(Lateness::of),
+    })
+}

@@ -1,0 +1,71 @@
+//! `haptic-daemon run`'s arguments.
+
+use crate::chain_args::ChainArgs;
+use haptic_daemon::extrapolate::Method;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub(crate) struct RunArgs {
+    /// simulated (a hand poking along z), simulated:FILE.csv (a hand following a
+    /// trajectory), replay:FILE.csv (open-loop positions), plugin:LIB.so[:ARGS]
+    /// (a C-ABI device, see include/hapsim_device.h), haply[:ws://HOST:PORT]
+    /// (Haply Inverse3 through the Haply Inverse Service, default
+    /// ws://localhost:10001).
+    #[arg(long, default_value = "simulated")]
+    pub device: String,
+    /// Loop rate (Hz), 100 to 10000.
+    #[arg(long, default_value_t = 1000.0)]
+    pub rate: f64,
+    /// The force extrapolator (default local-problem: the lowest error on
+    /// every `hapbench extrapolation` run in the README, passive on all;
+    /// without contact problems from the simulation it renders as
+    /// local-normal, the next best).
+    #[arg(long, value_enum, default_value_t = Method::LocalProblem)]
+    pub extrapolation: Method,
+    /// `local-problem`: solve the contact problems quasi-statically, without
+    /// the tissue's inertia the simulation sends with them.
+    #[arg(long)]
+    pub quasi_static: bool,
+    /// Force limit (N); at most the device's own.
+    #[arg(long)]
+    pub max_force: Option<f64>,
+    /// The daemon's checks (pose plausibility, live samples, stiffness
+    /// cap, passivity).
+    #[command(flatten)]
+    pub chain: ChainArgs,
+    /// Shared memory (default) or a session on another host.
+    #[command(flatten)]
+    pub remote: crate::remote_args::RemoteArgs,
+    /// Session name shared with the simulation.
+    #[arg(long, default_value = "default")]
+    pub session: String,
+    /// Stop after this many seconds (default: until SIGINT/SIGTERM).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Write the summary as JSON here at exit.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Record every tick to this CSV.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// SCHED_FIFO priority to ask for the RT thread (0 = do not ask).
+    #[arg(long, default_value_t = 80)]
+    pub rt_priority: i32,
+    /// Pin the loop to this CPU.
+    #[arg(long)]
+    pub cpu: Option<usize>,
+    /// Wake this many microseconds early and spin to the deadline (lower
+    /// lateness, more CPU; at most half a period).
+    #[arg(long, default_value_t = 0)]
+    pub spin_us: u64,
+    /// The I/O thread polls for each pose in a window of this many
+    /// microseconds around its due time instead of being woken by the RT
+    /// thread: one thread wake-up less on the pose's way to the
+    /// simulation, the window's CPU every period (0: off; at most a
+    /// period).
+    #[arg(long, default_value_t = 0)]
+    pub io_spin_us: u64,
+    /// No live status line.
+    #[arg(long)]
+    pub quiet: bool,
+}
