@@ -1,4 +1,6 @@
-//! `CLOCK_MONOTONIC` in nanoseconds: the time base of every payload (`t_ns`).
+//! `CLOCK_MONOTONIC` in nanoseconds: the time base of every payload (`t_ns`);
+//! and the calling thread's CPU time, for what a loop's work costs apart from
+//! the machine.
 //!
 //! All processes of a session run on one host, so their monotonic clocks agree
 //! and a sample's age is a plain subtraction.
@@ -10,15 +12,7 @@ pub const NS_PER_S: u64 = 1_000_000_000;
 ///
 /// Allocation-free and lock-free (a vDSO call), so the haptic loop may call it.
 pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec and CLOCK_MONOTONIC is always
-    // available on Linux, so the call cannot fail or write out of bounds.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    debug_assert_eq!(rc, 0);
-    (ts.tv_sec as u64) * NS_PER_S + ts.tv_nsec as u64
+    read_ns(libc::CLOCK_MONOTONIC)
 }
 
 /// CPU time the calling thread has run, in nanoseconds
@@ -30,13 +24,21 @@ pub fn monotonic_ns() -> u64 {
 /// Allocation-free; a system call on most kernels (no vDSO for this clock),
 /// so read it per step, not per element.
 pub fn thread_cpu_ns() -> u64 {
+    read_ns(libc::CLOCK_THREAD_CPUTIME_ID)
+}
+
+/// `clock` in nanoseconds.
+#[inline]
+fn read_ns(clock: libc::clockid_t) -> u64 {
     let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
     };
-    // SAFETY: as in `monotonic_ns`; the thread CPU clock exists on every
-    // Linux this project supports.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    // SAFETY: `ts` is a valid, writable timespec, and both clocks this
+    // module reads (CLOCK_MONOTONIC, CLOCK_THREAD_CPUTIME_ID) exist on every
+    // Linux this project supports, so the call cannot fail or write out of
+    // bounds.
+    let rc = unsafe { libc::clock_gettime(clock, &mut ts) };
     debug_assert_eq!(rc, 0);
     (ts.tv_sec as u64) * NS_PER_S + ts.tv_nsec as u64
 }
