@@ -497,6 +497,41 @@ fn a_rotate_load_with_a_zero_axis_names_its_line() {
 }
 
 #[test]
+fn a_mesh_that_overlaps_itself_is_refused_at_its_mesh_line() {
+    // Three tetrahedra on one face (a duplicated or folded element): a cut
+    // there had no neighbour relation to update (it panicked).
+    let dir = std::env::temp_dir().join(format!("scene_overshared_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |x: f64, y: f64, z: f64| sim_server::prelude::Vec3::new(x, y, z) * 0.01;
+    let positions = [
+        p(0.0, 0.0, 0.0),
+        p(1.0, 0.0, 0.0),
+        p(0.0, 1.0, 0.0),
+        p(0.0, 0.0, 1.0),
+        p(0.0, 0.0, -1.0),
+        p(0.2, 0.2, 0.5),
+    ];
+    let tets =
+        [[0, 1, 2, 3], [0, 2, 1, 4], [0, 1, 2, 5]].map(|t| t.map(sim_server::prelude::VertexId));
+    let file = dir.join("overlap.vtu");
+    sim_server::mesh::io::write_vtu(&file, &positions, &tets, &[], &[]).unwrap();
+    let src = SceneSource {
+        name: "overlap.toml".into(),
+        dir: dir.clone(),
+        text: "# a folded mesh\n[mesh]\nfile = \"overlap.vtu\"\n[material]\nyoung_pa = 3000.0\npoisson = 0.4\ndensity_kg_m3 = 1000.0\n".into(),
+    };
+    let err = build_scene(&src, &src.parse().unwrap())
+        .err()
+        .expect("refused");
+    let msg = err.to_string();
+    assert!(
+        msg.starts_with("overlap.toml:2:") && msg.contains("shared by 3 tetrahedra"),
+        "{msg}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn a_mesh_file_in_millimetres_is_scaled_into_metres() {
     // The reference ellipsoid written in millimetres, read back with
     // `units = "mm"` or `scale = 0.001`: the same body as the metre file.

@@ -299,8 +299,14 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
     report.anisotropic_tets = (0..n_tets)
         .filter(|&t| mats.material(TetId::from(t)).is_anisotropic())
         .count();
-    let mut model = ElasticModel::new(mesh, mats)
-        .map_err(|e| src.error(spec.material.span(), e.to_string()))?;
+    let mut model = ElasticModel::new(mesh, mats).map_err(|e| {
+        // A mesh that overlaps itself is the mesh's fault, not the material's.
+        let span = match e {
+            crate::tensor_mass::ModelError::OversharedFace(_) => spec.mesh.span(),
+            _ => spec.material.span(),
+        };
+        src.error(span, e.to_string())
+    })?;
 
     if let Some(m) = &spec.membrane {
         let alpha = *m.get_ref().alpha.get_ref();

@@ -22,6 +22,20 @@ pub struct Topology {
     surface: Vec<(TetId, u8)>,
     /// Position of each (tet, face) in `surface`, NONE if not on the surface.
     surface_slot: Vec<[u32; 4]>,
+    /// The first face (by vertex ids) that more than two tetrahedra share,
+    /// if any: see [`Topology::overshared_face`].
+    overshared: Option<OversharedFace>,
+}
+
+/// A face of a volume mesh that more than two tetrahedra share: the mesh
+/// overlaps itself there (a duplicated or folded element), which no
+/// neighbour relation (and so no cut) can represent.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OversharedFace {
+    /// The face's vertices, ascending.
+    pub vertices: [VertexId; 3],
+    /// The tetrahedra that share it (at least three).
+    pub tets: Vec<TetId>,
 }
 
 /// A surface triangle, oriented with its normal out of the tissue.
@@ -69,6 +83,15 @@ impl Topology {
                 neighbours[w[1].1 as usize][w[1].2 as usize] = w[0].1;
             }
         }
+        // A face in three or more tetrahedra gets one-sided links above:
+        // found here, refused by the model (a cut there would break them).
+        let overshared = faces
+            .chunk_by(|a, b| a.0 == b.0)
+            .find(|run| run.len() > 2)
+            .map(|run| OversharedFace {
+                vertices: run[0].0.map(VertexId),
+                tets: run.iter().map(|f| TetId(f.1)).collect(),
+            });
         let mut vertex_tets = vec![0u32; mesh.vertex_count()];
         for tet in tets {
             for v in tet {
@@ -84,6 +107,7 @@ impl Topology {
             vertex_tets,
             surface: Vec::new(),
             surface_slot: vec![[NONE; 4]; tets.len()],
+            overshared,
         };
         for t in 0..tets.len() {
             for k in 0..4 {
@@ -93,6 +117,13 @@ impl Topology {
             }
         }
         topo
+    }
+
+    /// The first face more than two tetrahedra share (`None` in a valid
+    /// volume mesh). [`crate::tensor_mass::ElasticModel::new`] refuses such
+    /// a mesh.
+    pub fn overshared_face(&self) -> Option<&OversharedFace> {
+        self.overshared.as_ref()
     }
 
     fn surface_insert(&mut self, t: TetId, k: usize) {
@@ -273,6 +304,52 @@ mod tests {
             .filter(|t| topo.is_alive(*t))
             .map(|t| mesh.tet_volume_m3(t))
             .sum()
+    }
+
+    /// Three tetrahedra on the face (0, 1, 2): below it, above it, and a
+    /// third above it overlapping the second.
+    fn overshared_mesh() -> TetMesh {
+        let p = |x: Real, y: Real, z: Real| Vec3::new(x, y, z) * 0.01;
+        TetMesh::new(
+            vec![
+                p(0.0, 0.0, 0.0),
+                p(1.0, 0.0, 0.0),
+                p(0.0, 1.0, 0.0),
+                p(0.0, 0.0, 1.0),
+                p(0.0, 0.0, -1.0),
+                p(0.2, 0.2, 0.5),
+            ],
+            vec![[0, 1, 2, 3], [0, 2, 1, 4], [0, 1, 2, 5]],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_face_in_three_tetrahedra_is_found_and_the_model_refuses_it() {
+        let mesh = overshared_mesh();
+        let face = Topology::new(&mesh).overshared_face().cloned();
+        assert_eq!(
+            face,
+            Some(OversharedFace {
+                vertices: [VertexId(0), VertexId(1), VertexId(2)],
+                tets: vec![TetId(0), TetId(1), TetId(2)],
+            })
+        );
+        let tissue = crate::material::Material::isotropic(3000.0, 0.4, 1000.0, 5.0).unwrap();
+        let materials = crate::material_map::TetMaterials::uniform(tissue, mesh.tet_count());
+        let err = crate::tensor_mass::ElasticModel::new(mesh, materials).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("shared by 3 tetrahedra ([0, 1, 2])"),
+            "{err}"
+        );
+        // Two of them are a valid mesh (the face joins two).
+        let two = TetMesh::new(
+            overshared_mesh().positions_m().to_vec(),
+            vec![[0, 1, 2, 3], [0, 2, 1, 4]],
+        )
+        .unwrap();
+        assert_eq!(Topology::new(&two).overshared_face(), None);
     }
 
     #[test]

@@ -29,6 +29,14 @@ pub enum ModelError {
     /// The membrane coefficient is not a finite non-negative number.
     #[error("membrane alpha must be a finite number >= 0 (N/m^2), got {0}")]
     MembraneAlpha(Real),
+    /// More than two tetrahedra share a face: the mesh overlaps itself.
+    #[error(
+        "the face of vertices {vertices:?} is shared by {count} tetrahedra ({tets:?}): a face of a volume mesh joins at most two, so the mesh overlaps itself there (a duplicated or folded element); fix the mesh (`sim-server check` counts such faces)",
+        vertices = .0.vertices.map(|v| v.0),
+        count = .0.tets.len(),
+        tets = .0.tets.iter().map(|t| t.0).collect::<Vec<_>>()
+    )]
+    OversharedFace(crate::topology::OversharedFace),
 }
 
 /// Why a cut (removal or restoration) was refused.
@@ -116,6 +124,9 @@ impl ElasticModel {
         }
         materials.validate()?;
         let topo = Topology::new(&mesh);
+        if let Some(face) = topo.overshared_face() {
+            return Err(ModelError::OversharedFace(face.clone()));
+        }
         let n = mesh.vertex_count();
         let mut model = Self {
             vertex_k: vec![Mat3::ZERO; n],
