@@ -308,10 +308,17 @@ fn glitch(tag: &str, offset_m: [f64; 3], guard: Guard) {
     };
     // Before and after: the mean force (vector) and the mean of its
     // magnitude (what the hand feels: a force that flips sideways from
-    // tick to tick averages to less than it is).
-    let before = mean(GLITCH_S - BEFORE_S.0, GLITCH_S - BEFORE_S.1);
+    // tick to tick averages to less than it is). "Before" is the steady
+    // force the glitch interrupts: where a stall of the shared machine
+    // made the daemon ramp out and in again just before the glitch (seen
+    // once in CI: the simulation's samples went stale at 2.85 s), its
+    // window moves back to end at the last tick the filter was active
+    // after at least as long active, so that the baseline is not the ramp.
+    let (before_from, before_to) =
+        steady_window(&rec, GLITCH_S - BEFORE_S.0, GLITCH_S - BEFORE_S.1);
+    let before = mean(before_from, before_to);
     let after = mean(END_S - AFTER_S, END_S);
-    let f0 = mean_norm(GLITCH_S - BEFORE_S.0, GLITCH_S - BEFORE_S.1);
+    let f0 = mean_norm(before_from, before_to);
     let f1 = mean_norm(END_S - AFTER_S, END_S);
     // The hold after the glitch: from the glitch to the end of the replay,
     // the hand (not the device's reading) still.
@@ -392,7 +399,7 @@ fn glitch(tag: &str, offset_m: [f64; 3], guard: Guard) {
         "[{tag}] glitch {offset_m:?} m at {GLITCH_S} s for {} ms; probe end held {DEPTH_M} m deep (tip point z {HELD_Z_M:.4} m) from {PRESSED_S} s\n\
          pressing in: largest |F| {press_max:.4} N, largest fall below the running maximum {fall:.4} N{}, largest fall in one tick {drop:.4} N at {drop_t_s:.4} s\n\
          hold before the glitch (from {:.2} s): |F| {:.4}..{:.4} N, largest change in a tick {:.4} N\n\
-         before (mean over {}..{} s before the glitch): F {before:.4?} N, mean |F| {f0:.4} N\n\
+         before (mean over {:.3}..{:.3} s before the glitch): F {before:.4?} N, mean |F| {f0:.4} N\n\
          after (mean over the last {AFTER_S} s): F {after:.4?} N, mean |F| {f1:.4} N ({:+.1}%), |F_after - F_before| {back:.4} N ({:.1}%)\n\
          hold from the glitch: lowest |F| {:.4} N ({:.2}x) at {:.4} s, highest {:.4} N ({:.2}x) at {:.4} s, largest change in a tick {:.4} N, longest gap between ticks {:.1} ms\n\
          record:\n{shown}",
@@ -402,8 +409,8 @@ fn glitch(tag: &str, offset_m: [f64; 3], guard: Guard) {
         held_range.0,
         held_range.1,
         largest_step(&held),
-        BEFORE_S.0,
-        BEFORE_S.1,
+        GLITCH_S - before_from,
+        GLITCH_S - before_to,
         100.0 * (f1 - f0) / f0,
         100.0 * back / f0,
         low.force(),
@@ -468,4 +475,55 @@ fn a_5_ms_glitch_20_mm_deeper_leaves_the_held_force_as_it_was() {
 fn a_glitch_the_daemon_lets_through_is_held_by_the_simulation_proxy() {
     glitch("proxy-away", [0.0, 0.0, 1.0], Guard::ProxyOnly);
     glitch("proxy-deeper", [0.0, 0.0, -0.02], Guard::ProxyOnly);
+}
+
+/// The safety filter's code for `Active` in the record (`state_code`).
+const SAFETY_ACTIVE: u32 = 2;
+
+/// The window `[from, to)` if the safety filter was active through it;
+/// otherwise the latest window of the same length inside the hold (from
+/// 0.2 s after the press) and before `to` through which it was (a ramp
+/// after a stall of the machine is not the steady force). Fails if there
+/// is none.
+fn steady_window(rec: &[Tick], from: f64, to: f64) -> (f64, f64) {
+    let len = to - from;
+    let active = |a: f64, b: f64| {
+        rec.iter()
+            .filter(|t| (a..b).contains(&t.t_s))
+            .all(|t| t.safety_state == SAFETY_ACTIVE)
+    };
+    if active(from, to) {
+        return (from, to);
+    }
+    rec.iter()
+        .rev()
+        .filter(|t| t.t_s < to && t.t_s - len >= PRESSED_S + 0.2)
+        .map(|t| (t.t_s - len, t.t_s))
+        .find(|&(a, b)| active(a, b) && rec.iter().any(|t| (a..b).contains(&t.t_s)))
+        .unwrap_or_else(|| {
+            panic!("the safety filter was never active for {len} s in the hold before {to} s")
+        })
+}
+
+#[test]
+fn the_baseline_skips_a_ramp_after_a_stall_and_only_that() {
+    // Ticks each millisecond of the hold, the filter active except for a
+    // ramp (after a stall) from 2.85 to 2.95 s.
+    let tick = |ms: u32, state: u32| Tick {
+        t_s: ms as f64 * 1e-3,
+        pos_z_m: HELD_Z_M,
+        force_n: [0.0; 3],
+        sample_age_ns: 0,
+        safety_state: state,
+    };
+    let from_ms = (PRESSED_S * 1e3) as u32;
+    let ramp = |ms: u32| (2850..2950).contains(&ms);
+    let rec: Vec<Tick> = (from_ms..3000)
+        .map(|ms| tick(ms, if ramp(ms) { 1 } else { SAFETY_ACTIVE }))
+        .collect();
+    // A window clear of the ramp is kept as it is.
+    assert_eq!(steady_window(&rec, 2.7, 2.79), (2.7, 2.79));
+    // One that holds it moves back to end before the ramp's first tick.
+    let (a, b) = steady_window(&rec, 2.9, 2.99);
+    assert!((b - 2.8495).abs() < 1e-3 && (b - a - 0.09).abs() < 1e-9, "{a}..{b}");
 }
