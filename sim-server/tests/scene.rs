@@ -171,6 +171,13 @@ fn each_kind_of_mistake_names_its_line() {
         12,
         "unknown field `stiffness`",
     );
+    // A step above 0.1 s (1e300 asked for usize::MAX sub-steps: a step
+    // that never ended).
+    fails_at(
+        &format!("{BASE}\n[simulation]\ndt_s = 1e300\n"),
+        11,
+        "[simulation] dt_s must be a step in seconds, at most 0.1",
+    );
     // Unknown section.
     fails_at(
         &format!("{BASE}\n[solver]\nx = 1\n"),

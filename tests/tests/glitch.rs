@@ -525,5 +525,8 @@ fn the_baseline_skips_a_ramp_after_a_stall_and_only_that() {
     assert_eq!(steady_window(&rec, 2.7, 2.79), (2.7, 2.79));
     // One that holds it moves back to end before the ramp's first tick.
     let (a, b) = steady_window(&rec, 2.9, 2.99);
-    assert!((b - 2.8495).abs() < 1e-3 && (b - a - 0.09).abs() < 1e-9, "{a}..{b}");
+    assert!(
+        (b - 2.8495).abs() < 1e-3 && (b - a - 0.09).abs() < 1e-9,
+        "{a}..{b}"
+    );
 }

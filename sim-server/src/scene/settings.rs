@@ -143,7 +143,14 @@ pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSetting
     s.dt_s = sim
         .dt_s
         .as_ref()
-        .map(|d| positive(src, d, "[simulation] dt_s"))
+        .map(|d| match positive(src, d, "[simulation] dt_s")? {
+            // The bound `--dt-s` has: a step is at most 0.1 s.
+            dt if dt <= 0.1 => Ok(dt),
+            dt => Err(src.error(
+                d.span(),
+                format!("[simulation] dt_s must be a step in seconds, at most 0.1, got {dt}"),
+            )),
+        })
         .transpose()?;
     s.rate_hz = sim
         .rate_hz

@@ -68,6 +68,20 @@ pub enum ExplicitError {
         /// Bound method name.
         method: &'static str,
     },
+    /// Sub-stepping the step would take more than [`MAX_SUBSTEPS`].
+    #[error(
+        "dt_s = {dt_s:e} s needs {needed:e} sub-steps under the stable step {dt_max_s:e} s, more than the {max} a step may take; use dt_s <= {limit:e} s",
+        max = MAX_SUBSTEPS,
+        limit = dt_max_s * MAX_SUBSTEPS as Real
+    )]
+    TooManySubsteps {
+        /// Requested step.
+        dt_s: Real,
+        /// The bound.
+        dt_max_s: Real,
+        /// Sub-steps it would need.
+        needed: Real,
+    },
     /// The thread pool could not be created.
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads {
@@ -89,7 +103,17 @@ pub fn substeps_for(
     if dt_s <= stable.dt_max_s || policy == DtPolicy::Unchecked {
         Ok(1)
     } else if policy == DtPolicy::Substep {
-        Ok((dt_s / stable.dt_max_s).ceil() as usize)
+        let needed = (dt_s / stable.dt_max_s).ceil();
+        // A step that needs more sub-steps than a diverging state may take
+        // would never end (1e300 s asks for usize::MAX of them).
+        if needed > MAX_SUBSTEPS as Real {
+            return Err(ExplicitError::TooManySubsteps {
+                dt_s,
+                dt_max_s: stable.dt_max_s,
+                needed,
+            });
+        }
+        Ok(needed as usize)
     } else {
         Err(ExplicitError::Unstable {
             dt_s,
@@ -206,5 +230,32 @@ impl<S: Storage> Explicit<S> {
         for v in 0..self.u.len() {
             self.refresh_vertex(v);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_step_that_needs_more_sub_steps_than_allowed_is_refused_not_run() {
+        let stable = StableStep::from_lambda(4e6, BoundMethod::Element); // 1 ms
+        assert_eq!(substeps_for(0.5e-3, &stable, DtPolicy::Substep), Ok(1));
+        assert_eq!(substeps_for(2.5e-3, &stable, DtPolicy::Substep), Ok(3));
+        let most = MAX_SUBSTEPS as Real * 1e-3;
+        assert_eq!(
+            substeps_for(most, &stable, DtPolicy::Substep),
+            Ok(MAX_SUBSTEPS)
+        );
+        for dt_s in [most * 1.01, 1e300] {
+            let err = substeps_for(dt_s, &stable, DtPolicy::Substep).unwrap_err();
+            assert!(
+                matches!(err, ExplicitError::TooManySubsteps { .. })
+                    && err.to_string().contains("use dt_s <= 4.096e0 s"),
+                "{err}"
+            );
+        }
+        // Unchecked asks for none.
+        assert_eq!(substeps_for(1e300, &stable, DtPolicy::Unchecked), Ok(1));
     }
 }
