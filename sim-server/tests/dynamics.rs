@@ -94,6 +94,60 @@ fn fused_step_equals_a_plain_central_difference() {
 }
 
 #[test]
+fn thread_counts_that_would_allocate_without_bound_are_refused() {
+    let model = model([3, 2, 2], 10.0);
+    let dt = 0.5 * element_bound(&model).dt_max_s;
+    // More threads than a step may use: refused before any is started.
+    match Explicit::<f64>::new(model.clone(), config(dt, 100_000)) {
+        Err(ExplicitError::Threads { threads, reason }) => {
+            assert_eq!(threads, 100_000);
+            assert!(reason.contains("at most 256"), "{reason}");
+        }
+        other => panic!("accepted 100000 threads: {:?}", other.map(|s| s.parts())),
+    }
+    // A large mesh numbered at random: each part's ring is about the
+    // vertex count, so a few parts are refused, one is not.
+    let mesh = box_mesh([40, 40, 40], 0.001, 0.0, 7);
+    let n = mesh.vertex_count();
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    let mut rng = Rng::new(3);
+    for i in (1..n).rev() {
+        order.swap(i, (rng.vec3().x.abs() * 1e9) as usize % (i + 1));
+    }
+    let shuffled = TetMesh::new(
+        {
+            let mut p = vec![Vec3::ZERO; n];
+            for (old, &new) in order.iter().enumerate() {
+                p[new as usize] = mesh.positions_m()[old];
+            }
+            p
+        },
+        mesh.tets()
+            .iter()
+            .map(|t| t.map(|v| order[v.idx()]))
+            .collect(),
+    )
+    .unwrap();
+    let mat = Material::isotropic(4500.0, 0.45, 1060.0, 5.0).unwrap();
+    let big = ElasticModel::new(
+        shuffled.clone(),
+        TetMaterials::uniform(mat, shuffled.tet_count()),
+    )
+    .unwrap();
+    let dt = 0.5 * element_bound(&big).dt_max_s;
+    match Explicit::<f32>::new(big.clone(), config(dt, 32)) {
+        Err(ExplicitError::Threads { reason, .. }) => {
+            assert!(reason.contains("renumber the mesh"), "{reason}")
+        }
+        other => panic!(
+            "32 parts on a shuffled mesh: {:?}",
+            other.map(|s| s.parts())
+        ),
+    }
+    assert_eq!(Explicit::<f32>::new(big, config(dt, 1)).unwrap().parts(), 1);
+}
+
+#[test]
 fn threads_do_not_change_the_result() {
     // Small meshes make parts shorter than the bandwidth, so spills reach
     // across several parts: the hardest case for the deferred rows.

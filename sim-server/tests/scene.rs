@@ -178,6 +178,12 @@ fn each_kind_of_mistake_names_its_line() {
         11,
         "[simulation] dt_s must be a step in seconds, at most 0.1",
     );
+    // More worker threads than a step may use.
+    fails_at(
+        &format!("{BASE}\n[simulation]\nthreads = 1000\n"),
+        11,
+        "[simulation] threads must be at least 1 and at most 256, got 1000",
+    );
     // Unknown section.
     fails_at(
         &format!("{BASE}\n[solver]\nx = 1\n"),

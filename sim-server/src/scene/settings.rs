@@ -158,8 +158,15 @@ pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSetting
         .map(|r| positive(src, r, "[simulation] rate_hz"))
         .transpose()?;
     if let Some(t) = &sim.threads {
-        if *t.get_ref() == 0 {
-            return Err(src.error(t.span(), "[simulation] threads must be at least 1"));
+        let most = crate::tensor_mass::explicit::MAX_THREADS;
+        if *t.get_ref() == 0 || *t.get_ref() > most {
+            return Err(src.error(
+                t.span(),
+                format!(
+                    "[simulation] threads must be at least 1 and at most {most}, got {}",
+                    t.get_ref()
+                ),
+            ));
         }
         s.threads = *t.get_ref();
     }

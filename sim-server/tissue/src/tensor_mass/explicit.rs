@@ -12,7 +12,7 @@ use crate::math::Real;
 use parts::{PartBuffers, PartPlan, plan_parts, run_parts};
 use predicted::Prediction;
 pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, substeps_for};
-pub use step_size::{MAX_SUBSTEPS, PREDICTED_SUBSTEPS_MAX};
+pub use step_size::{MAX_SUBSTEPS, MAX_THREADS, PREDICTED_SUBSTEPS_MAX};
 
 /// What a kernel pass reads ([`StepInputs`]) and, borrowed apart from it,
 /// what it writes.
@@ -96,6 +96,12 @@ impl<S: Storage> Explicit<S> {
         };
         let substeps = substeps_for(dt_s, &stable, config.policy)?;
         let threads = config.threads.max(1);
+        if threads > MAX_THREADS {
+            return Err(ExplicitError::Threads {
+                threads,
+                reason: format!("at most {MAX_THREADS} worker threads"),
+            });
+        }
         let pool = if threads > 1 {
             Some(
                 rayon::ThreadPoolBuilder::new()
@@ -127,6 +133,21 @@ impl<S: Storage> Explicit<S> {
         };
         let n = model.vertex_count();
         let plans = plan_parts(&kernel, threads);
+        // Each part has a ring of the mesh's bandwidth: on a large mesh
+        // numbered at random that is about the vertex count, and many parts
+        // of it would allocate without bound. Refused past four vertex
+        // arrays' worth of rows and 64 MiB (2^21 rows of 32 bytes): small
+        // meshes, whose bandwidth is their size, still split freely.
+        let ring_rows = plans.len() * kernel.ring_len();
+        if plans.len() > 1 && ring_rows > (4 * n).max(1 << 21) {
+            return Err(ExplicitError::Threads {
+                threads,
+                reason: format!(
+                    "each part needs a ring of {} rows (the mesh's bandwidth) for {n} vertices: renumber the mesh (RCM, a scene's default) or use fewer threads",
+                    kernel.ring_len()
+                ),
+            });
+        }
         let (fmem, capsule_vertices) = match model.membrane() {
             Some(m) if m.model() == crate::membrane::MembraneModel::Nonlinear => {
                 let edges = model.topology().edges();

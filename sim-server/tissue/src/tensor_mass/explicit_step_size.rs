@@ -124,6 +124,9 @@ pub fn substeps_for(
     }
 }
 
+/// Worker threads a step may use at most.
+pub const MAX_THREADS: usize = 256;
+
 /// Sub-steps per step at most when contact springs or a stretched
 /// nonlinear body raise the bound: a state that needs more is diverging,
 /// and the caller's divergence check reports it (rather than a step that
