@@ -245,6 +245,36 @@ fn a_tool_pressing_the_same_depth_feels_the_same_reaction(kind: Kind) {
 }
 
 #[test]
+fn a_mesh_too_large_for_precomputed_responses_is_refused_before_any_solve() {
+    // A 40 mm cube on 1.2 mm cells: ~37k vertices, ~6.5k on the surface;
+    // 3 x 6.5k responses of 37k vertices would take about 17 GiB.
+    let mesh = BoxSpec::new(Vec3::splat(0.04), CellSize::EdgeM(0.0012))
+        .generate()
+        .unwrap();
+    let mat = Material::isotropic(4500.0, 0.45, 1060.0, 5.0).unwrap();
+    let m = ElasticModel::new(mesh.clone(), TetMaterials::uniform(mat, mesh.tet_count())).unwrap();
+    let fixed = wall(&m);
+    let mut solves = 0;
+    let err = Precomputed::new(m.clone(), &fixed, 0.01, None, |_, _| solves += 1)
+        .err()
+        .expect("refused");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("GiB, more than the 8 GiB a backend keeps") && solves == 0,
+        "{msg} ({solves} solves)"
+    );
+    // The hybrid's precomputed part is refused the same way.
+    let cuttable: Vec<TetId> = (0..mesh.tet_count())
+        .map(TetId::from)
+        .filter(|t| mesh.tet_points(*t)[0].x > 0.036)
+        .collect();
+    let err = Hybrid::new(m, &fixed, &cuttable, HybridConfig::new(0.001), |_, _| {})
+        .err()
+        .expect("refused");
+    assert!(err.to_string().starts_with("precomputed part: "), "{err}");
+}
+
+#[test]
 fn precomputed_responses_are_cached_and_cutting_is_refused() {
     let m = model();
     let fixed = wall(&m);

@@ -11,6 +11,56 @@ use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"HAPSIMP1";
 
+/// The most a backend keeps in precomputed responses (bytes): far above
+/// what a real-time mesh needs (the embedded liver's are about 0.1 GB),
+/// below what would exhaust the machine: each response is a whole vertex
+/// array per surface degree of freedom, which grows as the square of the
+/// mesh.
+pub const MAX_RESPONSE_BYTES: u64 = 8 << 30;
+
+/// A mesh too large for precomputed responses.
+#[derive(Clone, Debug, thiserror::Error, PartialEq, Eq)]
+#[error(
+    "{columns} precomputed responses over {vertices} vertices would take {gib:.1} GiB, more than the {max} GiB a backend keeps: use the tensor-mass backend, or the hybrid with a smaller precomputed part or surface",
+    gib = (*columns as f64) * (*vertices as f64) * 24.0 / (1u64 << 30) as f64,
+    max = MAX_RESPONSE_BYTES >> 30
+)]
+pub struct TooManyResponses {
+    /// Responses (three per surface vertex, and per shared vertex for a hybrid).
+    pub columns: usize,
+    /// Vertices in each.
+    pub vertices: usize,
+}
+
+/// The refusal when `columns` responses of `n` vertices each would pass
+/// [`MAX_RESPONSE_BYTES`]; their vector count otherwise.
+pub(super) fn check_responses(columns: usize, n: usize) -> Result<usize, TooManyResponses> {
+    let too_many = TooManyResponses {
+        columns,
+        vertices: n,
+    };
+    match columns.checked_mul(n) {
+        Some(len) if len as u64 <= MAX_RESPONSE_BYTES / std::mem::size_of::<Vec3>() as u64 => {
+            Ok(len)
+        }
+        _ => Err(too_many),
+    }
+}
+
+/// A zeroed buffer for `columns` responses of `n` vertices each, or the
+/// refusal when they pass [`MAX_RESPONSE_BYTES`] or cannot be allocated.
+pub(super) fn response_buffer(columns: usize, n: usize) -> Result<Vec<Vec3>, TooManyResponses> {
+    let len = check_responses(columns, n)?;
+    let too_many = TooManyResponses {
+        columns,
+        vertices: n,
+    };
+    let mut v = Vec::new();
+    v.try_reserve_exact(len).map_err(|_| too_many)?;
+    v.resize(len, Vec3::ZERO);
+    Ok(v)
+}
+
 fn fnv(bytes: impl Iterator<Item = u8>, mut h: u64) -> u64 {
     for b in bytes {
         h ^= u64::from(b);

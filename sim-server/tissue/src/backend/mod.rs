@@ -27,6 +27,7 @@ mod hybrid;
 mod implicit;
 mod precomputed;
 
+pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
 pub use hybrid::{Hybrid, HybridConfig, HybridError};
 pub use implicit::{Implicit, ImplicitConfig, ImplicitError, Preconditioner};
 pub use precomputed::{Precomputed, PrecomputedError};

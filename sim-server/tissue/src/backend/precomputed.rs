@@ -31,6 +31,9 @@ pub enum PrecomputedError {
     /// The stiffness could not be factorized.
     #[error(transparent)]
     Static(#[from] StaticError),
+    /// The mesh is too large to keep its responses.
+    #[error(transparent)]
+    TooLarge(#[from] super::cache::TooManyResponses),
 }
 
 /// The precomputed backend.
@@ -95,6 +98,8 @@ impl Precomputed {
         let cache: Option<PathBuf> =
             cache_dir.map(|d| d.join(format!("precomputed-{:016x}.bin", key(&model, fixed, &[]))));
         let expected = 3 * surface.len() * n;
+        // Refused before the cache is read or anything factorised.
+        super::cache::check_responses(3 * surface.len(), n)?;
         let mut responses = cache
             .as_deref()
             .and_then(|p| read_cache(p, expected))
@@ -106,7 +111,7 @@ impl Precomputed {
                 bc.fix(*v);
             }
             let k = Factorized::new(&model, &bc)?;
-            responses = vec![Vec3::ZERO; expected];
+            responses = super::cache::response_buffer(3 * surface.len(), n)?;
             let mut load = vec![Vec3::ZERO; n];
             for (s, v) in surface.iter().enumerate() {
                 for a in 0..3 {

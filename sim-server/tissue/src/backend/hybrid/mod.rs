@@ -96,6 +96,9 @@ pub enum HybridError {
     /// The precomputed part could not be factorized.
     #[error("precomputed part: {0}")]
     Static(#[from] StaticError),
+    /// The precomputed part is too large to keep its responses.
+    #[error("precomputed part: {0}")]
+    TooLarge(#[from] super::cache::TooManyResponses),
     /// The tensor-mass part's integrator refused.
     #[error("tensor-mass part: {0}")]
     Explicit(#[from] ExplicitError),

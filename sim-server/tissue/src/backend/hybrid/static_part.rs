@@ -22,7 +22,7 @@ use super::super::cache::{key, read_cache, write_cache};
 use super::super::holds::Holds;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
-use crate::static_solve::{Dirichlet, Factorized, StaticError};
+use crate::static_solve::{Dirichlet, Factorized};
 use crate::tensor_mass::ElasticModel;
 use std::path::Path;
 
@@ -79,7 +79,7 @@ impl StaticPart {
         shared: &[VertexId],
         cache_dir: Option<&Path>,
         mut progress: impl FnMut(usize, usize),
-    ) -> Result<Self, StaticError> {
+    ) -> Result<Self, super::HybridError> {
         let n = model.vertex_count();
         let mut clamped = vec![false; n];
         for v in fixed.iter().chain(shared) {
@@ -100,6 +100,8 @@ impl StaticPart {
         let ids: Vec<u32> = shared.iter().map(|v| v.0).collect();
         let cache =
             cache_dir.map(|d| d.join(format!("hybrid-{:016x}.bin", key(model, fixed, &ids))));
+        // Refused before the cache is read or anything factorised.
+        super::super::cache::check_responses(total, n)?;
         let mut all = cache
             .as_deref()
             .and_then(|p| read_cache(p, total * n))
@@ -111,7 +113,7 @@ impl StaticPart {
                 bc.fix(*v);
             }
             let k = Factorized::new(model, &bc)?;
-            all = vec![Vec3::ZERO; total * n];
+            all = super::super::cache::response_buffer(total, n)?;
             let mut load = vec![Vec3::ZERO; n];
             let mut unit = vec![Vec3::ZERO; n];
             for c in 0..total {
