@@ -18,6 +18,12 @@ use std::sync::Arc;
 const SIM_GONE_NS: u64 = 1_000_000_000;
 /// Window (ns) of the rates and percentiles in [`Stats`].
 const WINDOW_NS: u64 = 1_000_000_000;
+/// The most stamps the statistics' window keeps per stream: a second at
+/// 65 kHz, above any rate a simulation or haptic loop runs at. Pruning by
+/// age alone stops at the first stamp not yet old, so one stamp from far in
+/// the future (a faulty or foreign peer) would let the window grow for
+/// ever.
+const WINDOW_MAX: usize = 1 << 16;
 
 /// Rates and latencies over the last second, for the overlay.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -232,12 +238,8 @@ impl Session {
 
     fn update_stats(&mut self, now_ns: u64) {
         let since = now_ns.saturating_sub(WINDOW_NS);
-        while self.force_times.front().is_some_and(|&(t, _)| t < since) {
-            self.force_times.pop_front();
-        }
-        while self.ticks.front().is_some_and(|&(t, ..)| t < since) {
-            self.ticks.pop_front();
-        }
+        prune(&mut self.force_times, since, |&(t, _)| t);
+        prune(&mut self.ticks, since, |&(t, ..)| t);
         // The force stream keeps only the newest samples for a slow reader:
         // rates come from sequence numbers, not from what was received.
         self.stats.sim_hz = rate(
@@ -268,6 +270,16 @@ impl Session {
     }
 }
 
+/// Drops the stamps older than `since` from the front of `q`, and the
+/// oldest beyond [`WINDOW_MAX`].
+fn prune<T>(q: &mut VecDeque<T>, since: u64, t_ns: impl Fn(&T) -> u64) {
+    while q.front().is_some_and(|x| t_ns(x) < since) {
+        q.pop_front();
+    }
+    let excess = q.len().saturating_sub(WINDOW_MAX);
+    q.drain(..excess);
+}
+
 /// Events per second between two (t_ns, seq) points (0 without two).
 fn rate(span: Option<(u64, u64, u64, u64)>) -> f64 {
     match span {
@@ -290,7 +302,23 @@ fn percentiles(x: &mut [f64]) -> (f64, f64) {
 
 #[cfg(test)]
 mod tests {
-    use super::{percentiles, rate};
+    use super::{WINDOW_MAX, percentiles, prune, rate};
+    use std::collections::VecDeque;
+
+    #[test]
+    fn a_stamp_from_the_future_does_not_let_the_window_grow() {
+        let mut q: VecDeque<(u64, u64)> = VecDeque::new();
+        q.push_back((u64::MAX, 0));
+        for k in 0..3 * WINDOW_MAX as u64 {
+            q.push_back((k, k));
+            prune(&mut q, k.saturating_sub(1000), |&(t, _)| t);
+            assert!(q.len() <= WINDOW_MAX, "{} stamps kept", q.len());
+        }
+        // Once the future stamp is pruned, age pruning works again.
+        let mut q: VecDeque<(u64, u64)> = (0..10u64).map(|k| (k, k)).collect();
+        prune(&mut q, 7, |&(t, _)| t);
+        assert_eq!(q.front(), Some(&(7, 7)));
+    }
 
     #[test]
     fn percentiles_of_a_ramp() {
