@@ -311,6 +311,13 @@ fn write_samples(path: &Path, period_s: f64, delay_s: f64, samples: &[Sample]) -
     std::fs::write(path, o).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// The highest haptic rate simulated (Hz): `haptic-daemon run --rate`'s.
+const MAX_HAPTIC_RATE_HZ: f64 = 10_000.0;
+
+/// The longest trajectory simulated (s): an hour at 10 kHz is 36 million
+/// ticks, kept for every method.
+const MAX_DURATION_S: f64 = 3600.0;
+
 /// Runs the benchmark.
 pub fn run(args: &Args) -> Result<()> {
     anyhow::ensure!(
@@ -318,8 +325,10 @@ pub fn run(args: &Args) -> Result<()> {
         "--sim-rate must be a positive number of Hz"
     );
     anyhow::ensure!(
-        args.haptic_rate.is_finite() && args.haptic_rate >= args.sim_rate,
-        "--haptic-rate must be at least the simulation rate"
+        args.haptic_rate.is_finite()
+            && args.haptic_rate >= args.sim_rate
+            && args.haptic_rate <= MAX_HAPTIC_RATE_HZ,
+        "--haptic-rate must be at least the simulation rate and at most {MAX_HAPTIC_RATE_HZ} Hz (the daemon's range)"
     );
     anyhow::ensure!(
         args.delay_ms.is_finite() && (0.0..=1000.0).contains(&args.delay_ms),
@@ -334,6 +343,12 @@ pub fn run(args: &Args) -> Result<()> {
         ),
     };
     let duration = traj.duration_s();
+    // Every tick of the truth, each method and the series is kept: a
+    // trajectory of days would ask for more memory than any machine has.
+    anyhow::ensure!(
+        duration <= MAX_DURATION_S,
+        "the trajectory lasts {duration} s; at most {MAX_DURATION_S} s are simulated tick by tick"
+    );
     let (h, s) = (1.0 / args.haptic_rate, 1.0 / args.sim_rate);
     let ticks = (duration / h).floor() as usize;
     let sim_steps = (duration / s).ceil() as usize + 1;

@@ -412,3 +412,30 @@ fn hapbench_tradeoff_runs_every_backend_on_a_scene() {
     assert!(v["backends"]["precomputed"]["error"].as_f64().unwrap() < 1e-6);
     assert_eq!(v["sweep"][0]["tets"], 7950);
 }
+
+#[test]
+fn hapbench_extrapolation_refuses_runs_no_memory_holds() {
+    let dir = scratch_dir("hapbench-extrapolation-limits");
+    let long = dir.join("days.csv");
+    std::fs::write(&long, "t_s,x_m,y_m,z_m\n0,0,0,0.05\n1e9,0,0,0.05\n").unwrap();
+    for (args, needle) in [
+        (
+            vec!["extrapolation", "--haptic-rate", "1e12"],
+            "at most 10000 Hz",
+        ),
+        (
+            vec!["extrapolation", "--trajectory", long.to_str().unwrap()],
+            "at most 3600 s are simulated tick by tick",
+        ),
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"))
+            .args(&args)
+            .output()
+            .expect("run hapbench");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(needle),
+            "{args:?}: {err}"
+        );
+    }
+}
