@@ -35,15 +35,14 @@ pub struct TooManyResponses {
 /// The refusal when `columns` responses of `n` vertices each would pass
 /// [`MAX_RESPONSE_BYTES`]; their vector count otherwise.
 pub(super) fn check_responses(columns: usize, n: usize) -> Result<usize, TooManyResponses> {
-    let too_many = TooManyResponses {
-        columns,
-        vertices: n,
-    };
     match columns.checked_mul(n) {
         Some(len) if len as u64 <= MAX_RESPONSE_BYTES / std::mem::size_of::<Vec3>() as u64 => {
             Ok(len)
         }
-        _ => Err(too_many),
+        _ => Err(TooManyResponses {
+            columns,
+            vertices: n,
+        }),
     }
 }
 
@@ -51,12 +50,11 @@ pub(super) fn check_responses(columns: usize, n: usize) -> Result<usize, TooMany
 /// refusal when they pass [`MAX_RESPONSE_BYTES`] or cannot be allocated.
 pub(super) fn response_buffer(columns: usize, n: usize) -> Result<Vec<Vec3>, TooManyResponses> {
     let len = check_responses(columns, n)?;
-    let too_many = TooManyResponses {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len).map_err(|_| TooManyResponses {
         columns,
         vertices: n,
-    };
-    let mut v = Vec::new();
-    v.try_reserve_exact(len).map_err(|_| too_many)?;
+    })?;
     v.resize(len, Vec3::ZERO);
     Ok(v)
 }

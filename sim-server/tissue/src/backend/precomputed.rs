@@ -97,9 +97,8 @@ impl Precomputed {
         }
         let cache: Option<PathBuf> =
             cache_dir.map(|d| d.join(format!("precomputed-{:016x}.bin", key(&model, fixed, &[]))));
-        let expected = 3 * surface.len() * n;
         // Refused before the cache is read or anything factorised.
-        super::cache::check_responses(3 * surface.len(), n)?;
+        let expected = super::cache::check_responses(3 * surface.len(), n)?;
         let mut responses = cache
             .as_deref()
             .and_then(|p| read_cache(p, expected))

@@ -101,12 +101,12 @@ impl StaticPart {
         let cache =
             cache_dir.map(|d| d.join(format!("hybrid-{:016x}.bin", key(model, fixed, &ids))));
         // Refused before the cache is read or anything factorised.
-        super::super::cache::check_responses(total, n)?;
+        let len = super::super::cache::check_responses(total, n)?;
         let mut all = cache
             .as_deref()
-            .and_then(|p| read_cache(p, total * n))
+            .and_then(|p| read_cache(p, len))
             .unwrap_or_default();
-        let from_cache = all.len() == total * n;
+        let from_cache = all.len() == len;
         if !from_cache {
             let mut bc = Dirichlet::new(n);
             for v in fixed.iter().chain(shared) {
