@@ -63,24 +63,23 @@ impl<S: Storage> Explicit<S> {
     /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
     pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         let change = self.model.remove_tet(t)?;
-        if let Some(large) = &mut self.large {
-            large.set_alive(t, false);
-        }
-        self.after_cut(&change);
+        self.after_cut(t, false, &change);
         Ok(change)
     }
 
     /// Adds a removed tetrahedron back.
     pub fn restore_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         let change = self.model.restore_tet(t)?;
-        if let Some(large) = &mut self.large {
-            large.set_alive(t, true);
-        }
-        self.after_cut(&change);
+        self.after_cut(t, true, &change);
         Ok(change)
     }
 
-    fn after_cut(&mut self, change: &CutChange) {
+    /// After the model removed (`alive` false) or restored `t`: the
+    /// nonlinear pass, the kernel and the rows a prediction recomputes.
+    fn after_cut(&mut self, t: TetId, alive: bool, change: &CutChange) {
+        if let Some(large) = &mut self.large {
+            large.set_alive(t, alive);
+        }
         // K U ahead is stale; a prediction is not: only the removed
         // element's four rows read its tensors (its edges join only those
         // vertices) and their masses, so they are recomputed like rows
