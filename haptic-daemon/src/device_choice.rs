@@ -13,6 +13,7 @@ use haptic_daemon::rt::Pacer;
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
 use shared::monotonic_ns;
 use shared::protocol::ForceMsg;
+use shared::source::Source;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -83,12 +84,12 @@ impl DeviceChoice {
 
     /// Runs the real-time loop on this device until it stops (the loop is
     /// generic over the device: one instance per kind).
-    pub(crate) fn run_loop(self, cfg: LoopConfig) -> Result<RtEnd> {
+    pub(crate) fn run_loop(self, cfg: LoopConfig, sub: Source<ForceMsg>) -> Result<RtEnd> {
         match self {
-            DeviceChoice::Simulated(d) => run_loop(d, cfg),
-            DeviceChoice::Replay(d) => run_loop(d, cfg),
-            DeviceChoice::Plugin(d) => run_loop(d, cfg),
-            DeviceChoice::Haply(d) => run_loop(d, cfg),
+            DeviceChoice::Simulated(d) => run_loop(d, cfg, sub),
+            DeviceChoice::Replay(d) => run_loop(d, cfg, sub),
+            DeviceChoice::Plugin(d) => run_loop(d, cfg, sub),
+            DeviceChoice::Haply(d) => run_loop(d, cfg, sub),
         }
     }
 }
@@ -96,12 +97,12 @@ impl DeviceChoice {
 /// The device's own limit for the simulated and replayed devices (N).
 pub(crate) const SIMULATED_DEVICE_MAX_FORCE_N: f64 = 8.0;
 
-/// What the real-time thread's loop is given, once.
+/// What the real-time thread's loop is given, once (with the force source
+/// it opens on its own thread).
 pub(crate) struct LoopConfig {
     pub method: Method,
     pub safety: SafetyConfig,
     pub chain: ChainConfig,
-    pub sub: shared::source::Source<ForceMsg>,
     pub local: Option<triple_buffer::Output<LocalProblem>>,
     pub shared: Arc<Shared>,
     pub period_ns: u64,
@@ -119,12 +120,15 @@ pub(crate) struct RtEnd {
 /// The loop on the RT thread: ticks until stop, then ramps the force to zero
 /// and disables the device. A panic inside is caught so the device is still
 /// zeroed and disabled. Returns the ticks, overruns and render times.
-pub(crate) fn run_loop<D: Device>(device: D, cfg: LoopConfig) -> Result<RtEnd> {
+pub(crate) fn run_loop<D: Device>(
+    device: D,
+    cfg: LoopConfig,
+    sub: Source<ForceMsg>,
+) -> Result<RtEnd> {
     let LoopConfig {
         method,
         safety,
         chain,
-        sub,
         local,
         shared,
         period_ns,

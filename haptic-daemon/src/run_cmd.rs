@@ -6,7 +6,7 @@ use crate::device_choice::{DeviceChoice, SIMULATED_DEVICE_MAX_FORCE_N, make_devi
 use crate::device_choice::{LoopConfig, RtEnd};
 use crate::run_args::RunArgs;
 use anyhow::{Context, Result, bail};
-use haptic_daemon::daemon::{ChainConfig, Shared};
+use haptic_daemon::daemon::Shared;
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoConfig, IoSpin, Stats, run_io};
@@ -123,7 +123,7 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
     let (report_tx, report_rx) = std::sync::mpsc::channel::<RtReport>();
     let rt = spawn_rt(
         device,
-        LoopSetup {
+        LoopConfig {
             method,
             safety,
             chain,
@@ -131,11 +131,9 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
             shared: shared.clone(),
             period_ns,
             spin_ns: args.spin_us.saturating_mul(1000),
-            priority: args.rt_priority,
-            cpu: args.cpu,
-            transport: transport.clone(),
-            session: session.clone(),
         },
+        (args.rt_priority, args.cpu),
+        (transport.clone(), session.clone()),
         report_tx,
     )?;
     let warnings: Vec<String> = report_rx.recv().map(|r| r.warnings()).unwrap_or_default();
@@ -296,46 +294,19 @@ fn spawn_local_setup(
         .spawn(move || run_local_setup(shared, transport, session, setup, input))?)
 }
 
-/// What the real-time thread is started with: the loop's configuration
-/// (its force source is opened on the thread) and the thread's own
-/// scheduling.
-struct LoopSetup {
-    method: Method,
-    safety: SafetyConfig,
-    chain: ChainConfig,
-    local: Option<triple_buffer::Output<LocalProblem>>,
-    shared: Arc<Shared>,
-    period_ns: u64,
-    spin_ns: u64,
-    priority: i32,
-    cpu: Option<usize>,
-    transport: Transport,
-    session: SessionName,
-}
-
-/// The real-time thread: memory locked, SCHED_FIFO and a CPU as asked
-/// (what it got sent back on `report_tx`), then the loop on the device.
+/// The real-time thread: memory locked, SCHED_FIFO `priority` and `cpu` as
+/// asked (what it got sent back on `report_tx`), the force source of
+/// `session` opened, then the loop on the device.
 fn spawn_rt(
     device: DeviceChoice,
-    setup: LoopSetup,
+    cfg: LoopConfig,
+    (priority, cpu): (i32, Option<usize>),
+    (transport, session): (Transport, SessionName),
     report_tx: std::sync::mpsc::Sender<RtReport>,
 ) -> Result<JoinHandle<Result<RtEnd>>> {
     Ok(std::thread::Builder::new()
         .name("haptic-rt".into())
         .spawn(move || -> Result<RtEnd> {
-            let LoopSetup {
-                method,
-                safety,
-                chain,
-                local,
-                shared,
-                period_ns,
-                spin_ns,
-                priority,
-                cpu,
-                transport,
-                session,
-            } = setup;
             let _ = haptic_daemon::rt::minimal_timer_slack();
             let mut report = RtReport {
                 mlockall: Some(lock_memory()),
@@ -354,16 +325,8 @@ fn spawn_rt(
                 &session,
                 services::FORCE_BUFFER_LATEST,
             )?;
-            let result = device.run_loop(LoopConfig {
-                method,
-                safety,
-                chain,
-                sub,
-                local,
-                shared: shared.clone(),
-                period_ns,
-                spin_ns,
-            });
+            let shared = cfg.shared.clone();
+            let result = device.run_loop(cfg, sub);
             shared.flags.rt_done.store(true, Ordering::Release);
             result
         })?)
