@@ -49,6 +49,10 @@ pub struct DemoArgs {
     /// linear-position-signed, local-model, local-normal, local-problem).
     #[arg(long, default_value = "local-problem")]
     pub extrapolation: String,
+    /// The implicit backend's CG iterations per step at most (as `sim-server
+    /// run --implicit-iterations`; 0: to the tolerance).
+    #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
+    pub implicit_iterations: usize,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -112,6 +116,13 @@ struct DemoJson {
     sim_predicted_steps: u64,
     /// The simulation's steps.
     sim_steps: u64,
+    /// The implicit backend's CG iterations a step, mean and most, and
+    /// the steps its budget stopped short (the run summary's `solve_*`).
+    sim_solve_iterations_mean: f64,
+    /// See `sim_solve_iterations_mean`.
+    sim_solve_iterations_max: usize,
+    /// See `sim_solve_iterations_mean`.
+    sim_solve_capped_steps: u64,
 }
 
 /// A pipe (both ends close on exec).
@@ -286,6 +297,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         save_frames: args.save_frames.clone(),
         scene_name: src.name.clone(),
         rt_priority: 0,
+        implicit_step_iterations: super::implicit_step_iterations(args.implicit_iterations),
     };
     let result = super::run_scene(scene, backend, &cfg, stop.clone());
     if let Some(v) = &mut viewer {
@@ -338,6 +350,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
         sim_step_cpu_us: summary.step_cpu_us,
         sim_predicted_steps: summary.predicted_steps,
         sim_steps: summary.steps,
+        sim_solve_iterations_mean: summary.solve_iterations_mean,
+        sim_solve_iterations_max: summary.solve_iterations_max,
+        sim_solve_capped_steps: summary.solve_capped_steps,
     };
     println!(
         "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed, tools {:.1}% of the step | max rendered force {:.3} N (device limit {} N)",

@@ -42,6 +42,11 @@ impl From<BackendArg> for BackendName {
     }
 }
 
+/// `--implicit-iterations`: the per-step budget, 0 for none.
+pub fn implicit_step_iterations(n: usize) -> Option<usize> {
+    (n > 0).then_some(n)
+}
+
 /// Runs `scene` on `backend` (the scene's when `None`).
 pub fn run_scene(
     scene: BuiltScene,
@@ -54,7 +59,9 @@ pub fn run_scene(
             // Stable at any step: the real-time step, not the explicit bound.
             let dt = real_time_step(&scene);
             let prepared = prepare_with(scene, Some(dt), |model, _, dt_s| {
-                Implicit::new(model, ImplicitConfig::new(dt_s))
+                let mut config = ImplicitConfig::new(dt_s);
+                config.step_iterations = cfg.implicit_step_iterations;
+                Implicit::new(model, config)
             })?;
             run(prepared, cfg, stop)?
         }

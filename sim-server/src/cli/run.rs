@@ -66,6 +66,14 @@ pub struct RunArgs {
     /// refused, it runs at normal priority and says so.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=98))]
     pub rt_priority: i32,
+    /// The implicit backend's CG iterations per step at most while its
+    /// Cholesky factor preconditions (0: iterate to the tolerance). A grip
+    /// or a cut makes the factor stale until its rebuild arrives from the
+    /// worker thread (tens of ms); bounded, those steps cost what any step
+    /// costs and stop short of the tolerance (counted in the summary's
+    /// `solve_capped_steps`). README, Real time.
+    #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
+    pub implicit_iterations: usize,
 }
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
@@ -106,6 +114,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         save_frames: args.save_frames.clone(),
         scene_name: src.name.clone(),
         rt_priority: args.rt_priority,
+        implicit_step_iterations: super::implicit_step_iterations(args.implicit_iterations),
     };
     let summary = match super::run_scene(scene, backend, &cfg, stop) {
         Ok(summary) => summary,

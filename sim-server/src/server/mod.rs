@@ -58,7 +58,15 @@ pub struct RunConfig {
     pub scene_name: String,
     /// SCHED_FIFO priority for the stepping loop (0: normal priority).
     pub rt_priority: i32,
+    /// The implicit backend's CG iterations per step at most while its
+    /// factor preconditions (`None`: to the tolerance);
+    /// [`sim_server::backend::ImplicitConfig::step_iterations`].
+    pub implicit_step_iterations: Option<usize>,
 }
+
+/// The implicit backend's default per-step iteration budget in a
+/// real-time run: a step with a current factor takes one or two.
+pub const IMPLICIT_STEP_ITERATIONS: usize = 2;
 
 /// A scripted tool: tip position and jaw opening against simulated time,
 /// linearly interpolated, held after the last point.
@@ -151,6 +159,15 @@ pub struct RunSummary {
     /// Times the daemon-driven tools let go because the pose went stale or
     /// its publisher died.
     pub pose_timeouts: u64,
+    /// Mean linear-solver iterations a step (implicit backend; 0 for the
+    /// others).
+    pub solve_iterations_mean: Real,
+    /// Most linear-solver iterations in one step.
+    pub solve_iterations_max: usize,
+    /// Steps whose solve the per-step iteration budget stopped above its
+    /// tolerance (`--implicit-iterations`): the stale factor's steps after
+    /// a grip or a cut, until the rebuilt one arrives.
+    pub solve_capped_steps: u64,
     /// Live tetrahedra with a nonlinear (StVK, corotational) model at the start.
     pub nonlinear_tets: usize,
     /// Most StVK elements compressed below half their volume (in the

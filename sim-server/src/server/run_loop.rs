@@ -66,6 +66,8 @@ pub struct RunLoop<'a, B: Backend> {
     last_cpu_ns: u64,
     /// The loop's CPU time per step, from one step's end to the next's.
     work_cpu_times: StepHistogram,
+    /// Linear-solver iterations summed over the steps (implicit backend).
+    solve_iterations: u64,
     start_ns: u64,
     pacing: Pacing,
     stalls_told: u64,
@@ -157,6 +159,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             woke_ns: 0,
             last_cpu_ns: shared::thread_cpu_ns(),
             work_cpu_times: StepHistogram::new(),
+            solve_iterations: 0,
             start_ns,
             stalls_told: 0,
             last_stall_told: 0,
@@ -210,6 +213,12 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let reports = self.contacts.step(&mut self.sim);
         if let Some(r) = self.sim.large_strain() {
             self.summary.max_barrier_elements = self.summary.max_barrier_elements.max(r.collapsed);
+        }
+        if let Some(s) = self.sim.linear_solve() {
+            self.solve_iterations += s.iterations as u64;
+            let max = &mut self.summary.solve_iterations_max;
+            *max = (*max).max(s.iterations);
+            self.summary.solve_capped_steps += u64::from(s.capped);
         }
         let t1 = monotonic_ns();
         self.summary.step_s += (t1 - t0) as Real * 1e-9;
@@ -447,6 +456,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.pose_timeouts = self.poses.timeouts;
         summary.step_us = self.step_times.percentiles_us();
         summary.step_cpu_us = self.work_cpu_times.percentiles_us();
+        summary.solve_iterations_mean =
+            self.solve_iterations as Real / (summary.steps.max(1)) as Real;
         summary.turnaround_us = self.turnaround_times.percentiles_us();
         summary.hand_over_us = self.hand_over_times.percentiles_us();
         summary.pose_wait_us = self.pose_wait_times.percentiles_us();

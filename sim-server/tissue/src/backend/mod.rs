@@ -95,6 +95,11 @@ pub trait Backend {
         let _ = v;
         None
     }
+    /// The last step's linear solve, for a backend that solves one per
+    /// step (implicit); `None` otherwise.
+    fn linear_solve(&self) -> Option<SolveReport> {
+        None
+    }
     /// Whether the backend integrates inertia (false: quasi-static).
     fn dynamic(&self) -> bool {
         true
@@ -138,6 +143,15 @@ pub trait Backend {
         let _ = (field, resample_every_s, resample);
         self.step();
     }
+}
+
+/// What a step's linear solve did ([`Backend::linear_solve`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolveReport {
+    /// Iterations it took.
+    pub iterations: usize,
+    /// Whether a per-step iteration budget stopped it above its tolerance.
+    pub capped: bool,
 }
 
 /// How much of the body `sim` can cut: (cuttable, live) tetrahedra.
