@@ -53,6 +53,10 @@ pub struct DemoArgs {
     /// run --implicit-iterations`; 0: to the tolerance).
     #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
     pub implicit_iterations: usize,
+    /// The simulation's stepping loop under SCHED_FIFO at this priority (as
+    /// `sim-server run --rt-priority`; 0: normal priority).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=98))]
+    pub rt_priority: i32,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -296,7 +300,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         pose_timeout_ns: crate::server::poses::DEFAULT_POSE_TIMEOUT_NS,
         save_frames: args.save_frames.clone(),
         scene_name: src.name.clone(),
-        rt_priority: 0,
+        rt_priority: args.rt_priority,
         implicit_step_iterations: super::implicit_step_iterations(args.implicit_iterations),
     };
     let result = super::run_scene(scene, backend, &cfg, stop.clone());
