@@ -32,7 +32,7 @@ pub mod scene;
 pub mod step_time;
 pub mod wire;
 
-/// Tetrahedral meshes ([`tissue::mesh`]) and their file formats ([`io`]).
+/// Tetrahedral meshes ([`tissue::mesh`]) and their file formats ([`io`](crate::mesh::io)).
 pub mod mesh {
     pub use tissue::mesh::*;
     pub mod io;

@@ -25,7 +25,7 @@ pub fn spawn_sim_server(session: &str, args: &[&str]) -> std::process::Child {
 }
 
 /// The path of a workspace binary built in the same profile as the running
-/// test (target/<profile>/<name>).
+/// test (`target/<profile>/<name>`).
 pub fn binary(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
     // target/<profile>/deps/<test> -> target/<profile>/<name>

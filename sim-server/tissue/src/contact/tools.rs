@@ -333,7 +333,7 @@ impl Tools {
     /// which delayed those steps' forces. The sample then carries the
     /// stiffness received a step earlier (zero at once when nothing
     /// touches) (it is a few steps old anyway: the
-    /// solver works on snapshots every [`super::stiffness_thread::HAND_OVER_EVERY_S`]).
+    /// solver works on snapshots every `HAND_OVER_EVERY_S` (`contact/stiffness_thread.rs`)).
     pub fn hand_over_after_sample(&mut self, deferred: bool) {
         self.deferred_hand_over = deferred;
     }

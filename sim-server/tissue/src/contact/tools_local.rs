@@ -153,7 +153,7 @@ impl Tools {
     /// friction (the problem is frictionless), no surface near it, or no
     /// exact compliance here (the stiffness solved on its worker thread: use
     /// [`Tools::set_local_contact`] then, or a mesh above
-    /// [`super::MAX_FACTOR_VERTICES`]).
+    /// `contact::stiffness::MAX_FACTOR_VERTICES`).
     pub fn local_contact<B: Backend + ?Sized>(
         &mut self,
         sim: &B,

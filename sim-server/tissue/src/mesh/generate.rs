@@ -44,7 +44,7 @@ pub enum GenerateError {
         /// The value given.
         value: Real,
     },
-    /// The grid would have more than [`MAX_GENERATED_VERTICES`] vertices.
+    /// The grid would have more than `MAX_GENERATED_VERTICES` vertices.
     #[error(
         "{cells:?} cells are too many: a generated mesh has at most {} vertices (check size_m and cell_m, and their units: metres)",
         MAX_GENERATED_VERTICES

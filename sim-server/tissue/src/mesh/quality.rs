@@ -49,7 +49,7 @@ pub struct QualityReport {
     pub unused_vertices: usize,
     /// Faces shared by more than two tetrahedra.
     pub non_manifold_faces: usize,
-    /// Vertices whose link is not a single disk or sphere (see [`vertex_link`]).
+    /// Vertices whose link is not a single disk or sphere (see `vertex_link`).
     pub non_manifold_vertices: usize,
     /// Connected pieces, tetrahedra being connected through shared faces.
     pub components: usize,

@@ -56,6 +56,7 @@
 //! Cutting updates the same tensors as the explicit backend. A nonlinear
 //! membrane (eq 29) is not linear in u and is refused; the linear one is in K.
 
+mod config;
 mod factor;
 mod rebuild;
 
@@ -68,76 +69,8 @@ use factor::{Assembly, Factor};
 use rebuild::{Rebuilder, Received};
 use std::sync::Weak;
 
+pub use config::{ImplicitConfig, ImplicitError, Preconditioner, REFACTOR_BUDGET};
 pub use rebuild::RebuildGate;
-
-/// Solver settings.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ImplicitConfig {
-    /// The step (s).
-    pub dt_s: Real,
-    /// Relative residual at which the CG stops.
-    pub tolerance: Real,
-    /// CG iteration limit per step.
-    pub max_iterations: usize,
-    /// With a Cholesky factor, at most this many CG iterations a step (see
-    /// the module doc); `None` (the default) iterates to the tolerance or
-    /// `max_iterations`. The Jacobi preconditioner ignores it.
-    pub step_iterations: Option<usize>,
-    /// How the CG is preconditioned.
-    pub preconditioner: Preconditioner,
-    /// Rebuild the Cholesky factor on a worker thread, the steps using the
-    /// old one meanwhile (default); `false` rebuilds inline, in the step
-    /// that needs it, so that runs are reproducible step for step (the
-    /// trajectories agree either way, to the CG tolerance).
-    pub background_rebuild: bool,
-}
-
-/// The CG preconditioner of the implicit backend.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Preconditioner {
-    /// The diagonal of A: no set-up, many iterations on stiff or
-    /// nearly incompressible tissue.
-    Jacobi,
-    /// A sparse Cholesky factor of A (see the module doc); falls back to
-    /// Jacobi if it cannot be built.
-    Cholesky,
-}
-
-/// The Cholesky preconditioner is rebuilt once the CG iterations beyond one
-/// per step since it was built exceed this: one factorisation costs about
-/// 50 preconditioner solves on the meshes measured (README).
-pub const REFACTOR_BUDGET: usize = 50;
-
-impl ImplicitConfig {
-    /// Step `dt_s`, residual 1e-9, at most 1000 iterations, Cholesky
-    /// preconditioner rebuilt in the background, no per-step budget.
-    pub fn new(dt_s: Real) -> Self {
-        Self {
-            dt_s,
-            tolerance: 1e-9,
-            max_iterations: 1000,
-            step_iterations: None,
-            preconditioner: Preconditioner::Cholesky,
-            background_rebuild: true,
-        }
-    }
-}
-
-/// Why the implicit backend cannot run a model.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum ImplicitError {
-    /// The step is not a positive number.
-    #[error("the implicit backend's dt_s must be positive and finite, got {0}")]
-    BadDt(Real),
-    /// The nonlinear membrane is not linear in u.
-    #[error(
-        "the implicit backend supports the linear membrane only (its forces are in K); use model = \"linear\" or the tensor-mass backend"
-    )]
-    NonlinearMembrane,
-    /// A nonlinear material model.
-    #[error(transparent)]
-    LinearOnly(#[from] crate::tensor_mass::LinearOnly),
-}
 
 /// The backward-Euler backend.
 pub struct Implicit {
