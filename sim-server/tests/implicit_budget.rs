@@ -40,10 +40,18 @@ fn setup(cfg: ImplicitConfig) -> (Implicit, Vec<VertexId>) {
     (sim, patch)
 }
 
-/// Per step: the displacements and the iterations; and the capped steps.
-fn session(cfg: ImplicitConfig) -> (Vec<Vec<[f64; 3]>>, Vec<usize>, u64) {
+/// Per step: the displacements, the iterations and the factors built so
+/// far; and the capped steps.
+struct Session {
+    states: Vec<Vec<[f64; 3]>>,
+    iterations: Vec<usize>,
+    builds: Vec<usize>,
+    capped: u64,
+}
+
+fn session(cfg: ImplicitConfig) -> Session {
     let (mut sim, patch) = setup(cfg);
-    let (mut states, mut its) = (Vec::new(), Vec::new());
+    let (mut states, mut its, mut builds) = (Vec::new(), Vec::new(), Vec::new());
     for k in 0..STEPS {
         if k == GRIP {
             for &v in &patch {
@@ -57,9 +65,15 @@ fn session(cfg: ImplicitConfig) -> (Vec<Vec<[f64; 3]>>, Vec<usize>, u64) {
         }
         sim.step();
         its.push(sim.iterations());
+        builds.push(sim.factor_builds());
         states.push(sim.displacements().to_vec());
     }
-    (states, its, sim.capped_steps())
+    Session {
+        states,
+        iterations: its,
+        builds,
+        capped: sim.capped_steps(),
+    }
 }
 
 /// Largest vertex distance between two states, and the largest displacement
@@ -87,21 +101,26 @@ fn inline(budget: Option<usize>) -> ImplicitConfig {
 
 #[test]
 fn a_budgeted_grip_stays_near_the_solved_trajectory_and_returns_to_it() {
-    let (exact, exact_its, none) = session(inline(None));
-    let (capped, capped_its, count) = session(inline(Some(BUDGET)));
-    assert_eq!(none, 0, "no budget, nothing capped");
+    let solved = session(inline(None));
+    let budgeted = session(inline(Some(BUDGET)));
+    let (exact, exact_its) = (&solved.states, &solved.iterations);
+    let (capped, capped_its, count) = (&budgeted.states, &budgeted.iterations, budgeted.capped);
+    assert_eq!(solved.capped, 0, "no budget, nothing capped");
     // The grip and the release are what the budget is for: solved to the
-    // tolerance they take more iterations than it allows.
+    // tolerance they take more iterations than it allows; budgeted, they
+    // stop at it and the next step has a factor for the new held set.
     for change in [GRIP, RELEASE] {
         assert!(exact_its[change] > BUDGET, "{:?}", &exact_its[change..]);
         assert_eq!(capped_its[change], BUDGET);
+        let b = &budgeted.builds;
+        assert_eq!(b[change + 1], b[change] + 1, "{:?}", &b[change..]);
     }
     assert!(capped_its.iter().all(|&i| i <= BUDGET), "{capped_its:?}");
     assert!(count >= 2, "{count} capped steps");
     let scale = exact.iter().map(|s| apart(s, s).1).fold(0.0, f64::max);
     assert!(scale > 1e-3, "the grip moves the block ({scale} m)");
     let mut worst: f64 = 0.0;
-    for (k, (x, y)) in exact.iter().zip(&capped).enumerate() {
+    for (k, (x, y)) in exact.iter().zip(capped).enumerate() {
         let (d, _) = apart(x, y);
         worst = worst.max(d / scale);
         assert!(d < 0.03 * scale, "step {k}: {d} m apart (scale {scale} m)");
@@ -157,14 +176,19 @@ fn with_the_rebuild_held_back_every_step_stays_within_the_budget() {
 }
 
 #[test]
-fn a_block_at_rest_takes_no_iteration() {
-    let (mut sim, _) = setup(inline(Some(BUDGET)));
-    for v in 0..sim.model().vertex_count() {
-        sim.set_external_force(VertexId::from(v), Vec3::ZERO);
-    }
-    for _ in 0..3 {
+fn a_budget_is_at_least_one_iteration_and_at_most_the_limit() {
+    // A zero budget still iterates once; a limit of zero still does none
+    // (it used to panic when the budget met it); a budget above the limit
+    // is the limit.
+    for (budget, limit, expected) in [(0, 1000, 1), (2, 0, 0), (50, 3, 3)] {
+        let mut cfg = inline(Some(budget));
+        cfg.max_iterations = limit;
+        let (mut sim, patch) = setup(cfg);
         sim.step();
-        assert_eq!(sim.iterations(), 0);
-        assert_eq!(sim.capped_steps(), 0);
+        for &v in &patch {
+            sim.prescribe(v, Vec3::new(0.0, 0.0, -2e-3));
+        }
+        sim.step();
+        assert_eq!(sim.iterations(), expected, "budget {budget}, limit {limit}");
     }
 }

@@ -132,6 +132,19 @@ fn two_hundred_steps_of_each_backend_allocate_nothing() {
 
 #[test]
 fn a_background_factor_rebuild_allocates_nothing_on_the_stepping_thread() {
+    background_rebuilds(None);
+}
+
+#[test]
+fn steps_stopped_by_the_iteration_budget_allocate_nothing_either() {
+    // A budget of one: every step the stale factor cannot finish in one
+    // iteration is capped and posts its rebuild at once.
+    background_rebuilds(Some(1));
+}
+
+/// Holds, a release and a cut with the factor rebuilt in the background,
+/// under the per-step iteration `budget`: no allocation in the steps.
+fn background_rebuilds(budget: Option<usize>) {
     let m = model();
     let p = m.mesh().positions_m().to_vec();
     let at = |q: Vec3| {
@@ -152,7 +165,9 @@ fn a_background_factor_rebuild_allocates_nothing_on_the_stepping_thread() {
             })
             .unwrap(),
     );
-    let mut sim = Implicit::new(m, ImplicitConfig::new(10.0 * bound)).unwrap();
+    let mut cfg = ImplicitConfig::new(10.0 * bound);
+    cfg.step_iterations = budget;
+    let mut sim = Implicit::new(m, cfg).unwrap();
     for (v, q) in p.iter().enumerate() {
         if q.x < 1e-9 {
             sim.fix(VertexId::from(v));
@@ -193,6 +208,11 @@ fn a_background_factor_rebuild_allocates_nothing_on_the_stepping_thread() {
         allocations += n;
     }
     let builds = sim.factor_builds();
-    assert_eq!(builds, 4, "three rebuilds swapped in");
+    if budget.is_some() {
+        assert!(sim.capped_steps() >= 3, "{} capped", sim.capped_steps());
+        assert!(builds >= 4, "{builds} factors");
+    } else {
+        assert_eq!(builds, 4, "three rebuilds swapped in");
+    }
     assert_eq!(allocations, 0, "{allocations} allocations");
 }

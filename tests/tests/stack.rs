@@ -101,6 +101,43 @@ fn the_headless_demo_cuts_touches_and_stays_within_the_device_limit() {
     check_saved_frames(&frames);
 }
 
+#[test]
+fn the_implicit_demo_keeps_its_steps_within_the_iteration_budget() {
+    // The grasper's jaws close 2.0-2.5 s in and its grip holds dozens of
+    // vertices at once: solved to the
+    // tolerance, the stale factor then takes up to ~16 iterations a step;
+    // with `--implicit-iterations 1` every step takes at most one, the
+    // grip's steps are counted as capped, and the demo runs as before.
+    let dir = scratch_dir("demo-implicit");
+    let json = dir.join("demo.json");
+    let out = Command::new(binary("sim-server"))
+        .args([
+            "demo",
+            "--headless",
+            "--duration-s",
+            "3",
+            "--backend",
+            "implicit",
+        ])
+        .args(["--dt-s", "0.004", "--implicit-iterations", "1", "--json"])
+        .arg(&json)
+        .output()
+        .expect("run sim-server demo");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = read_json(&json);
+    assert_eq!(v["sim_solve_iterations_max"], 1, "{v}");
+    assert!(
+        v["sim_solve_iterations_mean"].as_f64().unwrap() > 0.0,
+        "{v}"
+    );
+    assert!(v["sim_solve_capped_steps"].as_u64().unwrap() > 0, "{v}");
+    assert!(v["contact_steps"].as_u64().unwrap() > 0, "{v}");
+}
+
 /// The demo's `--save-frames` series: a PVD listing VTU frames in time
 /// order, each read back by the mesh reader, the cuts visible as
 /// tetrahedra gone from later frames, the vertices' original ids a

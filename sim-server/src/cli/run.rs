@@ -71,7 +71,7 @@ pub struct RunArgs {
     /// or a cut makes the factor stale until its rebuild arrives from the
     /// worker thread (tens of ms); bounded, those steps cost what any step
     /// costs and stop short of the tolerance (counted in the summary's
-    /// `solve_capped_steps`). README, Real time.
+    /// `solve_capped_steps`). README, Backends.
     #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
     pub implicit_iterations: usize,
 }

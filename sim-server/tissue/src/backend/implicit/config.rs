@@ -21,7 +21,9 @@ pub struct ImplicitConfig {
     /// Rebuild the Cholesky factor on a worker thread, the steps using the
     /// old one meanwhile (default); `false` rebuilds inline, in the step
     /// that needs it, so that runs are reproducible step for step (the
-    /// trajectories agree either way, to the CG tolerance).
+    /// trajectories agree either way, to the CG tolerance, as long as no
+    /// `step_iterations` budget stops a step short: a capped step's answer
+    /// depends on which factor is in use, so on when the worker finished).
     pub background_rebuild: bool,
 }
 

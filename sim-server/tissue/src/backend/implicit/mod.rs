@@ -30,8 +30,9 @@
 //!
 //! A real-time loop bounds the step ([`ImplicitConfig::step_iterations`]):
 //! with a factor, a step stops after that many iterations even if the
-//! residual is still above the tolerance, and posts a rebuild at once (the
-//! factor has shown itself stale). A grip holds some fifty vertices at
+//! residual is still above the tolerance, and posts a rebuild to the worker
+//! at once (the factor has shown itself stale; if one is already in flight,
+//! as soon as it has been swapped in). A grip holds some fifty vertices at
 //! once, a rank-150 change the old factor answers in 15-16 iterations,
 //! each a sparse solve; bounded, those steps cost what a step with a fresh
 //! factor costs, and their solution is the best the budget reaches (CG
@@ -179,7 +180,7 @@ impl Implicit {
     /// preconditions, else the limit.
     fn iteration_limit(&self) -> usize {
         match (&self.factor, self.cfg.step_iterations) {
-            (Some(_), Some(k)) => k.clamp(1, self.cfg.max_iterations),
+            (Some(_), Some(k)) => k.max(1).min(self.cfg.max_iterations),
             _ => self.cfg.max_iterations,
         }
     }
@@ -441,8 +442,13 @@ impl Backend for Implicit {
         if self.cfg.preconditioner == Preconditioner::Cholesky {
             self.excess_iterations += iterations.saturating_sub(1);
             // Not again while one is in flight: its swap resets the count.
+            // A capped step orders the rebuild at once: from the worker, or
+            // inline where inline rebuilds were asked for; but a worker that
+            // could not be started leaves the excess rule alone to decide
+            // (not a factorisation in a real-time loop after every grip).
+            let stale = capped && (self.rebuilder.is_some() || !self.cfg.background_rebuild);
             self.refactor =
-                (capped || self.excess_iterations > REFACTOR_BUDGET) && !self.rebuild_in_flight();
+                (stale || self.excess_iterations > REFACTOR_BUDGET) && !self.rebuild_in_flight();
         }
         for i in 0..n {
             if self.held[i] {
