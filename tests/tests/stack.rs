@@ -115,7 +115,7 @@ fn the_implicit_demo_keeps_its_steps_within_the_iteration_budget() {
             "demo",
             "--headless",
             "--duration-s",
-            "3",
+            "4",
             "--backend",
             "implicit",
         ])
