@@ -62,22 +62,9 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
 #[test]
 fn the_headless_demo_cuts_touches_and_stays_within_the_device_limit() {
     let dir = scratch_dir("demo");
-    let json = dir.join("demo.json");
     let frames = dir.join("frames");
-    let out = Command::new(binary("sim-server"))
-        .args(["demo", "--headless", "--duration-s", "7"])
-        .arg("--json")
-        .arg(&json)
-        .arg("--save-frames")
-        .arg(&frames)
-        .output()
-        .expect("run sim-server demo");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = read_json(&json);
+    let frames_arg = frames.to_str().expect("a UTF-8 scratch path");
+    let v = headless_demo(&dir, &["--duration-s", "7", "--save-frames", frames_arg]);
     for key in [
         "sim_steps_per_s",
         "haptic_ticks_per_s",
@@ -104,22 +91,40 @@ fn the_headless_demo_cuts_touches_and_stays_within_the_device_limit() {
 #[test]
 fn the_implicit_demo_keeps_its_steps_within_the_iteration_budget() {
     // The grasper's jaws close 2.0-2.5 s in and its grip holds dozens of
-    // vertices at once: solved to the
-    // tolerance, the stale factor then takes up to ~16 iterations a step;
-    // with `--implicit-iterations 1` every step takes at most one, the
-    // grip's steps are counted as capped, and the demo runs as before.
-    let dir = scratch_dir("demo-implicit");
-    let json = dir.join("demo.json");
-    let out = Command::new(binary("sim-server"))
-        .args([
-            "demo",
-            "--headless",
+    // vertices at once: solved to the tolerance, the stale factor then
+    // takes up to ~16 iterations a step; with `--implicit-iterations 1`
+    // every step takes at most one, the grip's steps are counted as
+    // capped, and the demo runs as before.
+    let v = headless_demo(
+        &scratch_dir("demo-implicit"),
+        &[
             "--duration-s",
             "4",
             "--backend",
             "implicit",
-        ])
-        .args(["--dt-s", "0.004", "--implicit-iterations", "1", "--json"])
+            "--dt-s",
+            "0.004",
+            "--implicit-iterations",
+            "1",
+        ],
+    );
+    assert_eq!(v["sim_solve_iterations_max"], 1, "{v}");
+    assert!(
+        v["sim_solve_iterations_mean"].as_f64().unwrap() > 0.0,
+        "{v}"
+    );
+    assert!(v["sim_solve_capped_steps"].as_u64().unwrap() > 0, "{v}");
+    assert!(v["contact_steps"].as_u64().unwrap() > 0, "{v}");
+}
+
+/// Runs `sim-server demo --headless` with `args`, its JSON in `dir`;
+/// returns the JSON.
+fn headless_demo(dir: &std::path::Path, args: &[&str]) -> serde_json::Value {
+    let json = dir.join("demo.json");
+    let out = Command::new(binary("sim-server"))
+        .args(["demo", "--headless"])
+        .args(args)
+        .arg("--json")
         .arg(&json)
         .output()
         .expect("run sim-server demo");
@@ -128,14 +133,7 @@ fn the_implicit_demo_keeps_its_steps_within_the_iteration_budget() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = read_json(&json);
-    assert_eq!(v["sim_solve_iterations_max"], 1, "{v}");
-    assert!(
-        v["sim_solve_iterations_mean"].as_f64().unwrap() > 0.0,
-        "{v}"
-    );
-    assert!(v["sim_solve_capped_steps"].as_u64().unwrap() > 0, "{v}");
-    assert!(v["contact_steps"].as_u64().unwrap() > 0, "{v}");
+    read_json(&json)
 }
 
 /// The demo's `--save-frames` series: a PVD listing VTU frames in time
