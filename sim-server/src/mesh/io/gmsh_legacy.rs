@@ -15,7 +15,7 @@ use super::error::{Location, MeshIoError};
 use super::gmsh::{
     count_line, element, expect_end, gmsh_type, node, node_line, record, unsupported,
 };
-use super::gmsh41::{Binary, Input, expect_marker};
+use super::gmsh41_input::{Binary, Input, expect_marker};
 use super::text::{Line, Lines, parse_i64, perr, shown};
 use super::{Builder, ImportedMesh, NodeMap};
 

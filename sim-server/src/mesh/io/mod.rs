@@ -25,6 +25,7 @@ mod error;
 mod export;
 mod gmsh;
 mod gmsh41;
+mod gmsh41_input;
 mod gmsh_legacy;
 mod medit;
 mod text;
