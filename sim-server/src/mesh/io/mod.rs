@@ -34,6 +34,7 @@ mod vtk_binary;
 mod vtk_export;
 mod vtk_zlib;
 mod vtu;
+mod vtu_decode;
 mod xml;
 
 pub use error::{Location, MeshIoError};
