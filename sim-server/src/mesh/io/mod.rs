@@ -31,6 +31,7 @@ mod medit;
 mod text;
 mod vtk;
 mod vtk_binary;
+mod vtk_cells;
 mod vtk_export;
 mod vtk_zlib;
 mod vtu;

@@ -7,7 +7,7 @@
 
 use super::error::{Location, MeshIoError};
 use super::text::{as_text, perr, shown};
-use super::vtk::{CellLists, PHYSICAL_NAMES, add_cell_lists, physical_tag};
+use super::vtk_cells::{CellLists, PHYSICAL_NAMES, add_cell_lists, physical_tag};
 use super::{Builder, ImportedMesh};
 
 /// Byte width of a legacy VTK data type name.

@@ -6,13 +6,11 @@
 
 use super::error::MeshIoError;
 use super::export::{DataArray, check_indices, check_lengths, write_with};
+use super::vtk_cells::VTK_TETRA;
 use crate::ids::VertexId;
 use crate::math::Vec3;
 use std::io::Write;
 use std::path::Path;
-
-/// The VTK cell type of the linear tetrahedron.
-const VTK_TETRA: u8 = 10;
 
 /// Writes a legacy ASCII VTK file: linear tetrahedra and `point_data` (one
 /// value per position: vectors as `VECTORS`, scalars and ids as `SCALARS`).

@@ -9,7 +9,7 @@
 
 use super::error::{Location, MeshIoError};
 use super::text::{perr, shown};
-use super::vtk::{PHYSICAL_NAMES, add_cells};
+use super::vtk_cells::{PHYSICAL_NAMES, add_cells};
 use super::vtu_decode::{Array, Data, Decoder, Settings, integers};
 use super::xml::{Event, LineIndex, Xml};
 use super::{Builder, ImportedMesh};
