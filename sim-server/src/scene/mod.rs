@@ -4,12 +4,15 @@
 //! only what it declares: no anisotropy data without fibres, no membrane
 //! without `[membrane]`, no load arrays without loads.
 
+mod assign;
 mod build;
+mod loads;
 mod materials;
 mod mesh_load;
 mod select;
 mod settings;
 pub mod spec;
+mod tool_decls;
 
 pub use build::{BuiltScene, SceneReport, SimSettings, ToolDecl, build_scene};
 pub use settings::HYBRID_NEEDS_SPLIT;
