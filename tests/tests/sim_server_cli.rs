@@ -777,6 +777,41 @@ fn run_takes_the_step_from_the_command_line() {
 }
 
 #[test]
+fn an_implicit_run_reports_its_linear_solves() {
+    // A clamped block pulled at its free end: every step solves.
+    let dir = scratch_dir("run-solves");
+    let (scene, json) = (dir.join("pulled.toml"), dir.join("run.json"));
+    std::fs::write(
+        &scene,
+        format!(
+            "{BLOCK}[[fixed]]\nselect = {{ box_m = [[-0.001, -0.001, -0.001], [0.0001, 0.021, 0.021]] }}\n\n[[load]]\nselect = {{ box_m = [[0.0399, -0.001, -0.001], [0.041, 0.021, 0.021]] }}\nforce_n = [0.0, 0.0, -0.01]\n"
+        ),
+    )
+    .unwrap();
+    let session = format!("solves{}", std::process::id());
+    let out = run_ok(
+        Command::new(binary("sim-server"))
+            .args(["run", "--backend", "implicit", "--headless", "--quiet"])
+            .args(["--steps", "20", "--session", &session, "--scene"])
+            .arg(&scene)
+            .arg("--json")
+            .arg(&json),
+    );
+    let v = read_json(&json);
+    let mean = v["solve_iterations_mean"].as_f64().unwrap();
+    assert!(
+        mean > 0.0 && v["solve_iterations_max"].as_u64().unwrap() >= 1,
+        "{v}"
+    );
+    assert!(v["solve_capped_steps"].is_u64(), "{v}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("linear solves:") && stdout.contains("--implicit-iterations budget"),
+        "{stdout}"
+    );
+}
+
+#[test]
 fn run_asks_for_sched_fifo_and_says_what_it_got() {
     let dir = scratch_dir("run-rt");
     let json = dir.join("rt.json");

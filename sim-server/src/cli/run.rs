@@ -154,6 +154,15 @@ pub fn run(args: RunArgs) -> Result<()> {
             String::new()
         }
     );
+    if summary.solve_iterations_max > 0 {
+        println!(
+            "{}: linear solves: {:.2} iterations a step on average, {} at most; {} steps stopped at the --implicit-iterations budget",
+            src.name,
+            summary.solve_iterations_mean,
+            summary.solve_iterations_max,
+            summary.solve_capped_steps
+        );
+    }
     if let Some(dir) = &args.save_frames {
         println!(
             "{}: {} frames saved to {} (open frames.pvd in ParaView){}",
