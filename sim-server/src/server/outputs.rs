@@ -1,7 +1,8 @@
 //! The process's hops in and out of a step: the tools' inputs from the
 //! pose and the scripts ([`tool_inputs`]), and the viewer's streams with
-//! the optional frame recording ([`MeshOut`]); the force sample itself is
-//! the library's ([`sim_server::wire`]).
+//! the optional frame recording ([`MeshOut`]), and the start-up line
+//! ([`announce`]); the force sample itself is the library's
+//! ([`sim_server::wire`]).
 
 use super::{RunError, ToolScript, publish_err};
 use shared::protocol::{
@@ -167,6 +168,25 @@ where
         .send()
         .map_err(|e| publish_err(what)(format!("{e:?}")))?;
     Ok(())
+}
+
+/// The start line: backend, dynamics and where it cuts.
+pub(super) fn announce<B: Backend>(sim: &B) {
+    let (cut, live) = sim_server::backend::cuttable(sim);
+    eprintln!(
+        "sim-server: {} backend, {}, cuts {}",
+        sim.name(),
+        if sim.dynamic() {
+            "dynamic"
+        } else {
+            "quasi-static"
+        },
+        match cut {
+            0 => "nowhere".to_string(),
+            c if c == live => "anywhere".to_string(),
+            c => format!("in {c} of {live} tetrahedra"),
+        }
+    );
 }
 
 #[cfg(test)]

@@ -97,7 +97,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         // The stiffness hand-over after the force sample, not before it.
         contacts.hand_over_after_sample(true);
         if cfg.status {
-            announce(&sim);
+            super::outputs::announce(&sim);
         }
         let node = services::node("sim-server")?;
         let poses = PoseIntake::new(&node, &cfg.session, cfg.pose_timeout_ns)?;
@@ -398,8 +398,15 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             && self.cfg.status
             && now.saturating_sub(self.last_stall_told) >= 1_000_000_000
         {
+            // The implicit backend is stable at any step: a step that
+            // takes longer than it simulates has a remedy to name.
+            let hint = if self.sim.name() == "implicit" {
+                "; the implicit backend is stable at any step: a longer --dt-s (e.g. 0.004) lets it keep real time"
+            } else {
+                ""
+            };
             eprintln!(
-                "sim-server: {:.1} ms behind real time (a stall): the missed time is dropped, not run fast ({} stall(s) since the last message, {:.3} s dropped in all: simulated time now runs that far behind wall time)",
+                "sim-server: {:.1} ms behind real time (a stall): the missed time is dropped, not run fast ({} stall(s) since the last message, {:.3} s dropped in all: simulated time now runs that far behind wall time){hint}",
                 dropped as Real * 1e-6,
                 self.pacing.stalls() - self.stalls_told,
                 self.pacing.dropped_ns() as Real * 1e-9
@@ -481,23 +488,4 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             None => Ok(summary),
         }
     }
-}
-
-/// The start line: backend, dynamics and where it cuts.
-fn announce<B: Backend>(sim: &B) {
-    let (cut, live) = sim_server::backend::cuttable(sim);
-    eprintln!(
-        "sim-server: {} backend, {}, cuts {}",
-        sim.name(),
-        if sim.dynamic() {
-            "dynamic"
-        } else {
-            "quasi-static"
-        },
-        match cut {
-            0 => "nowhere".to_string(),
-            c if c == live => "anywhere".to_string(),
-            c => format!("in {c} of {live} tetrahedra"),
-        }
-    );
 }
