@@ -398,10 +398,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             && self.cfg.status
             && now.saturating_sub(self.last_stall_told) >= 1_000_000_000
         {
-            // The implicit backend is stable at any step: a step that
-            // takes longer than it simulates has a remedy to name.
-            let hint = if self.sim.name() == "implicit" {
-                "; the implicit backend is stable at any step: a longer --dt-s (e.g. 0.004) lets it keep real time"
+            // A backend stable at any step has a remedy to name for steps
+            // that take longer than they simulate.
+            let hint = if self.sim.stable_at_any_step() {
+                "; this backend is stable at any step: a longer --dt-s (e.g. 0.004) lets it keep real time"
             } else {
                 ""
             };

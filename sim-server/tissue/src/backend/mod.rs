@@ -100,6 +100,12 @@ pub trait Backend {
     fn linear_solve(&self) -> Option<SolveReport> {
         None
     }
+    /// Whether the backend is stable at any step (implicit integration),
+    /// so that a step longer than the real-time one is a remedy for steps
+    /// that take longer than they simulate.
+    fn stable_at_any_step(&self) -> bool {
+        false
+    }
     /// Whether the backend integrates inertia (false: quasi-static).
     fn dynamic(&self) -> bool {
         true

@@ -31,8 +31,8 @@
 //! A real-time loop bounds the step ([`ImplicitConfig::step_iterations`]):
 //! with a factor, a step stops after that many iterations even if the
 //! residual is still above the tolerance, and posts a rebuild to the worker
-//! at once (the factor has shown itself stale; if one is already in flight,
-//! as soon as it has been swapped in). A grip holds some fifty vertices at
+//! at once (the factor has shown itself stale; while one is in flight, the
+//! first capped step after its swap does). A grip holds some fifty vertices at
 //! once, a rank-150 change the old factor answers in 15-16 iterations,
 //! each a sparse solve; bounded, those steps cost what a step with a fresh
 //! factor costs, and their solution is the best the budget reaches (CG
@@ -340,6 +340,9 @@ impl Backend for Implicit {
     }
     fn dt_s(&self) -> Real {
         self.cfg.dt_s
+    }
+    fn stable_at_any_step(&self) -> bool {
+        true
     }
     fn linear_solve(&self) -> Option<super::SolveReport> {
         Some(super::SolveReport {
