@@ -169,6 +169,19 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
         cpu_max < 0.5 * dropped * 1e6,
         "step_cpu_us {cpu}, dropped {dropped} s"
     );
+    // The wall time of a step's whole work contains its step after the
+    // pose, step by step, so every percentile is at least the step's.
+    let work = &s["step_work_us"];
+    for key in ["p50", "p99", "p999", "max"] {
+        let (w, st) = (
+            work[key].as_f64().unwrap(),
+            s["step_us"][key].as_f64().unwrap(),
+        );
+        assert!(
+            w.is_finite() && w >= st,
+            "step_work_us.{key} {w} against step_us.{key} {st}: {s}"
+        );
+    }
     // Simulated time + dropped time = wall time, to the other stalls a
     // busy machine adds (all counted in dropped) and the start-up.
     let wall = s["steps"].as_f64().unwrap() / s["steps_per_s"].as_f64().unwrap();

@@ -115,6 +115,9 @@ struct DemoJson {
     /// The stepping thread's CPU time per step's whole work (us; the run
     /// summary's `step_cpu_us`): the step's own cost, without preemption.
     sim_step_cpu_us: sim_server::step_time::StepPercentiles,
+    /// The wall time of each step's whole work, the wait left out (us;
+    /// the run summary's `step_work_us`).
+    sim_step_work_us: sim_server::step_time::StepPercentiles,
     /// Steps finished from the prediction made while the simulation
     /// waited for the pose (the rest ran whole).
     sim_predicted_steps: u64,
@@ -352,6 +355,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         sim_dropped_time_s: summary.dropped_time_s,
         sim_step_us: summary.step_us,
         sim_step_cpu_us: summary.step_cpu_us,
+        sim_step_work_us: summary.step_work_us,
         sim_predicted_steps: summary.predicted_steps,
         sim_steps: summary.steps,
         sim_solve_iterations_mean: summary.solve_iterations_mean,

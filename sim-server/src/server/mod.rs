@@ -134,6 +134,15 @@ pub struct RunSummary {
     /// away (preemption by other threads or the hypervisor): a long step
     /// here is the simulation's own work, a long `step_us` alone is not.
     pub step_cpu_us: StepPercentiles,
+    /// Wall time of each step's whole work (us): from the loop's wake-up
+    /// (a pose or the step's due time) to the end of the next step's
+    /// prediction, the same work as `step_cpu_us` but on the wall clock
+    /// and without the wait (so without the CPU time some VMs charge a
+    /// thread that only sleeps). Beside `step_us` (the step after the
+    /// pose alone, most of it predicted ahead) this is the step's whole
+    /// cost, the figure to compare between backends and with a step
+    /// made without a prediction.
+    pub step_work_us: StepPercentiles,
     /// Wall time from the loop's wake-up (a pose or the step's due time)
     /// to its force sample sent (us): pose intake and the tools' update,
     /// the step, the sample; the simulation's share of device -> force.

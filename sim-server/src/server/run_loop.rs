@@ -66,6 +66,9 @@ pub struct RunLoop<'a, B: Backend> {
     last_cpu_ns: u64,
     /// The loop's CPU time per step, from one step's end to the next's.
     work_cpu_times: StepHistogram,
+    /// The loop's wall time per step's work, from its wake-up to the end
+    /// of the next step's prediction.
+    work_times: StepHistogram,
     /// Linear-solver iterations summed over the steps (implicit backend).
     solve_iterations: u64,
     start_ns: u64,
@@ -159,6 +162,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             woke_ns: 0,
             last_cpu_ns: shared::thread_cpu_ns(),
             work_cpu_times: StepHistogram::new(),
+            work_times: StepHistogram::new(),
             solve_iterations: 0,
             start_ns,
             stalls_told: 0,
@@ -348,6 +352,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         self.work_cpu_times
             .record(cpu_ns.saturating_sub(self.last_cpu_ns));
         self.last_cpu_ns = cpu_ns;
+        self.work_times
+            .record(monotonic_ns().saturating_sub(self.woke_ns));
         Ok(())
     }
 
@@ -463,6 +469,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.pose_timeouts = self.poses.timeouts;
         summary.step_us = self.step_times.percentiles_us();
         summary.step_cpu_us = self.work_cpu_times.percentiles_us();
+        summary.step_work_us = self.work_times.percentiles_us();
         summary.solve_iterations_mean =
             self.solve_iterations as Real / (summary.steps.max(1)) as Real;
         summary.turnaround_us = self.turnaround_times.percentiles_us();
