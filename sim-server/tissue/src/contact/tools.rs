@@ -1,13 +1,11 @@
 //! The tools of a scene, updated together each step so that they share one
 //! surface index and never fight over a vertex.
 
-use super::ToolDecl;
 use super::adjacency::Adjacency;
 use super::claims::Claims;
-use super::config::{ContactConfig, ContactLaw};
+use super::config::ContactLaw;
 use super::field::ContactField;
 use super::local::LocalContact;
-use super::proxy::Proxy;
 use super::sampling::Sampler;
 use super::stiffness_thread::{ContactStiffness, StiffnessSolves};
 use super::surface_index::SurfaceIndex;
@@ -145,138 +143,6 @@ pub enum ContactError {
 }
 
 impl Tools {
-    /// The tools `decls` over `model` with the paper's projection law,
-    /// touching nothing.
-    pub fn new(decls: &[ToolDecl], model: &ElasticModel) -> Self {
-        Self::build(
-            decls,
-            model,
-            ContactLaw::Projection,
-            &ContactConfig::default(),
-        )
-    }
-
-    /// The tools `decls` on `sim` as `config` says: the penalty law
-    /// (unless the scene asks for projection or the backend cannot
-    /// integrate it), with `sim`'s stable step made to include the contact
-    /// springs (more sub-steps). The scene holds `held` (fixed or
-    /// prescribed): no tool takes them ([`Tools::reserve`]), and the
-    /// contact stiffness sees them fixed.
-    pub fn with_config<B: Backend + ?Sized>(
-        decls: &[ToolDecl],
-        sim: &mut B,
-        config: &ContactConfig,
-        held: &[VertexId],
-    ) -> Result<Self, ContactError> {
-        for (key, value) in [
-            ("stiffness_factor", config.stiffness_factor),
-            ("point_spacing", config.point_spacing),
-            ("max_tool_speed_m_s", config.max_tool_speed_m_s),
-            ("max_tool_accel_m_s2", config.max_tool_accel_m_s2),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(ContactError::BadConstant {
-                    key,
-                    value,
-                    range: "positive",
-                });
-            }
-        }
-        if !(config.damping_s_per_m.is_finite() && config.damping_s_per_m >= 0.0) {
-            return Err(ContactError::BadConstant {
-                key: "damping_s_per_m",
-                value: config.damping_s_per_m,
-                range: "zero or positive",
-            });
-        }
-        for d in decls {
-            d.friction
-                .check()
-                .map_err(|why| ContactError::BadFriction {
-                    tool: d.name.clone(),
-                    why,
-                })?;
-        }
-        let law = match config.law {
-            Some(ContactLaw::Penalty) if !sim.integrates_contact() => {
-                return Err(ContactError::PenaltyUnsupported {
-                    backend: sim.name(),
-                });
-            }
-            Some(law) => law,
-            None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
-            None => ContactLaw::Projection,
-        };
-        if law == ContactLaw::Projection
-            && let Some(d) = decls.iter().find(|d| d.friction.is_active())
-        {
-            return Err(ContactError::FrictionUnsupported {
-                tool: d.name.clone(),
-                backend: sim.name(),
-            });
-        }
-        let mut tools = Self::build(decls, sim.model(), law, config);
-        if law == ContactLaw::Penalty {
-            let sampler = Sampler::new(sim.model(), config.stiffness_factor, config.point_spacing);
-
-            tools.sampler = Some(sampler);
-            tools.stiffness = Some(ContactStiffness::new(sim.model(), held));
-        }
-        for v in held {
-            tools.reserve(*v);
-        }
-        Ok(tools)
-    }
-
-    fn build(
-        decls: &[ToolDecl],
-        model: &ElasticModel,
-        law: ContactLaw,
-        config: &ContactConfig,
-    ) -> Self {
-        let tools: Vec<ToolContact> = decls
-            .iter()
-            .enumerate()
-            .map(|(i, d)| {
-                let proxy = Proxy::new(config.max_tool_speed_m_s, config.max_tool_accel_m_s2);
-                ToolContact::new(d, i, model, law, proxy)
-            })
-            .collect();
-        // A leaf is updated once its vertex has moved half the smallest
-        // tool radius: few leaves per step, few false candidates per query.
-        let margin_m = decls
-            .iter()
-            .map(|d| d.radius_m)
-            .fold(Real::INFINITY, Real::min)
-            .min(0.01)
-            * 0.5;
-        Self {
-            reports: vec![ContactReport::default(); tools.len()],
-            tools,
-            index: SurfaceIndex::new(model, margin_m),
-            adjacency: Adjacency::new(model),
-            claims: Claims::new(model.vertex_count()),
-            law,
-            field: ContactField::new(decls.len(), config.damping_s_per_m)
-                .with_friction(&decls.iter().map(|d| d.friction).collect::<Vec<_>>())
-                .with_implicit_springs(config.implicit_springs),
-            sampler: None,
-            stiffness: None,
-            last_inputs: vec![None; decls.len()],
-            stiffness_n_per_m: vec![Mat3::ZERO; decls.len()],
-            mark: vec![false; model.vertex_count()],
-            spring_n_per_m: vec![0.0; model.vertex_count()],
-            sprung: Vec::new(),
-            local: LocalScratch {
-                field: ContactField::new(decls.len(), 0.0),
-                ..Default::default()
-            },
-            steps: 0,
-            deferred_hand_over: false,
-            hand_over_due_s: 0.0,
-        }
-    }
-
     /// The contact law in force.
     pub fn law(&self) -> ContactLaw {
         self.law
@@ -537,3 +403,5 @@ impl Tools {
 
 #[path = "tools_local.rs"]
 mod local_problems;
+#[path = "tools_new.rs"]
+mod new;
