@@ -278,6 +278,26 @@ fn bad_contact_constants_are_scene_errors_with_their_line() {
         err.contains("bad.toml:9") && err.contains("implicit") && err.contains("explicit"),
         "{err}"
     );
+    // The implicit springs are refused stiffer than they integrate
+    // faithfully (at 1e6 they gave hundreds of newtons), naming the way
+    // out; explicit springs take the same factor, and 1e4 is accepted.
+    let with = |contact: &str| {
+        let src = SceneSource {
+            name: "bad.toml".into(),
+            dir: PathBuf::from("."),
+            text: text.replace("stiffness_factor = -3.0", contact),
+        };
+        build_scene(&src, &src.parse().unwrap()).map(|_| ())
+    };
+    let err = with("stiffness_factor = 1e5").unwrap_err().to_string();
+    assert!(
+        err.contains("bad.toml:9")
+            && err.contains("at most 1e4 with the implicit springs")
+            && err.contains("springs = \"explicit\""),
+        "{err}"
+    );
+    with("stiffness_factor = 1e5\nsprings = \"explicit\"").expect("explicit springs");
+    with("stiffness_factor = 1e4").expect("the largest implicit factor");
 }
 
 #[test]

@@ -50,6 +50,20 @@ pub(super) fn contact_config(
     if let Some(springs) = &s.springs {
         c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
     }
+    if c.implicit_springs && c.stiffness_factor > crate::contact::MAX_IMPLICIT_STIFFNESS_FACTOR {
+        let span = s
+            .stiffness_factor
+            .as_ref()
+            .map_or(section.span(), |x| x.span());
+        return Err(src.error(
+            span,
+            format!(
+                "[contact] stiffness_factor must be at most {:e} with the implicit springs (the default; beyond it their linearisation no longer holds the force: measured in hapbench extrapolation), got {}: use springs = \"explicit\" for a stiffer contact (more sub-steps)",
+                crate::contact::MAX_IMPLICIT_STIFFNESS_FACTOR,
+                c.stiffness_factor
+            ),
+        ));
+    }
     if let Some(d) = &s.damping_s_per_m {
         let x = *d.get_ref();
         if !(x.is_finite() && x >= 0.0) {

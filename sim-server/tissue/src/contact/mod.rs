@@ -101,7 +101,7 @@ mod surface_index;
 mod tool;
 mod tools;
 
-pub use config::{ContactConfig, ContactLaw};
+pub use config::{ContactConfig, ContactLaw, MAX_IMPLICIT_STIFFNESS_FACTOR};
 pub use decl::{ToolDecl, ToolKind};
 pub use field::ContactField;
 pub use friction::Friction;

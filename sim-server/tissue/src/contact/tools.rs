@@ -122,6 +122,17 @@ pub enum ContactError {
         /// What it must be: "positive", or "zero or positive".
         range: &'static str,
     },
+    /// The implicit springs asked stiffer than they integrate faithfully
+    /// ([`super::MAX_IMPLICIT_STIFFNESS_FACTOR`]).
+    #[error(
+        "[contact] stiffness_factor must be at most {max:e} with the implicit springs (beyond it their linearisation no longer holds the force), got {value}: use springs = \"explicit\" for a stiffer contact (more sub-steps)"
+    )]
+    TooStiffForImplicitSprings {
+        /// The factor asked for.
+        value: Real,
+        /// The largest accepted.
+        max: Real,
+    },
     /// A tool asks for friction under the projection law.
     #[error(
         "tool {tool:?} has friction, which the penalty contact law models; the contact here is the projection law (on the {backend} backend), whose prescribed vertices cannot slide: remove friction_static/friction_dynamic or use law = \"penalty\" on a tensor-mass backend"

@@ -11,7 +11,7 @@ use crate::contact::ContactReport;
 use crate::contact::ToolDecl;
 use crate::contact::adjacency::Adjacency;
 use crate::contact::claims::Claims;
-use crate::contact::config::{ContactConfig, ContactLaw};
+use crate::contact::config::{ContactConfig, ContactLaw, MAX_IMPLICIT_STIFFNESS_FACTOR};
 use crate::contact::field::ContactField;
 use crate::contact::proxy::Proxy;
 use crate::contact::sampling::Sampler;
@@ -59,6 +59,12 @@ impl Tools {
                     range: "positive",
                 });
             }
+        }
+        if config.implicit_springs && config.stiffness_factor > MAX_IMPLICIT_STIFFNESS_FACTOR {
+            return Err(ContactError::TooStiffForImplicitSprings {
+                value: config.stiffness_factor,
+                max: MAX_IMPLICIT_STIFFNESS_FACTOR,
+            });
         }
         if !(config.damping_s_per_m.is_finite() && config.damping_s_per_m >= 0.0) {
             return Err(ContactError::BadConstant {
