@@ -751,6 +751,45 @@ _"#
     assert_eq!(a.tet_physical, [0, 0]);
 }
 
+/// A compressed array may not inflate past what its points and cells
+/// hold: a small file declaring five points whose zlib Points block
+/// inflates to 1 MiB (well within zlib's ratio: a 1.4 MB file asked for
+/// 1 GiB this way) is refused at the array's line before inflating.
+#[test]
+fn a_compressed_array_larger_than_its_points_need_is_refused() {
+    use base64::Engine;
+    use std::io::Write;
+    let n = 1u64 << 20;
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+    z.write_all(&vec![0u8; n as usize]).unwrap();
+    let block = z.finish().unwrap();
+    let header: Vec<u8> = [1, n, n, block.len() as u64]
+        .iter()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let text = format!(
+        r#"<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt64" compressor="vtkZLibDataCompressor">
+<UnstructuredGrid><Piece NumberOfPoints="5" NumberOfCells="2">
+<Points><DataArray type="Float64" NumberOfComponents="3" format="binary">{}{}</DataArray></Points>
+<Cells>
+<DataArray type="Int64" Name="connectivity" format="ascii">0 1 2 3 1 2 3 4</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">4 8</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">10 10</DataArray>
+</Cells></Piece></UnstructuredGrid></VTKFile>
+"#,
+        b64.encode(&header),
+        b64.encode(&block)
+    );
+    fails_at(
+        &text,
+        MeshFormat::Vtu,
+        4,
+        "Points: compressed header claims 1048576 bytes, the array holds 120",
+    );
+}
+
 /// Every prefix of a valid file, and every single-byte corruption of a
 /// small one, gives a result or an error, never a panic.
 #[test]

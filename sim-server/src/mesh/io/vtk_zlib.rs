@@ -50,9 +50,18 @@ pub(super) fn deflate_array(payload: &[u8], block_size: usize, hb: usize) -> (Ve
 }
 
 /// The uncompressed bytes of one compressed array stored raw (appended
-/// data, or inline data once decoded); `hb` is the header integer width
-/// and `big_endian` the file's byte order. The error says what is wrong.
-pub(super) fn inflate_array(raw: &[u8], hb: usize, big_endian: bool) -> Result<Vec<u8>, String> {
+/// data, or inline data once decoded); `hb` is the header integer width,
+/// `big_endian` the file's byte order and `need` the bytes the array
+/// holds (its value count times the value width, from the file's point
+/// and cell counts): a header claiming more is refused before inflating
+/// (zlib's ratio alone let a 1.4 MB file of five points ask for 1 GiB).
+/// The error says what is wrong.
+pub(super) fn inflate_array(
+    raw: &[u8],
+    hb: usize,
+    big_endian: bool,
+    need: u64,
+) -> Result<Vec<u8>, String> {
     let int = |k: usize| -> Result<u64, String> {
         let bytes = raw
             .get(k * hb..(k + 1) * hb)
@@ -83,6 +92,11 @@ pub(super) fn inflate_array(raw: &[u8], hb: usize, big_endian: bool) -> Result<V
             .and_then(|t| t.checked_add(last))
             .ok_or("compressed header sizes overflow")?,
     };
+    if total > need {
+        return Err(format!(
+            "compressed header claims {total} bytes, the array holds {need}"
+        ));
+    }
     let body = &raw[header_len..];
     if total > (body.len() as u64).saturating_mul(MAX_RATIO) {
         return Err(format!(
@@ -116,8 +130,14 @@ pub(super) fn inflate_array(raw: &[u8], hb: usize, big_endian: bool) -> Result<V
 }
 
 /// Inline base64 text of a compressed array: the header and the blocks as
-/// two base64 streams (VTK, meshio), or as one.
-pub(super) fn inflate_inline(text: &[u8], hb: usize, big_endian: bool) -> Result<Vec<u8>, String> {
+/// two base64 streams (VTK, meshio), or as one; `need` as for
+/// [`inflate_array`].
+pub(super) fn inflate_inline(
+    text: &[u8],
+    hb: usize,
+    big_endian: bool,
+    need: u64,
+) -> Result<Vec<u8>, String> {
     // The block count is the first integer: the first whole base64 groups.
     let first = base64::decode(text.get(..hb.div_ceil(3) * 4).unwrap_or(text))
         .map_err(|_| "invalid base64 data")?;
@@ -145,7 +165,7 @@ pub(super) fn inflate_inline(text: &[u8], hb: usize, big_endian: bool) -> Result
         Some(raw) => raw,
         None => base64::decode(text).map_err(|_| "invalid base64 data")?,
     };
-    inflate_array(&raw, hb, big_endian)
+    inflate_array(&raw, hb, big_endian, need)
 }
 
 #[cfg(test)]
@@ -157,9 +177,10 @@ mod tests {
         let data: Vec<u8> = (0..10_000u32)
             .flat_map(|i| (i % 97).to_le_bytes())
             .collect();
+        let need = data.len() as u64;
         let (header, blocks) = deflate_array(&data, 4096, 4);
         let packed = [header, blocks].concat();
-        assert_eq!(inflate_array(&packed, 4, false).unwrap(), data);
+        assert_eq!(inflate_array(&packed, 4, false, need).unwrap(), data);
         // Header and blocks as two base64 streams, as VTK writes inline.
         let blocks = u32::from_le_bytes(packed[..4].try_into().unwrap()) as usize;
         let h = (3 + blocks) * 4;
@@ -168,27 +189,37 @@ mod tests {
             base64::encode(&packed[..h]),
             base64::encode(&packed[h..])
         );
-        assert_eq!(inflate_inline(text.as_bytes(), 4, false).unwrap(), data);
+        assert_eq!(
+            inflate_inline(text.as_bytes(), 4, false, need).unwrap(),
+            data
+        );
         // One stream is accepted too.
         let one = base64::encode(&packed);
-        assert_eq!(inflate_inline(one.as_bytes(), 4, false).unwrap(), data);
+        assert_eq!(
+            inflate_inline(one.as_bytes(), 4, false, need).unwrap(),
+            data
+        );
         // A header claiming a huge size is refused before any allocation.
         let mut bomb = packed.clone();
         bomb[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
         assert!(
-            inflate_array(&bomb, 4, false)
+            inflate_array(&bomb, 4, false, u64::MAX)
                 .unwrap_err()
                 .contains("claims")
         );
+        // ... and so is one within zlib's ratio but beyond what the array
+        // holds (its points and cells say how many bytes that is).
+        let err = inflate_array(&packed, 4, false, need - 1).unwrap_err();
+        assert!(err.contains("the array holds"), "{err}");
         // Truncated blocks and corrupt streams are errors, not panics.
         for cut in [0, 3, 12, h, packed.len() - 1] {
             assert!(
-                inflate_array(&packed[..cut], 4, false).is_err(),
+                inflate_array(&packed[..cut], 4, false, need).is_err(),
                 "cut {cut}"
             );
         }
         let mut corrupt = packed.clone();
         corrupt[h + 2] ^= 0xff;
-        assert!(inflate_array(&corrupt, 4, false).is_err());
+        assert!(inflate_array(&corrupt, 4, false, need).is_err());
     }
 }

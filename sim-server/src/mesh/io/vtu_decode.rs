@@ -64,6 +64,8 @@ impl Decoder<'_> {
             t => return Err(self.err(a.at, format!("{what}: unknown DataArray type {}", shown(t)))),
         };
         let bound = self.bytes.len();
+        // The bytes the array holds: a compressed one may not inflate past them.
+        let need = count.saturating_mul(width as u64);
         let values = match &a.data {
             Data::Ascii(r) => {
                 let line = self.lines.line(r.start);
@@ -97,7 +99,7 @@ impl Decoder<'_> {
                     .collect();
                 let raw = if self.settings.zlib {
                     let s = self.settings;
-                    vtk_zlib::inflate_inline(&text, s.header_bytes, s.big_endian)
+                    vtk_zlib::inflate_inline(&text, s.header_bytes, s.big_endian, need)
                         .map_err(|e| self.err(a.at, format!("{what}: {e}")))?
                 } else {
                     self.inline_binary(&text, a, what)?
@@ -124,7 +126,7 @@ impl Decoder<'_> {
                 let stored = self.bytes.get(start..region.end).unwrap_or_default();
                 if self.settings.zlib {
                     let s = self.settings;
-                    let raw = vtk_zlib::inflate_array(stored, s.header_bytes, s.big_endian)
+                    let raw = vtk_zlib::inflate_array(stored, s.header_bytes, s.big_endian, need)
                         .map_err(|e| self.err(a.at, format!("{what}: {e}")))?;
                     self.convert(&raw, width, &a.ty)
                 } else {
