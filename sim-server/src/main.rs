@@ -214,8 +214,11 @@ fn main() -> Result<()> {
                 problem.model = problem.model.with_model(m.model());
             }
             if let Some(dt) = dt_s {
-                if !(dt.is_finite() && dt > 0.0) {
-                    bail!("--dt-s must be a positive number of seconds, got {dt}");
+                use sim_server::scene::{MAX_DT_S, MIN_DT_S};
+                if !(dt.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&dt)) {
+                    bail!(
+                        "--dt-s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
+                    );
                 }
                 problem.dt_s = Some(dt);
             }

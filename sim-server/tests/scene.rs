@@ -163,6 +163,20 @@ fn fails_at(text: &str, line: usize, needle: &str) {
     assert!(msg.starts_with(&format!("test.toml:{line}:")), "{msg}");
 }
 
+/// `rate_hz` sets the step where the scene gives no `dt_s` (on every
+/// backend: the tensor-mass backend ignored it), and `dt_s` wins.
+#[test]
+fn a_rate_sets_the_step_unless_the_scene_gives_one() {
+    let b = build(&format!("{BASE}\n[simulation]\nrate_hz = 500.0\n")).unwrap();
+    assert_eq!(b.settings.dt_s, Some(0.002));
+    let b = build(&format!(
+        "{BASE}\n[simulation]\nrate_hz = 500.0\ndt_s = 0.001\n"
+    ))
+    .unwrap();
+    assert_eq!(b.settings.dt_s, Some(0.001));
+    assert_eq!(build(BASE).unwrap().settings.dt_s, None);
+}
+
 #[test]
 fn each_kind_of_mistake_names_its_line() {
     // Unknown key in a table.
@@ -176,7 +190,26 @@ fn each_kind_of_mistake_names_its_line() {
     fails_at(
         &format!("{BASE}\n[simulation]\ndt_s = 1e300\n"),
         11,
-        "[simulation] dt_s must be a step in seconds, at most 0.1",
+        "[simulation] dt_s must be a step in seconds, at least 1e-6 and at most 0.1",
+    );
+    // A step so short that m / dt^2 overflows (1e-300 "diverged" at step
+    // 64, blaming a step too large).
+    fails_at(
+        &format!("{BASE}\n[simulation]\ndt_s = 1e-300\n"),
+        11,
+        "at least 1e-6",
+    );
+    // A rate whose period is beyond the step's bounds (0.05 Hz slept
+    // through a 20 s step, deaf to the stop signal).
+    fails_at(
+        &format!("{BASE}\n[simulation]\nrate_hz = 0.05\n"),
+        11,
+        "[simulation] rate_hz must be at least 10 and at most 1e6",
+    );
+    fails_at(
+        &format!("{BASE}\n[simulation]\nrate_hz = 1e9\n"),
+        11,
+        "rate_hz must be at least 10",
     );
     // More worker threads than a step may use.
     fails_at(

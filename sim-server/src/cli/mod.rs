@@ -206,12 +206,15 @@ pub fn count_u64(s: &str) -> Result<u64, String> {
     count(s).map(|n| n as u64)
 }
 
-/// `--dt-s`: the step instead of the scene's, if given (a positive finite
-/// number of seconds, at most 0.1 s).
+/// `--dt-s`: the step instead of the scene's, if given (a finite number
+/// of seconds within the scene's bounds on `dt_s`).
 fn override_step(scene: &mut BuiltScene, dt_s: Option<f64>) -> Result<()> {
+    use sim_server::scene::{MAX_DT_S, MIN_DT_S};
     if let Some(dt) = dt_s {
-        if !(dt.is_finite() && dt > 0.0 && dt <= 0.1) {
-            anyhow::bail!("--dt-s must be a step in seconds, above 0 and at most 0.1, got {dt}");
+        if !(dt.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&dt)) {
+            anyhow::bail!(
+                "--dt-s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
+            );
         }
         scene.settings.dt_s = Some(dt);
     }
@@ -219,12 +222,9 @@ fn override_step(scene: &mut BuiltScene, dt_s: Option<f64>) -> Result<()> {
 }
 
 /// The step of backends not bound by the explicit stability limit: the
-/// scene's `dt_s`, else one period of its rate (1 kHz by default).
+/// scene's `dt_s` (or one period of its `rate_hz`), else 1 ms.
 fn real_time_step(scene: &BuiltScene) -> f64 {
-    scene
-        .settings
-        .dt_s
-        .unwrap_or(1.0 / scene.settings.rate_hz.unwrap_or(1000.0))
+    scene.settings.dt_s.unwrap_or(1e-3)
 }
 
 /// Where precomputed responses are kept: `$XDG_CACHE_HOME/hapsim`, else

@@ -12,6 +12,13 @@ use crate::math::Real;
 use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
 use toml::Spanned;
 
+/// The longest step a scene or `--dt-s` may ask for (s): longer, a live
+/// run would sleep through its stop signal and its duration.
+pub const MAX_DT_S: Real = 0.1;
+/// The shortest (s): below it the integrators' coefficients (m / dt^2)
+/// overflow long before any real time could be kept.
+pub const MIN_DT_S: Real = 1e-6;
+
 /// Why a scene cannot run on the hybrid backend.
 pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] section naming its tensor-mass (cuttable) part, e.g. [hybrid] select = { sphere_m = [x, y, z, r] }; the rest is precomputed";
 
@@ -158,19 +165,36 @@ pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSetting
         .dt_s
         .as_ref()
         .map(|d| match positive(src, d, "[simulation] dt_s")? {
-            // The bound `--dt-s` has: a step is at most 0.1 s.
-            dt if dt <= 0.1 => Ok(dt),
+            // The bounds `--dt-s` has.
+            dt if (MIN_DT_S..=MAX_DT_S).contains(&dt) => Ok(dt),
             dt => Err(src.error(
                 d.span(),
-                format!("[simulation] dt_s must be a step in seconds, at most 0.1, got {dt}"),
+                format!(
+                    "[simulation] dt_s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
+                ),
             )),
         })
         .transpose()?;
     s.rate_hz = sim
         .rate_hz
         .as_ref()
-        .map(|r| positive(src, r, "[simulation] rate_hz"))
+        .map(|r| match positive(src, r, "[simulation] rate_hz")? {
+            // One step of the rate within the step's bounds.
+            hz if (1.0 / MAX_DT_S..=1.0 / MIN_DT_S).contains(&hz) => Ok(hz),
+            hz => Err(src.error(
+                r.span(),
+                format!(
+                    "[simulation] rate_hz must be at least {} and at most {:e} (a step of {MAX_DT_S} s to {MIN_DT_S:e} s), got {hz}",
+                    1.0 / MAX_DT_S,
+                    1.0 / MIN_DT_S
+                ),
+            )),
+        })
         .transpose()?;
+    // The rate sets the step where the scene gives none (dt_s wins).
+    if s.dt_s.is_none() {
+        s.dt_s = s.rate_hz.map(|hz| 1.0 / hz);
+    }
     if let Some(t) = &sim.threads {
         let most = crate::tensor_mass::explicit::MAX_THREADS;
         if *t.get_ref() == 0 || *t.get_ref() > most {

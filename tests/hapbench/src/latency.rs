@@ -185,9 +185,10 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(dt) = args.dt_s {
         // Checked here too: sim-server would refuse it, and the run would
         // end with only "no traffic".
+        use sim_server::scene::{MAX_DT_S, MIN_DT_S};
         anyhow::ensure!(
-            dt.is_finite() && dt > 0.0 && dt <= 0.1,
-            "--dt-s must be a step in seconds, above 0 and at most 0.1, got {dt}"
+            dt.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&dt),
+            "--dt-s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
         );
     }
     let d = args.duration_s;
