@@ -122,6 +122,19 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
         err.contains("organ.stl") && err.contains("surface mesh") && !err.contains("TOML"),
         "{err}"
     );
+    // A scene `run` refuses is refused by `check` too, with run's reason
+    // (nearly incompressible: 44,722 sub-steps for its 1 ms step).
+    let stiff = dir.join("stiff.toml");
+    std::fs::write(
+        &stiff,
+        "[mesh]\ngenerate = { shape = \"box\", size_m = [0.1, 0.1, 0.1], cell_m = 0.05 }\n[material]\nyoung_pa = 4500.0\npoisson = 0.4999999999\ndensity_kg_m3 = 1000.0\n[simulation]\ndt_s = 0.001\n",
+    )
+    .unwrap();
+    let err = refused(&stiff);
+    assert!(
+        err.contains("stiff.toml") && err.contains("would refuse") && err.contains("4096"),
+        "{err}"
+    );
 }
 
 #[test]

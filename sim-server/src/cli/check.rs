@@ -214,6 +214,14 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
         };
         println!("dt_s = {dt:.4e} s: {verdict}");
     }
+    // What `run` would refuse, refused here too (the same check, on the
+    // step the tensor-mass backend would take).
+    if b.settings.backend == sim_server::scene::spec::BackendName::TensorMass {
+        let dt = b.settings.dt_s.unwrap_or(0.9 * element.dt_max_s);
+        sim_server::tensor_mass::explicit::substeps_for(dt, &element, b.settings.policy).map_err(
+            |e| anyhow::anyhow!("{name}: the tensor-mass backend would refuse this scene: {e}"),
+        )?;
+    }
     let cutting = b
         .tools
         .iter()
