@@ -244,6 +244,17 @@ fn a_tool_pressing_the_same_depth_feels_the_same_reaction(kind: Kind) {
     );
 }
 
+/// A body held nowhere has no static response: the precomputed backend
+/// is refused at start (it accepted one, and a tool then passed through
+/// it with zero force).
+#[test]
+fn the_precomputed_backend_refuses_a_body_held_nowhere() {
+    let err = Precomputed::new(model(), &[], 0.01, None, |_, _| {})
+        .err()
+        .expect("refused");
+    assert!(err.to_string().contains("rigid motion"), "{err}");
+}
+
 #[test]
 fn a_mesh_too_large_for_precomputed_responses_is_refused_before_any_solve() {
     // A 40 mm cube on 1.2 mm cells: ~37k vertices, ~6.5k on the surface;

@@ -190,6 +190,41 @@ fn unconstrained_static_problem_is_refused() {
     let err = solve_static(&model, &Dirichlet::new(n), &vec![Vec3::ZERO; n]).unwrap_err();
     assert!(matches!(err, StaticError::Singular { .. }), "{err}");
     assert!(err.to_string().contains("rigid"));
+    // Under a load, held nowhere, at one vertex or along one line of
+    // vertices: the rigid motions are free (a factorization got through
+    // such a box by round-off, "moving" it 1e11 m under 1 N). Three
+    // vertices not on a line hold them.
+    let p = model.mesh().positions_m();
+    let mut pushed = vec![Vec3::ZERO; n];
+    pushed[n - 1] = Vec3::new(0.0, 0.0, -1.0);
+    let on_x_axis: Vec<usize> = (0..n).filter(|&v| p[v].y < 1e-9 && p[v].z < 1e-9).collect();
+    assert!(on_x_axis.len() >= 3);
+    let corner_y = (0..n)
+        .find(|&v| p[v].x < 1e-9 && (p[v].y - W).abs() < 1e-9 && p[v].z < 1e-9)
+        .unwrap();
+    let held = |vs: &[usize]| {
+        let mut bc = Dirichlet::new(n);
+        for &v in vs {
+            bc.fix(VertexId::from(v));
+        }
+        bc
+    };
+    for (what, vs) in [
+        ("nowhere", vec![]),
+        ("one vertex", vec![0]),
+        ("one line", on_x_axis.clone()),
+    ] {
+        let bc = held(&vs);
+        assert!(!bc.holds_rigid_motions(p), "{what}");
+        let err = solve_static(&model, &bc, &pushed).unwrap_err();
+        assert!(matches!(err, StaticError::Singular { .. }), "{what}: {err}");
+    }
+    let mut three = on_x_axis;
+    three.push(corner_y);
+    let bc = held(&three);
+    assert!(bc.holds_rigid_motions(p));
+    let sol = solve_static(&model, &bc, &pushed).unwrap();
+    assert!(sol.displacement_m.iter().all(|d| d.is_finite()));
     let mut loads = vec![Vec3::ZERO; n];
     loads[3].y = f64::NAN;
     let err = solve_static(&model, &Dirichlet::new(n), &loads).unwrap_err();

@@ -100,6 +100,12 @@ pub fn solve_static_nonlinear(
     }
     let n = model.vertex_count();
     crate::static_solve::check_inputs(model, dirichlet, loads_n)?;
+    if !dirichlet.holds_rigid_motions(model.mesh().positions_m()) {
+        return Err(StaticError::Singular {
+            constrained: dirichlet.count(),
+        }
+        .into());
+    }
     let free = free_dofs(model, dirichlet);
     let nf = free.iter().filter(|i| **i != usize::MAX).count();
     let mut large = LargeStrain::new(model);

@@ -47,6 +47,67 @@ impl Dirichlet {
     pub fn count(&self) -> usize {
         self.dofs.iter().flatten().filter(|d| d.is_some()).count()
     }
+
+    /// Whether the imposed degrees of freedom hold every rigid motion of a
+    /// body at `positions_m` (its three translations and three rotations):
+    /// the 6 x 6 Gram matrix of the rigid modes restricted to them has
+    /// full rank. A body held nowhere, at one vertex or along one line
+    /// has a singular stiffness that a factorization can still get
+    /// through by round-off (a free box under 1 N "moved" 1e11 m).
+    pub fn holds_rigid_motions(&self, positions_m: &[Vec3]) -> bool {
+        let held: Vec<(usize, usize)> = (self.dofs.iter().enumerate())
+            .flat_map(|(v, d)| (0..3).filter(move |&a| d[a].is_some()).map(move |a| (v, a)))
+            .collect();
+        if held.len() < 6 {
+            return false;
+        }
+        // Rotations about the held vertices' centre, in units of their
+        // extent, so that all six columns are of one scale.
+        let centre = held.iter().map(|&(v, _)| positions_m[v]).sum::<Vec3>() / held.len() as Real;
+        let extent = (held.iter())
+            .map(|&(v, _)| (positions_m[v] - centre).length())
+            .fold(0.0, Real::max)
+            .max(Real::MIN_POSITIVE);
+        let mut gram = [[0.0; 6]; 6];
+        for &(v, a) in &held {
+            let r = (positions_m[v] - centre) / extent;
+            let mut row = [0.0; 6];
+            row[a] = 1.0;
+            for (k, e) in [Vec3::X, Vec3::Y, Vec3::Z].into_iter().enumerate() {
+                row[3 + k] = e.cross(r)[a];
+            }
+            for i in 0..6 {
+                for j in 0..6 {
+                    gram[i][j] += row[i] * row[j];
+                }
+            }
+        }
+        full_rank(gram, 1e-9)
+    }
+}
+
+/// Whether a symmetric positive semi-definite matrix has full rank: every
+/// pivot of its Cholesky factorization above `relative` times the largest
+/// diagonal entry.
+fn full_rank<const N: usize>(mut m: [[Real; N]; N], relative: Real) -> bool {
+    let scale = (0..N).map(|i| m[i][i]).fold(0.0, Real::max);
+    if scale <= 0.0 {
+        return false;
+    }
+    for k in 0..N {
+        let pivot = m[k][k];
+        if pivot <= relative * scale {
+            return false;
+        }
+        let pivot_row = m[k];
+        for row in m.iter_mut().skip(k + 1) {
+            let f = row[k] / pivot;
+            for (x, p) in row.iter_mut().zip(&pivot_row).skip(k) {
+                *x -= f * p;
+            }
+        }
+    }
+    true
 }
 
 /// The solution: displacements and forces per vertex.
@@ -88,6 +149,14 @@ pub enum StaticError {
         /// Imposed degrees of freedom.
         constrained: usize,
     },
+    /// The solution overflowed (a load too large for the stiffness).
+    #[error(
+        "the displacement of vertex {vertex} is not finite: the loads are too large for this stiffness"
+    )]
+    NonFiniteSolution {
+        /// The first vertex concerned.
+        vertex: usize,
+    },
     /// The factorization failed for another reason.
     #[error("sparse factorization failed: {0}")]
     Factorization(String),
@@ -121,7 +190,7 @@ pub fn solve_static(
             rhs[i] += f[d];
         }
     }
-    if let Some(llt) = factor(&asm, dirichlet)? {
+    if let Some(llt) = factor(&asm, dirichlet, model.mesh().positions_m())? {
         let mut x = faer::Mat::<Real>::from_fn(asm.nf, 1, |i, _| rhs[i]);
         llt.solve_in_place(x.as_mut());
         for (d, &i) in free.iter().enumerate() {
@@ -134,6 +203,9 @@ pub fn solve_static(
         .chunks_exact(3)
         .map(|c| Vec3::new(c[0], c[1], c[2]))
         .collect();
+    if let Some(vertex) = displacement_m.iter().position(|d| !d.is_finite()) {
+        return Err(StaticError::NonFiniteSolution { vertex });
+    }
     let mut ku = vec![Vec3::ZERO; n];
     model.elastic_forces(&displacement_m, &mut ku);
     for (a, b, t) in membrane_blocks {
@@ -304,9 +376,18 @@ fn assemble(model: &ElasticModel, dirichlet: &Dirichlet) -> Assembly {
 type Cholesky = faer::sparse::linalg::solvers::Llt<usize, Real>;
 
 /// Factorizes the free block (`None` when nothing is free).
-fn factor(asm: &Assembly, dirichlet: &Dirichlet) -> Result<Option<Cholesky>, StaticError> {
+fn factor(
+    asm: &Assembly,
+    dirichlet: &Dirichlet,
+    positions_m: &[Vec3],
+) -> Result<Option<Cholesky>, StaticError> {
     if asm.nf == 0 {
         return Ok(None);
+    }
+    if !dirichlet.holds_rigid_motions(positions_m) {
+        return Err(StaticError::Singular {
+            constrained: dirichlet.count(),
+        });
     }
     let k = SparseColMat::<usize, Real>::try_new_from_triplets(asm.nf, asm.nf, &asm.triplets)
         .map_err(|e| StaticError::Factorization(format!("{e:?}")))?;
@@ -331,7 +412,7 @@ impl Factorized {
     /// Assembles and factorizes K with `dirichlet` imposed.
     pub fn new(model: &ElasticModel, dirichlet: &Dirichlet) -> Result<Self, StaticError> {
         let asm = assemble(model, dirichlet);
-        let llt = factor(&asm, dirichlet)?;
+        let llt = factor(&asm, dirichlet, model.mesh().positions_m())?;
         Ok(Self { asm, llt })
     }
 
