@@ -363,6 +363,12 @@ fn each_kind_of_mistake_names_its_line() {
     fails_at(&format!("{BASE}{tool}"), 16, "exceeds length_m");
     let ok_tool = tool.replace("tip_length_m = 0.5", "tip_length_m = 0.01");
     fails_at(&format!("{BASE}{ok_tool}{ok_tool}"), 19, "unique");
+    // A fifth tool: the protocol carries four (it was declared, and never
+    // moved or felt).
+    let five: String = (0..5)
+        .map(|k| ok_tool.replace("name = \"g\"", &format!("name = \"g{k}\"")))
+        .collect();
+    fails_at(&format!("{BASE}{five}"), 42, "at most 4 [[tool]]s");
     // Simulation: the hybrid without its split, a split that selects
     // nothing, zero threads, negative dt.
     fails_at(

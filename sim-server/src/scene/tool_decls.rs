@@ -1,4 +1,4 @@
-//! The scene's `[[tool]]`s: unique names, a fulcrum outside the organ, a
+//! The scene's `[[tool]]`s: at most the protocol's four, unique names, a fulcrum outside the organ, a
 //! positive length, radius and tip no longer than the tool, friction.
 
 use super::build::positive;
@@ -7,6 +7,7 @@ use super::{SceneError, SceneSource};
 use crate::contact::{Friction, ToolDecl};
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::ElasticModel;
+use shared::protocol::MAX_TOOLS;
 use toml::Spanned;
 
 /// The `[[tool]]`s of `spec` around `model`, each checked at its own line.
@@ -16,8 +17,19 @@ pub(super) fn tool_decls(
     model: &ElasticModel,
 ) -> Result<Vec<ToolDecl>, SceneError> {
     let mut tools: Vec<ToolDecl> = Vec::new();
-    for tool in &spec.tool {
+    for (k, tool) in spec.tool.iter().enumerate() {
         let t = tool.get_ref();
+        if k == MAX_TOOLS {
+            // The protocol carries MAX_TOOLS poses and forces: a fifth tool
+            // would be declared and never moved or felt.
+            return Err(src.error(
+                tool.span(),
+                format!(
+                    "a scene has at most {MAX_TOOLS} [[tool]]s (the poses and force samples carry {MAX_TOOLS}), this is tool {}",
+                    k + 1
+                ),
+            ));
+        }
         let name = t.name.get_ref().clone();
         if name.is_empty() || tools.iter().any(|x| x.name == name) {
             return Err(src.error(
