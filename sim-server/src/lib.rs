@@ -27,6 +27,7 @@ pub use tissue::{
 
 pub mod bench;
 pub mod frames;
+pub mod input_file;
 pub mod prepare;
 pub mod scene;
 pub mod step_time;

@@ -40,9 +40,20 @@ pub struct SceneSource {
 impl SceneSource {
     /// Reads a scene file.
     pub fn read(path: &Path) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let io = |source| SceneError::Io {
             file: path.display().to_string(),
             source,
+        };
+        let bytes = crate::input_file::read_at_most(path, crate::input_file::MAX_SCENE_BYTES)
+            .map_err(io)?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "not UTF-8 text (byte {}): not a scene file",
+                    e.utf8_error().valid_up_to()
+                ),
+            ))
         })?;
         Ok(Self {
             name: path.display().to_string(),

@@ -100,10 +100,12 @@ pub fn read_mesh(path: &Path) -> Result<ImportedMesh, MeshIoError> {
     let name = path.display().to_string();
     let format = MeshFormat::from_path(path)
         .ok_or_else(|| MeshIoError::UnknownFormat { file: name.clone() })?;
-    let bytes = std::fs::read(path).map_err(|source| MeshIoError::Io {
-        file: name.clone(),
-        source,
-    })?;
+    let bytes = crate::input_file::read_at_most(path, crate::input_file::MAX_MESH_BYTES).map_err(
+        |source| MeshIoError::Io {
+            file: name.clone(),
+            source,
+        },
+    )?;
     parse_mesh(&name, &bytes, format)
 }
 
