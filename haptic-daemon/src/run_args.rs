@@ -48,21 +48,21 @@ pub(crate) struct RunArgs {
     /// Record every tick to this CSV.
     #[arg(long)]
     pub record: Option<PathBuf>,
-    /// SCHED_FIFO priority to ask for the RT thread (0 = do not ask).
-    #[arg(long, default_value_t = 80)]
+    /// SCHED_FIFO priority to ask for the RT thread (1-99; 0 = do not ask).
+    #[arg(long, default_value_t = 80, value_parser = clap::value_parser!(i32).range(0..=99))]
     pub rt_priority: i32,
     /// Pin the loop to this CPU.
     #[arg(long)]
     pub cpu: Option<usize>,
     /// Wake this many microseconds early and spin to the deadline (lower
-    /// lateness, more CPU; at most half a period).
+    /// lateness, more CPU; at most half a period, refused above).
     #[arg(long, default_value_t = 0)]
     pub spin_us: u64,
     /// The I/O thread polls for each pose in a window of this many
     /// microseconds around its due time instead of being woken by the RT
     /// thread: one thread wake-up less on the pose's way to the
     /// simulation, the window's CPU every period (0: off; at most a
-    /// period).
+    /// period, refused above).
     #[arg(long, default_value_t = 0)]
     pub io_spin_us: u64,
     /// No live status line.

@@ -236,6 +236,24 @@ fn check_args(args: &RunArgs) -> Result<()> {
     {
         bail!("--duration-s must be a positive number of seconds, got {d}");
     }
+    // Asked for more than they can do, they were clamped without a word.
+    let period_us = 1e6 / args.rate;
+    if args.spin_us as f64 > 0.5 * period_us {
+        bail!(
+            "--spin-us must be at most half the period ({:.0} us at {} Hz), got {}",
+            0.5 * period_us,
+            args.rate,
+            args.spin_us
+        );
+    }
+    if args.io_spin_us as f64 > period_us {
+        bail!(
+            "--io-spin-us must be at most the period ({:.0} us at {} Hz), got {}",
+            period_us,
+            args.rate,
+            args.io_spin_us
+        );
+    }
     Ok(())
 }
 

@@ -555,6 +555,57 @@ fn a_negative_number_gets_the_flags_own_message() {
     }
 }
 
+/// The daemon's flags that were accepted out of range (clamped, or a
+/// SCHED_FIFO call refused with the wrong advice) and a recorder told to
+/// write two streams into one file are refused up front, by name.
+#[test]
+fn the_daemon_refuses_flags_out_of_range_and_one_file_for_two_streams() {
+    let dir = scratch_dir("daemon-flags");
+    let same = dir.join("same.csv");
+    let same_again = dir.join(".").join("same.csv");
+    let cases: [(Vec<&std::ffi::OsStr>, &str); 5] = [
+        (
+            vec!["run".as_ref(), "--rt-priority".as_ref(), "200".as_ref()],
+            "not in 0..=99",
+        ),
+        (
+            vec!["run".as_ref(), "--rt-priority=-1".as_ref()],
+            "not in 0..=99",
+        ),
+        (
+            vec!["run".as_ref(), "--spin-us".as_ref(), "100000".as_ref()],
+            "--spin-us must be at most half the period (500 us at 1000 Hz)",
+        ),
+        (
+            vec!["run".as_ref(), "--io-spin-us".as_ref(), "5000".as_ref()],
+            "--io-spin-us must be at most the period",
+        ),
+        (
+            vec![
+                "record".as_ref(),
+                "--forces".as_ref(),
+                same.as_os_str(),
+                "--telemetry".as_ref(),
+                same_again.as_os_str(),
+            ],
+            "--forces and --telemetry name the same file",
+        ),
+    ];
+    for (args, needle) in cases {
+        let out = Command::new(binary("haptic-daemon"))
+            .args(&args)
+            .args(["--duration-s", "0.5"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(needle),
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!same.exists(), "a refused recorder wrote nothing");
+}
+
 /// Processes whose command line contains `needle` (from /proc).
 fn processes_with(needle: &str) -> Vec<String> {
     std::fs::read_dir("/proc")
