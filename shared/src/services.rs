@@ -74,6 +74,16 @@ pub enum ServiceError {
         /// iceoryx2's error.
         reason: String,
     },
+    /// The stream already has as many publishers as it takes.
+    #[error(
+        "{service} already has its {max} publishers (a session's pose stream takes a haptic daemon and a scripted client, say): stop one of them first"
+    )]
+    Full {
+        /// Service name.
+        service: String,
+        /// Publishers it takes.
+        max: usize,
+    },
     /// Any other failure to open or create a service or port.
     #[error("cannot open {service}: {reason}")]
     Open {
@@ -92,6 +102,8 @@ pub type IpcNode = Node<Ipc>;
 pub type PoseService = PortFactory<Ipc, PoseMsg, ()>;
 /// The service of a fixed-size stream of `T`.
 pub type PortFactoryOf<T> = PortFactory<Ipc, T, ()>;
+/// Who published a sample (its header's publisher id).
+pub type PublisherId = iceoryx2::identifiers::UniquePublisherId;
 /// A pose subscriber.
 pub type PoseSubscriber = Subscriber<Ipc, PoseMsg, ()>;
 /// A listener on the pose-ready event.
@@ -466,13 +478,18 @@ pub fn subscriber_count<T: std::fmt::Debug + ZeroCopySend>(
 pub fn publisher<T: std::fmt::Debug + ZeroCopySend>(
     factory: &PortFactory<Ipc, T, ()>,
 ) -> Result<Publisher<Ipc, T, ()>, ServiceError> {
-    factory
-        .publisher_builder()
-        .create()
-        .map_err(|e| ServiceError::Open {
+    factory.publisher_builder().create().map_err(|e| match e {
+        iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers => {
+            ServiceError::Full {
+                service: factory.name().to_string(),
+                max: factory.static_config().max_publishers(),
+            }
+        }
+        e => ServiceError::Open {
             service: factory.name().to_string(),
             reason: format!("{e:?}"),
-        })
+        },
+    })
 }
 
 /// A subscriber on `factory` keeping at most `buffer` unread samples (the

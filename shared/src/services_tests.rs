@@ -130,3 +130,17 @@ fn sessions_do_not_meet() {
     publisher.send_copy(ForceMsg::default()).unwrap();
     assert!(other.receive().unwrap().is_none());
 }
+
+#[test]
+fn a_publisher_past_a_stream_s_limit_is_told_so_by_name() {
+    let session = unique_session("full");
+    let n = node("test-full").unwrap();
+    let poses = pose_service(&n, &session).unwrap();
+    let _a = publisher(&poses).unwrap();
+    let _b = publisher(&poses).unwrap();
+    let Err(err) = publisher(&poses) else {
+        panic!("a third pose publisher was created");
+    };
+    assert!(matches!(err, ServiceError::Full { max: 2, .. }), "{err}");
+    assert!(err.to_string().contains("stop one of them"), "{err}");
+}

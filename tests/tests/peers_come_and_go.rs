@@ -8,7 +8,10 @@ use shared::protocol::PROTOCOL_VERSION;
 use shared::services;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use system_tests::{binary, finish, read_json, scratch_dir};
+use system_tests::{
+    Peer, binary, finish, read_json, scratch_dir, spawn_sim_server, wait_bounded, wait_for,
+    wait_until,
+};
 
 /// Joins the session as a viewer would, waits for one mesh frame and
 /// returns its vertex count; the node leaves when this returns.
@@ -89,4 +92,38 @@ fn simulation_outlives_its_viewer_and_daemon_leaving_and_coming_back() {
     assert!(s["finite"].as_bool().unwrap(), "{s}");
     // Both daemons' poses arrived (the second one ran 2 s at 1 kHz).
     assert!(s["poses_received"].as_u64().unwrap() > 1000, "{s}");
+}
+
+/// Two daemons in one session take turns at every tool (each pose carries
+/// all of them): the simulation says so; a third cannot publish and is
+/// told why by name, not with iceoryx2's error code.
+#[test]
+fn two_pose_publishers_are_told_and_a_third_is_refused_by_name() {
+    let session = format!("twopub{}", std::process::id());
+    let sim = spawn_sim_server(&session, &["--duration-s", "4", "--headless"]);
+    wait_for(&session, Peer::Simulation);
+    let mut first = daemon(&session, "3").spawn().unwrap();
+    let mut second = daemon(&session, "3").spawn().unwrap();
+    wait_until("two pose publishers", Duration::from_secs(20), || {
+        let name = SessionName::new(&session).unwrap();
+        let node = services::node("test-count").unwrap();
+        services::publisher_count(&services::pose_service(&node, &name).unwrap()) == 2
+    });
+    let third = daemon(&session, "1")
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&third.stderr);
+    assert!(
+        !third.status.success() && err.contains("already has its 2 publishers"),
+        "{err}"
+    );
+    wait_bounded(&mut first, Duration::from_secs(20), "first daemon");
+    wait_bounded(&mut second, Duration::from_secs(20), "second daemon");
+    let out = finish(sim, Duration::from_secs(30), "sim-server");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("poses alternate between two publishers"),
+        "{err}"
+    );
 }

@@ -56,6 +56,11 @@ pub struct PoseIntake {
     /// The reaper's passes at the last count.
     counted_after: u64,
     was_active: bool,
+    /// Who sent the last pose, who sent poses before that one, and
+    /// whether poses alternating between two were told.
+    last_publisher: Option<shared::services::PublisherId>,
+    previous_publisher: Option<shared::services::PublisherId>,
+    told_two_publishers: bool,
     /// Pose messages received.
     pub received: u64,
     /// Times the tools were let go because the pose went stale or its
@@ -85,6 +90,9 @@ impl PoseIntake {
             timeout_ns,
             latest: None,
             was_active: false,
+            last_publisher: None,
+            previous_publisher: None,
+            told_two_publishers: false,
             received: 0,
             timeouts: 0,
         })
@@ -98,6 +106,21 @@ impl PoseIntake {
             .map_err(|e| super::publish_err("pose receive")(format!("{e:?}")))?
         {
             shared::protocol::check_version("pose", p.version)?;
+            let from = p.header().publisher_id();
+            if self.last_publisher.is_some_and(|last| last != from) {
+                // Back to the publisher before the last: two live ones
+                // alternate (a restart moves from one to the next only).
+                // Each pose carries every tool, so they take turns at all
+                // of them, which no one asks for knowingly.
+                if self.previous_publisher == Some(from) && !self.told_two_publishers {
+                    self.told_two_publishers = true;
+                    eprintln!(
+                        "sim-server: poses alternate between two publishers (two haptic daemons, or a daemon and a scripted client?); each pose drives every tool, so they take turns: stop one"
+                    );
+                }
+                self.previous_publisher = self.last_publisher;
+            }
+            self.last_publisher = Some(from);
             self.latest = Some(*p);
             self.received += 1;
         }
