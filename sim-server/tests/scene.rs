@@ -363,6 +363,38 @@ fn each_kind_of_mistake_names_its_line() {
     fails_at(&format!("{BASE}{tool}"), 16, "exceeds length_m");
     let ok_tool = tool.replace("tip_length_m = 0.5", "tip_length_m = 0.01");
     fails_at(&format!("{BASE}{ok_tool}{ok_tool}"), 19, "unique");
+    // A generator key of another shape (ignored before: a box given
+    // center_m was built at the origin), and a box of zero tetrahedra.
+    let generated = |g: &str| {
+        BASE.replace(
+            "shape = \"box\", size_m = [0.06, 0.02, 0.02], cell_m = 0.005",
+            g,
+        )
+    };
+    fails_at(
+        &generated(
+            "shape = \"box\", size_m = [0.06, 0.02, 0.02], cell_m = 0.005, center_m = [1, 1, 1]",
+        ),
+        3,
+        "`center_m` does not apply to shape \"box\"",
+    );
+    fails_at(
+        &generated("shape = \"liver\", size_m = [0.06, 0.02, 0.02], cell_m = 0.005"),
+        3,
+        "`size_m` does not apply to shape \"liver\" (its keys: cell_m, lattice)",
+    );
+    fails_at(
+        &generated(
+            "shape = \"box\", size_m = [0.06, 0.02, 0.02], cell_m = 0.005, lattice = \"cubic\"",
+        ),
+        3,
+        "`lattice` does not apply to shape \"box\"",
+    );
+    fails_at(
+        &generated("shape = \"box\", size_m = [0.06, 0.02, 0.02], tets = 0"),
+        3,
+        "`tets` must be at least 1",
+    );
     // A fifth tool: the protocol carries four (it was declared, and never
     // moved or felt).
     let five: String = (0..5)

@@ -95,6 +95,39 @@ pub(super) fn load_mesh(
                 LatticeKind::Cubic => shapes::Lattice::Cubic,
             };
             let fail = |e: crate::mesh::GenerateError| src.error(gen_span.clone(), e.to_string());
+            // A key of another shape was ignored without a word (a box
+            // given center_m was built at the origin).
+            let (name, keys) = match g.shape {
+                ShapeKind::Box => ("box", "size_m, origin_m, and cell_m or tets"),
+                ShapeKind::Ellipsoid => ("ellipsoid", "radii_m, center_m, cell_m, lattice"),
+                ShapeKind::Liver => ("liver", "cell_m, lattice"),
+            };
+            let given = [
+                ("size_m", g.size_m.is_some(), ShapeKind::Box),
+                ("origin_m", g.origin_m.is_some(), ShapeKind::Box),
+                ("tets", g.tets.is_some(), ShapeKind::Box),
+                ("radii_m", g.radii_m.is_some(), ShapeKind::Ellipsoid),
+                ("center_m", g.center_m.is_some(), ShapeKind::Ellipsoid),
+            ];
+            if let Some((key, ..)) = given.iter().find(|(_, set, of)| *set && *of != g.shape) {
+                return Err(src.error(
+                    gen_span,
+                    format!("`{key}` does not apply to shape \"{name}\" (its keys: {keys})"),
+                ));
+            }
+            if g.shape == ShapeKind::Box && g.lattice.is_some() {
+                return Err(src.error(
+                    gen_span,
+                    format!(
+                        "`lattice` does not apply to shape \"box\" (its keys: {keys}): the box is cut into cubes of six tetrahedra"
+                    ),
+                ));
+            }
+            if let Some(t) = &g.tets
+                && *t.get_ref() == 0
+            {
+                return Err(src.error(t.span(), "`tets` must be at least 1"));
+            }
             let mesh = match g.shape {
                 ShapeKind::Box => {
                     let size = g.size_m.as_ref().ok_or_else(|| {
@@ -133,12 +166,6 @@ pub(super) fn load_mesh(
                 }
                 ShapeKind::Liver => shapes::liver(need_cell()?, lattice).map_err(fail)?,
             };
-            if g.shape != ShapeKind::Box && g.tets.is_some() {
-                return Err(src.error(
-                    gen_span,
-                    "`tets` only sizes the box generator; use `cell_m`",
-                ));
-            }
             report.mesh_source = format!("generated {:?}", g.shape).to_lowercase();
             let n = mesh.tet_count();
             let tags = Tags {
