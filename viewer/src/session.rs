@@ -142,7 +142,17 @@ impl Session {
             && self.streams.peers.remote_sim_alive().unwrap_or(true)
     }
 
-    /// Whether the latest positions and triangles belong together.
+    /// Whether a running simulation's tissue has no surface left: frames
+    /// come, of a topology cut down to no triangle.
+    pub fn all_cut(&self) -> bool {
+        self.frames > 0
+            && self.triangles.is_empty()
+            && self.topology_version > 0
+            && self.topology_version == self.frame_topology_version
+    }
+
+    /// Whether the latest positions and triangles belong together (and
+    /// can be drawn: some triangles, every index in range).
     pub fn drawable(&self) -> bool {
         !self.triangles.is_empty()
             && self.topology_version == self.frame_topology_version
@@ -318,6 +328,20 @@ mod tests {
         let mut q: VecDeque<(u64, u64)> = (0..10u64).map(|k| (k, k)).collect();
         prune(&mut q, 7, |&(t, _)| t);
         assert_eq!(q.front(), Some(&(7, 7)));
+    }
+
+    /// A running simulation cut down to no tetrahedron is told apart from
+    /// no simulation at all (a snapshot said "is sim-server run running?").
+    #[test]
+    fn a_session_cut_down_to_nothing_is_not_a_missing_one() {
+        let name = shared::SessionName::new(&format!("allcut{}", std::process::id())).unwrap();
+        let mut s = super::Session::join(&name).unwrap();
+        assert!(!s.all_cut() && !s.drawable(), "nothing received yet");
+        (s.frames, s.topology_version, s.frame_topology_version) = (3, 5, 5);
+        assert!(s.all_cut() && !s.drawable());
+        s.positions_m = vec![[0.0; 3]; 3];
+        s.triangles = vec![[0, 1, 2]];
+        assert!(!s.all_cut() && s.drawable());
     }
 
     #[test]

@@ -30,6 +30,14 @@ pub enum SnapshotError {
         /// How long it waited.
         wait_s: f64,
     },
+    /// The simulation runs, but all of its tissue was cut away.
+    #[error(
+        "the simulation in session {session:?} runs, but its tissue has no surface left (every tetrahedron was cut away): nothing to draw"
+    )]
+    AllCut {
+        /// The session.
+        session: String,
+    },
     /// The PNG could not be written.
     #[error("cannot write {path}: {reason}")]
     Write {
@@ -118,6 +126,11 @@ pub fn snapshot(
         if (now - start) as f64 * 1e-9 > wait_s {
             if session.drawable() {
                 break;
+            }
+            if session.all_cut() {
+                return Err(SnapshotError::AllCut {
+                    session: session_name.to_string(),
+                });
             }
             return Err(SnapshotError::NoMesh {
                 session: session_name.to_string(),
