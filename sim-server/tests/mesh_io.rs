@@ -713,6 +713,24 @@ fn vtu_ascii_and_appended_and_faults() {
         "compressor 'vtkLZ4DataCompressor' is not supported (vtkZLibDataCompressor is)",
     );
 
+    // An appended array's offset that is not a byte count says so (it was
+    // reported as a missing attribute).
+    let appended = r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
+<UnstructuredGrid><Piece NumberOfPoints="5" NumberOfCells="2">
+<Points><DataArray type="Float64" NumberOfComponents="3" format="appended" offset="-5"/></Points>
+</Piece></UnstructuredGrid>
+<AppendedData encoding="raw">
+_
+</AppendedData>
+</VTKFile>
+"#;
+    fails_at(
+        appended,
+        f,
+        3,
+        "offset must be a byte count (a non-negative integer), found '-5'",
+    );
+
     // The same mesh with appended raw data (UInt32 headers).
     let mut raw = Vec::new();
     let mut block = |payload: Vec<u8>| {

@@ -289,7 +289,9 @@ impl<'f> Builder<'f> {
                 MeshError::IndexOutOfRange { tet, .. }
                 | MeshError::RepeatedVertex { tet, .. }
                 | MeshError::Degenerate { tet, .. } => Some(*tet),
-                MeshError::Empty | MeshError::NonFinite { .. } => None,
+                MeshError::Empty | MeshError::NonFinite { .. } | MeshError::OutOfRange { .. } => {
+                    None
+                }
             };
             let place = tet.and_then(|t| origin.get(t));
             MeshIoError::Invalid {

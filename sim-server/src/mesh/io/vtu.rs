@@ -101,17 +101,23 @@ pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoErro
                         let data = match get("format").unwrap_or("ascii") {
                             "ascii" => Data::Ascii(0..0),
                             "binary" => Data::Base64(0..0),
-                            "appended" => Data::Appended(
-                                get("offset")
-                                    .and_then(|v| v.trim().parse().ok())
-                                    .ok_or_else(|| {
-                                        err(
-                                            o,
-                                            "an appended DataArray needs an offset attribute"
-                                                .into(),
-                                        )
-                                    })?,
-                            ),
+                            "appended" => Data::Appended(match get("offset") {
+                                None => {
+                                    return Err(err(
+                                        o,
+                                        "an appended DataArray needs an offset attribute".into(),
+                                    ));
+                                }
+                                Some(v) => v.trim().parse().map_err(|_| {
+                                    err(
+                                        o,
+                                        format!(
+                                            "offset must be a byte count (a non-negative integer), found {}",
+                                            shown(v)
+                                        ),
+                                    )
+                                })?,
+                            }),
                             f => {
                                 return Err(err(
                                     o,

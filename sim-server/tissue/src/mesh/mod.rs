@@ -38,6 +38,11 @@ pub struct TetMesh {
     reoriented: usize,
 }
 
+/// The largest coordinate magnitude a mesh may have (in its file's units,
+/// before any scaling): a kilometre in micrometres, far from where
+/// products of coordinates overflow.
+pub const MAX_COORDINATE: Real = 1e9;
+
 /// Why a mesh was refused.
 #[derive(Debug, Error, PartialEq)]
 pub enum MeshError {
@@ -47,6 +52,18 @@ pub enum MeshError {
     /// A vertex coordinate is NaN or infinite.
     #[error("vertex {vertex} has a non-finite coordinate {coords:?}")]
     NonFinite {
+        /// The vertex index (0-based).
+        vertex: usize,
+        /// Its coordinates.
+        coords: [Real; 3],
+    },
+    /// A vertex coordinate is finite but absurdly large: its edges and
+    /// volumes would overflow (1e300 was reported as a zero volume "for
+    /// a longest edge of inf m").
+    #[error(
+        "vertex {vertex} has a coordinate of magnitude above {MAX_COORDINATE:e} {coords:?}: not a mesh of tissue in metres or millimetres"
+    )]
+    OutOfRange {
         /// The vertex index (0-based).
         vertex: usize,
         /// Its coordinates.
@@ -96,6 +113,14 @@ impl TetMesh {
         }
         if let Some((vertex, p)) = positions_m.iter().enumerate().find(|(_, p)| !p.is_finite()) {
             return Err(MeshError::NonFinite {
+                vertex,
+                coords: p.to_array(),
+            });
+        }
+        if let Some((vertex, p)) =
+            (positions_m.iter().enumerate()).find(|(_, p)| p.abs().max_element() > MAX_COORDINATE)
+        {
+            return Err(MeshError::OutOfRange {
                 vertex,
                 coords: p.to_array(),
             });
@@ -292,5 +317,14 @@ mod tests {
             TetMesh::new(nan, vec![[0, 1, 2, 3]]),
             Err(MeshError::NonFinite { vertex: 2, .. })
         ));
+        // Finite but far beyond any tissue: refused by name, not as a
+        // zero volume "for a longest edge of inf m".
+        let mut far = unit_tet();
+        far[1].x = 1e300;
+        let err = TetMesh::new(far, vec![[0, 1, 2, 3]]).unwrap_err();
+        assert!(
+            matches!(err, MeshError::OutOfRange { vertex: 1, .. }),
+            "{err}"
+        );
     }
 }
