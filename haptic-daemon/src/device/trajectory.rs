@@ -59,6 +59,10 @@ impl Trajectory {
             p_m: Vec::new(),
             jaw: Vec::new(),
         };
+        // One header line at most: a second line that does not parse is
+        // an error at its line (a file of `;`-separated rows was all
+        // skipped as headers and reported only as "no samples").
+        let mut header_seen = false;
         for (i, raw) in text.lines().enumerate() {
             let line = raw.trim();
             if line.is_empty() || line.starts_with('#') {
@@ -70,8 +74,12 @@ impl Trajectory {
                 message,
             };
             let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-            if t.t_s.is_empty() && fields.first().is_some_and(|f| f.parse::<f64>().is_err()) {
-                continue; // header
+            if t.t_s.is_empty()
+                && !header_seen
+                && fields.first().is_some_and(|f| f.parse::<f64>().is_err())
+            {
+                header_seen = true;
+                continue;
             }
             if !(4..=5).contains(&fields.len()) {
                 return Err(err(format!(
@@ -163,5 +171,10 @@ mod tests {
             .to_string();
         assert!(e.contains("not finite"), "{e}");
         assert!(Trajectory::parse("e.csv", "t_s,x_m,y_m,z_m\n").is_err());
+        // One header at most: rows in another separator name their line.
+        let e = Trajectory::parse("f.csv", "t_s;x_m;y_m;z_m\n0;0;0;0\n1;0;0;0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("f.csv:2:") && e.contains("fields"), "{e}");
     }
 }
