@@ -288,7 +288,8 @@ impl<'f> Builder<'f> {
             let tet = match &source {
                 MeshError::IndexOutOfRange { tet, .. }
                 | MeshError::RepeatedVertex { tet, .. }
-                | MeshError::Degenerate { tet, .. } => Some(*tet),
+                | MeshError::Degenerate { tet, .. }
+                | MeshError::Duplicate { tet, .. } => Some(*tet),
                 MeshError::Empty | MeshError::NonFinite { .. } | MeshError::OutOfRange { .. } => {
                     None
                 }

@@ -43,6 +43,25 @@ pub struct TetMesh {
 /// products of coordinates overflow.
 pub const MAX_COORDINATE: Real = 1e9;
 
+/// The first tetrahedron with the same four vertices as an earlier one,
+/// and that one: a duplicated element doubles the stiffness there and
+/// hides its faces from the surface (a mesh of one element twice had no
+/// surface at all).
+fn duplicate_tet(tets: &[[u32; 4]]) -> Option<(usize, usize)> {
+    let mut keys: Vec<([u32; 4], usize)> = (tets.iter().enumerate())
+        .map(|(t, tet)| {
+            let mut k = *tet;
+            k.sort_unstable();
+            (k, t)
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.windows(2)
+        .filter(|w| w[0].0 == w[1].0)
+        .map(|w| (w[1].1, w[0].1))
+        .min()
+}
+
 /// Why a mesh was refused.
 #[derive(Debug, Error, PartialEq)]
 pub enum MeshError {
@@ -68,6 +87,16 @@ pub enum MeshError {
         vertex: usize,
         /// Its coordinates.
         coords: [Real; 3],
+    },
+    /// A tetrahedron repeats another's four vertices.
+    #[error(
+        "tetrahedron {tet} has the same four vertices as tetrahedron {first}: a duplicated element"
+    )]
+    Duplicate {
+        /// The later one (0-based).
+        tet: usize,
+        /// The earlier one.
+        first: usize,
     },
     /// A tetrahedron references a vertex that does not exist.
     #[error("tetrahedron {tet} references vertex {vertex}, but the mesh has {count} vertices")]
@@ -164,6 +193,9 @@ impl TetMesh {
                 reoriented += 1;
             }
             out.push(ids);
+        }
+        if let Some((tet, first)) = duplicate_tet(&tets) {
+            return Err(MeshError::Duplicate { tet, first });
         }
         Ok(Self {
             positions_m,
