@@ -111,6 +111,7 @@ enum Command {
     /// Carry a session's streams between shared memory and zenoh, for
     /// viewers, recorders and haptic daemons on other hosts
     /// (`viewer --connect`, `haptic-daemon run --connect`).
+    #[command(allow_negative_numbers = true)]
     Bridge(cli::bridge::BridgeArgs),
     /// Time the explicit tensor-mass step on a generated box or a scene.
     #[command(allow_negative_numbers = true)]

@@ -541,7 +541,11 @@ fn a_killed_demo_takes_its_haptic_daemon_with_it() {
 #[test]
 fn a_negative_number_gets_the_flags_own_message() {
     // Taken as a value (not as an unknown flag "-1") and refused by name.
-    for (bin, sub) in [("sim-server", "run"), ("haptic-daemon", "run")] {
+    for (bin, sub) in [
+        ("sim-server", "run"),
+        ("sim-server", "bridge"),
+        ("haptic-daemon", "run"),
+    ] {
         let out = Command::new(binary(bin))
             .args([sub, "--duration-s", "-1"])
             .output()
