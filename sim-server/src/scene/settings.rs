@@ -62,14 +62,12 @@ pub(super) fn contact_config(
             .stiffness_factor
             .as_ref()
             .map_or(section.span(), |x| x.span());
-        return Err(src.error(
-            span,
-            format!(
-                "[contact] stiffness_factor must be at most {:e} with the implicit springs (the default; beyond it their linearisation no longer holds the force: measured in hapbench extrapolation), got {}: use springs = \"explicit\" for a stiffer contact (more sub-steps)",
-                crate::contact::MAX_IMPLICIT_STIFFNESS_FACTOR,
-                c.stiffness_factor
-            ),
-        ));
+        // The library's refusal, at the key's line.
+        let refusal = crate::contact::ContactError::TooStiffForImplicitSprings {
+            value: c.stiffness_factor,
+            max: crate::contact::MAX_IMPLICIT_STIFFNESS_FACTOR,
+        };
+        return Err(src.error(span, refusal.to_string()));
     }
     if let Some(d) = &s.damping_s_per_m {
         let x = *d.get_ref();
