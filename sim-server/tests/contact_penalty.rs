@@ -298,6 +298,8 @@ fn bad_contact_constants_are_scene_errors_with_their_line() {
     );
     with("stiffness_factor = 1e5\nsprings = \"explicit\"").expect("explicit springs");
     with("stiffness_factor = 1e4").expect("the largest implicit factor");
+    // The projection law reads no factor: nothing to refuse.
+    with("stiffness_factor = 1e5\nlaw = \"projection\"").expect("the projection law");
 }
 
 #[test]

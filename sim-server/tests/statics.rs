@@ -219,6 +219,27 @@ fn unconstrained_static_problem_is_refused() {
         let err = solve_static(&model, &bc, &pushed).unwrap_err();
         assert!(matches!(err, StaticError::Singular { .. }), "{what}: {err}");
     }
+    // A determinate roller support on a large face (its z rows many, the
+    // rows holding x and y three) is held: each rigid mode weighs alike.
+    let side = 300;
+    let grid: Vec<Vec3> = (0..side * side)
+        .map(|k| Vec3::new((k % side) as f64 * 1e-3, (k / side) as f64 * 1e-3, 0.0))
+        .collect();
+    let mut rollers = Dirichlet::new(grid.len());
+    for v in 0..grid.len() {
+        rollers.prescribe_axis(VertexId::from(v), 2, 0.0);
+    }
+    rollers.prescribe_axis(VertexId::from(0), 0, 0.0);
+    rollers.prescribe_axis(VertexId::from(0), 1, 0.0);
+    rollers.prescribe_axis(VertexId::from(1), 1, 0.0);
+    assert!(rollers.holds_rigid_motions(&grid));
+    let mut spinning = Dirichlet::new(grid.len());
+    for v in 0..grid.len() {
+        spinning.prescribe_axis(VertexId::from(v), 2, 0.0);
+    }
+    spinning.prescribe_axis(VertexId::from(0), 0, 0.0);
+    spinning.prescribe_axis(VertexId::from(0), 1, 0.0);
+    assert!(!spinning.holds_rigid_motions(&grid), "free to turn about z");
     let mut three = on_x_axis;
     three.push(corner_y);
     let bc = held(&three);

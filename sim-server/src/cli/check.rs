@@ -217,8 +217,14 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     // What `run` would refuse, refused here too (the same check, on the
     // step the tensor-mass backend would take).
     if b.settings.backend == sim_server::scene::spec::BackendName::TensorMass {
+        // The bound the scene asks the integrator to use; the default step
+        // is 0.9 of the element bound either way (`prepare`).
+        let bound = match b.settings.bound {
+            sim_server::tensor_mass::BoundMethod::PowerIteration => &power.step,
+            sim_server::tensor_mass::BoundMethod::Element => &element,
+        };
         let dt = b.settings.dt_s.unwrap_or(0.9 * element.dt_max_s);
-        sim_server::tensor_mass::explicit::substeps_for(dt, &element, b.settings.policy).map_err(
+        sim_server::tensor_mass::explicit::substeps_for(dt, bound, b.settings.policy).map_err(
             |e| anyhow::anyhow!("{name}: the tensor-mass backend would refuse this scene: {e}"),
         )?;
     }

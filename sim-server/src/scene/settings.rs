@@ -57,7 +57,21 @@ pub(super) fn contact_config(
     if let Some(springs) = &s.springs {
         c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
     }
-    if c.implicit_springs && c.stiffness_factor > crate::contact::MAX_IMPLICIT_STIFFNESS_FACTOR {
+    // The penalty law's springs only: the projection law (asked for, or
+    // the default off the tensor-mass backend) reads no factor.
+    let backend = spec
+        .simulation
+        .as_ref()
+        .and_then(|sim| sim.get_ref().backend.as_ref().map(|b| *b.get_ref()))
+        .unwrap_or(BackendName::TensorMass);
+    let penalty = match c.law {
+        Some(law) => law == ContactLaw::Penalty,
+        None => backend == BackendName::TensorMass,
+    };
+    if penalty
+        && c.implicit_springs
+        && c.stiffness_factor > crate::contact::MAX_IMPLICIT_STIFFNESS_FACTOR
+    {
         let span = s
             .stiffness_factor
             .as_ref()

@@ -82,7 +82,16 @@ impl Dirichlet {
                 }
             }
         }
-        full_rank(gram, 1e-9)
+        // Each mode to unit weight: a large face held along one axis
+        // (N^2 rows) would otherwise swamp the one or two rows that hold
+        // the others, and a determinate support read as singular.
+        let d: [Real; 6] = std::array::from_fn(|i| gram[i][i]);
+        if d.iter().any(|x| *x <= 0.0) {
+            return false;
+        }
+        let scaled: [[Real; 6]; 6] =
+            std::array::from_fn(|i| std::array::from_fn(|j| gram[i][j] / (d[i] * d[j]).sqrt()));
+        full_rank(scaled, 1e-9)
     }
 }
 

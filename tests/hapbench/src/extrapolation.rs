@@ -320,9 +320,18 @@ const MAX_DURATION_S: f64 = 3600.0;
 
 /// Runs the benchmark.
 pub fn run(args: &Args) -> Result<()> {
+    // The simulation's step is its period: within the scenes' bounds on
+    // a step, and no faster than the haptic loop (it was told "use dt_s
+    // <= 2 s" at 0.01 Hz, and about --haptic-rate at 1e9 Hz).
+    use sim_server::scene::MAX_DT_S;
     anyhow::ensure!(
-        args.sim_rate.is_finite() && args.sim_rate > 0.0,
-        "--sim-rate must be a positive number of Hz"
+        args.sim_rate.is_finite()
+            && args.sim_rate >= 1.0 / MAX_DT_S
+            && args.sim_rate <= args.haptic_rate,
+        "--sim-rate must be at least {} Hz (a step of at most {MAX_DT_S} s) and at most the haptic rate ({} Hz), got {}",
+        1.0 / MAX_DT_S,
+        args.haptic_rate,
+        args.sim_rate
     );
     anyhow::ensure!(
         args.haptic_rate.is_finite()

@@ -18,6 +18,12 @@ use std::io::Read;
 /// Deflate's largest expansion (a stream of one repeated byte): 1032:1.
 const MAX_RATIO: u64 = 1032;
 
+/// Above this many inflated bytes an array is held to [`MAX_LARGE_RATIO`].
+const LARGE_ARRAY_BYTES: u64 = 16 << 20;
+/// The largest compression ratio of a large array: coordinates and
+/// connectivity compress a few times at most.
+const MAX_LARGE_RATIO: u64 = 64;
+
 /// Block size of the compressed arrays this crate writes (VTK's default).
 pub(super) const WRITE_BLOCK: usize = 1 << 15;
 
@@ -98,6 +104,17 @@ pub(super) fn inflate_array(
         ));
     }
     let body = &raw[header_len..];
+    // Counts are the file's word too (a file claiming 44 million points
+    // passes `need`): a large array must also compress no better than
+    // real mesh data does, where zlib's ratio alone let a 1.4 MB file
+    // inflate to 1 GiB. (Small arrays may: a types array of one cell
+    // type compresses about 1000:1.)
+    if total > LARGE_ARRAY_BYTES && total > (body.len() as u64).saturating_mul(MAX_LARGE_RATIO) {
+        return Err(format!(
+            "compressed array of {} bytes claims {total} bytes, more than {MAX_LARGE_RATIO} times its size: not mesh data",
+            body.len()
+        ));
+    }
     if total > (body.len() as u64).saturating_mul(MAX_RATIO) {
         return Err(format!(
             "compressed header claims {total} bytes from {} compressed ones",
@@ -211,6 +228,20 @@ mod tests {
         // holds (its points and cells say how many bytes that is).
         let err = inflate_array(&packed, 4, false, need - 1).unwrap_err();
         assert!(err.contains("the array holds"), "{err}");
+        // A large array compressing far better than mesh data (counts
+        // declared to match it) is refused too; a small one may.
+        let zeros = vec![0u8; 32 << 20];
+        let (head, body) = deflate_array(&zeros, WRITE_BLOCK, 8);
+        let bomb = [head, body].concat();
+        let err = inflate_array(&bomb, 8, false, zeros.len() as u64).unwrap_err();
+        assert!(err.contains("not mesh data"), "{err}");
+        let small = vec![10u8; 1 << 20];
+        let (head, body) = deflate_array(&small, WRITE_BLOCK, 8);
+        let types = [head, body].concat();
+        assert_eq!(
+            inflate_array(&types, 8, false, small.len() as u64).unwrap(),
+            small
+        );
         // Truncated blocks and corrupt streams are errors, not panics.
         for cut in [0, 3, 12, h, packed.len() - 1] {
             assert!(

@@ -60,12 +60,6 @@ impl Tools {
                 });
             }
         }
-        if config.implicit_springs && config.stiffness_factor > MAX_IMPLICIT_STIFFNESS_FACTOR {
-            return Err(ContactError::TooStiffForImplicitSprings {
-                value: config.stiffness_factor,
-                max: MAX_IMPLICIT_STIFFNESS_FACTOR,
-            });
-        }
         if !(config.damping_s_per_m.is_finite() && config.damping_s_per_m >= 0.0) {
             return Err(ContactError::BadConstant {
                 key: "damping_s_per_m",
@@ -91,6 +85,16 @@ impl Tools {
             None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
             None => ContactLaw::Projection,
         };
+        // The penalty law's springs only (the projection law reads no factor).
+        if law == ContactLaw::Penalty
+            && config.implicit_springs
+            && config.stiffness_factor > MAX_IMPLICIT_STIFFNESS_FACTOR
+        {
+            return Err(ContactError::TooStiffForImplicitSprings {
+                value: config.stiffness_factor,
+                max: MAX_IMPLICIT_STIFFNESS_FACTOR,
+            });
+        }
         if law == ContactLaw::Projection
             && let Some(d) = decls.iter().find(|d| d.friction.is_active())
         {

@@ -358,5 +358,8 @@ mod tests {
             matches!(err, MeshError::OutOfRange { vertex: 1, .. }),
             "{err}"
         );
+        // The same element twice, in another vertex order.
+        let err = TetMesh::new(unit_tet(), vec![[0, 1, 2, 3], [1, 0, 3, 2]]).unwrap_err();
+        assert_eq!(err, MeshError::Duplicate { tet: 1, first: 0 });
     }
 }
