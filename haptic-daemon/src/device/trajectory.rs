@@ -5,6 +5,10 @@ use crate::math::V3;
 use std::path::Path;
 use thiserror::Error;
 
+/// The farthest a trajectory's position may be from the origin on an axis
+/// (m): far beyond any haptic device's workspace.
+pub const MAX_POSITION_M: f64 = 10.0;
+
 /// A trajectory: strictly increasing times with positions and jaw openings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
@@ -95,6 +99,15 @@ impl Trajectory {
                 if !v[k].is_finite() {
                     return Err(err(format!("field {} is not finite: {f:?}", k + 1)));
                 }
+                // A position beyond any device's reach (a column in the
+                // wrong unit, say) is refused: it made hapbench report a
+                // 300-digit energy.
+                if (1..4).contains(&k) && v[k].abs() > MAX_POSITION_M {
+                    return Err(err(format!(
+                        "field {} ({f}) is more than {MAX_POSITION_M} m from the origin: positions are in metres",
+                        k + 1
+                    )));
+                }
             }
             if let Some(&last) = t.t_s.last()
                 && v[0] <= last
@@ -176,5 +189,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("f.csv:2:") && e.contains("fields"), "{e}");
+        let e = Trajectory::parse("g.csv", "0,0,0,0\n1,0,0,1e100\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("g.csv:2:") && e.contains("metres"), "{e}");
     }
 }
