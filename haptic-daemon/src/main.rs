@@ -7,6 +7,7 @@ use record_cmd::{RecordArgs, record_main};
 use run_args::RunArgs;
 
 mod chain_args;
+mod out_files;
 mod record_cmd;
 mod remote_args;
 

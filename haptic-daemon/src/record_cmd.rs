@@ -36,23 +36,14 @@ pub fn record_main(args: RecordArgs) -> Result<()> {
         bail!("--duration-s must be a positive number of seconds");
     }
     // Two streams into one file interleaved their rows and lost a header.
-    let outputs = [
-        ("--forces", &args.forces),
-        ("--telemetry", &args.telemetry),
-        ("--json", &args.json),
-    ];
-    for (i, (flag_a, a)) in outputs.iter().enumerate() {
-        for (flag_b, b) in &outputs[i + 1..] {
-            if let (Some(a), Some(b)) = (a, b)
-                && same_file(a, b)
-            {
-                bail!(
-                    "{flag_a} and {flag_b} name the same file ({}): give each its own",
-                    a.display()
-                );
-            }
-        }
-    }
+    crate::out_files::distinct(
+        &[
+            ("--forces", args.forces.as_deref()),
+            ("--telemetry", args.telemetry.as_deref()),
+            ("--json", args.json.as_deref()),
+        ],
+        &[],
+    )?;
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;
@@ -82,21 +73,4 @@ pub fn record_main(args: RecordArgs) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
-}
-
-/// Whether two output paths name one file (which may not exist yet): their
-/// directories resolved, then their names compared.
-fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
-    let resolved = |p: &std::path::Path| {
-        let dir = match p.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => std::path::PathBuf::from("."),
-        };
-        let dir = std::fs::canonicalize(&dir).unwrap_or(dir);
-        p.file_name().map(|n| dir.join(n))
-    };
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => resolved(a).is_some() && resolved(a) == resolved(b),
-    }
 }

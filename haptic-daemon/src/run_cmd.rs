@@ -79,6 +79,19 @@ struct Summary {
 /// `haptic-daemon run`: the whole command.
 pub(crate) fn run_main(args: RunArgs) -> Result<()> {
     check_args(&args)?;
+    // `--record` naming the replayed trajectory overwrote it.
+    let device_file = args
+        .device
+        .split_once(':')
+        .filter(|(kind, _)| matches!(*kind, "replay" | "simulated"))
+        .map(|(_, file)| std::path::Path::new(file));
+    crate::out_files::distinct(
+        &[
+            ("--record", args.record.as_deref()),
+            ("--json", args.json.as_deref()),
+        ],
+        &[("--device", device_file)],
+    )?;
     let method = args.extrapolation;
     let session = SessionName::new(&args.session)?;
     let transport = args.remote.transport(&session)?;

@@ -560,14 +560,38 @@ fn a_negative_number_gets_the_flags_own_message() {
 }
 
 /// The daemon's flags that were accepted out of range (clamped, or a
-/// SCHED_FIFO call refused with the wrong advice) and a recorder told to
-/// write two streams into one file are refused up front, by name.
+/// SCHED_FIFO call refused with the wrong advice), a recorder told to
+/// write two streams into one file and a run told to record over the
+/// trajectory it replays are refused up front, by name.
 #[test]
 fn the_daemon_refuses_flags_out_of_range_and_one_file_for_two_streams() {
     let dir = scratch_dir("daemon-flags");
     let same = dir.join("same.csv");
     let same_again = dir.join(".").join("same.csv");
-    let cases: [(Vec<&std::ffi::OsStr>, &str); 5] = [
+    let traj = dir.join("press.csv");
+    std::fs::write(&traj, "0,0,0,0.2\n1,0,0,0.2\n").unwrap();
+    let replay = std::ffi::OsString::from(format!("replay:{}", traj.display()));
+    let cases: [(Vec<&std::ffi::OsStr>, &str); 7] = [
+        (
+            vec![
+                "run".as_ref(),
+                "--device".as_ref(),
+                replay.as_os_str(),
+                "--record".as_ref(),
+                traj.as_os_str(),
+            ],
+            "--record and --device name the same file",
+        ),
+        (
+            vec![
+                "run".as_ref(),
+                "--record".as_ref(),
+                same.as_os_str(),
+                "--json".as_ref(),
+                same_again.as_os_str(),
+            ],
+            "--record and --json name the same file",
+        ),
         (
             vec!["run".as_ref(), "--rt-priority".as_ref(), "200".as_ref()],
             "not in 0..=99",
@@ -608,6 +632,11 @@ fn the_daemon_refuses_flags_out_of_range_and_one_file_for_two_streams() {
         );
     }
     assert!(!same.exists(), "a refused recorder wrote nothing");
+    assert_eq!(
+        std::fs::read_to_string(&traj).unwrap(),
+        "0,0,0,0.2\n1,0,0,0.2\n",
+        "the trajectory is left as it was"
+    );
 }
 
 /// Processes whose command line contains `needle` (from /proc).
