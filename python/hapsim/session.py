@@ -386,8 +386,12 @@ class Session:
         if not 0 <= tool < tool_count <= MAX_TOOLS:
             raise ValueError(f"tool {tool} of {tool_count}: at most {MAX_TOOLS} tools")
         tip = [float(x) for x in tip_m]
-        if len(tip) != 3 or not all(np.isfinite(tip)) or not np.isfinite(jaw_opening):
+        if len(tip) != 3 or not all(np.isfinite(tip)):
             raise ValueError(f"tip_m must be 3 finite numbers, got {tip_m!r}")
+        if not 0.0 <= float(jaw_opening) <= 1.0:  # NaN fails this too
+            raise ValueError(
+                f"jaw_opening must be between 0 (closed) and 1 (open), got {jaw_opening!r}"
+            )
         if self._pose_pub is None:
             self._pose_pub = self._pose_service.publisher_builder().create()
         self._seq += 1
@@ -395,7 +399,7 @@ class Session:
         msg.t_ns = time.monotonic_ns()
         t = msg.tools[tool]
         t.tip_m[:] = tip
-        t.jaw_opening = min(max(float(jaw_opening), 0.0), 1.0)
+        t.jaw_opening = float(jaw_opening)
         t.flags = TOOL_PRESENT
         self._pose_pub.send_copy(msg)
         self._pose_ready.notify()

@@ -35,6 +35,30 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
     );
     let session = format!("pypkg{}", std::process::id());
     let sim = spawn_sim_server(&session, &["--duration-s", "20"]);
+    // A pose's jaw outside 0..1 (or NaN) is refused by its own name; a
+    // NaN jaw was blamed on the (finite) tip, and -5 passed silently.
+    let bad = Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import sys; from hapsim import Session\n\
+             with Session(sys.argv[1]) as s:\n\
+             \x20   for tip, jaw in [([0, 0, 0], float('nan')), ([0, 0, 0], -5.0), ([0, float('inf'), 0], 1.0)]:\n\
+             \x20       try:\n\
+             \x20           s.publish_pose(tip, jaw_opening=jaw)\n\
+             \x20           print('accepted')\n\
+             \x20       except ValueError as e:\n\
+             \x20           print(str(e).split(' must ')[0])",
+        )
+        .arg(&session)
+        .env("PYTHONPATH", &site)
+        .output()
+        .expect("run python3");
+    assert_eq!(
+        String::from_utf8_lossy(&bad.stdout),
+        "jaw_opening\njaw_opening\ntip_m\n",
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
     // The scene at rest, without the scene file: name, rest positions,
     // fibres and the uncut surface, as numpy arrays.
     let rest = Command::new("python3")

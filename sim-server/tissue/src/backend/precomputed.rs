@@ -259,7 +259,7 @@ impl Backend for Precomputed {
     fn remove_tet(&mut self, _t: TetId) -> Result<CutChange, CutError> {
         Err(CutError::Unsupported {
             backend: "precomputed",
-            why: "its responses were computed on the uncut mesh; cut with tensor-mass or implicit",
+            why: "its responses were computed on the uncut mesh; cut with tensor-mass, implicit, or hybrid (precomputed where nothing is cut)",
         })
     }
 }
