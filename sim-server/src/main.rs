@@ -215,12 +215,7 @@ fn main() -> Result<()> {
                 problem.model = problem.model.with_model(m.model());
             }
             if let Some(dt) = dt_s {
-                use sim_server::scene::{MAX_DT_S, MIN_DT_S};
-                if !(dt.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&dt)) {
-                    bail!(
-                        "--dt-s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
-                    );
-                }
+                sim_server::scene::check_step("--dt-s", dt).map_err(anyhow::Error::msg)?;
                 problem.dt_s = Some(dt);
             }
             let report = match precision {

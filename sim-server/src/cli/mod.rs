@@ -209,13 +209,8 @@ pub fn count_u64(s: &str) -> Result<u64, String> {
 /// `--dt-s`: the step instead of the scene's, if given (a finite number
 /// of seconds within the scene's bounds on `dt_s`).
 fn override_step(scene: &mut BuiltScene, dt_s: Option<f64>) -> Result<()> {
-    use sim_server::scene::{MAX_DT_S, MIN_DT_S};
     if let Some(dt) = dt_s {
-        if !(dt.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&dt)) {
-            anyhow::bail!(
-                "--dt-s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
-            );
-        }
+        sim_server::scene::check_step("--dt-s", dt).map_err(anyhow::Error::msg)?;
         scene.settings.dt_s = Some(dt);
     }
     Ok(())

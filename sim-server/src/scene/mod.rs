@@ -15,7 +15,7 @@ pub mod spec;
 mod tool_decls;
 
 pub use build::{BuiltScene, SceneReport, SimSettings, ToolDecl, build_scene};
-pub use settings::{HYBRID_NEEDS_SPLIT, MAX_DT_S, MIN_DT_S};
+pub use settings::{HYBRID_NEEDS_SPLIT, MAX_DT_S, MIN_DT_S, check_step};
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};

@@ -19,6 +19,18 @@ pub const MAX_DT_S: Real = 0.1;
 /// overflow long before any real time could be kept.
 pub const MIN_DT_S: Real = 1e-6;
 
+/// `dt_s` if it is a step a scene or `--dt-s` may ask for, else the
+/// message naming `what` and the bounds.
+pub fn check_step(what: &str, dt_s: Real) -> Result<Real, String> {
+    if (MIN_DT_S..=MAX_DT_S).contains(&dt_s) {
+        Ok(dt_s)
+    } else {
+        Err(format!(
+            "{what} must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt_s}"
+        ))
+    }
+}
+
 /// Why a scene cannot run on the hybrid backend.
 pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] section naming its tensor-mass (cuttable) part, e.g. [hybrid] select = { sphere_m = [x, y, z, r] }; the rest is precomputed";
 
@@ -176,15 +188,10 @@ pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSetting
     s.dt_s = sim
         .dt_s
         .as_ref()
-        .map(|d| match positive(src, d, "[simulation] dt_s")? {
+        .map(|d| {
             // The bounds `--dt-s` has.
-            dt if (MIN_DT_S..=MAX_DT_S).contains(&dt) => Ok(dt),
-            dt => Err(src.error(
-                d.span(),
-                format!(
-                    "[simulation] dt_s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
-                ),
-            )),
+            check_step("[simulation] dt_s", positive(src, d, "[simulation] dt_s")?)
+                .map_err(|e| src.error(d.span(), e))
         })
         .transpose()?;
     s.rate_hz = sim

@@ -185,11 +185,7 @@ pub fn run(args: &Args) -> Result<()> {
     if let Some(dt) = args.dt_s {
         // Checked here too: sim-server would refuse it, and the run would
         // end with only "no traffic".
-        use sim_server::scene::{MAX_DT_S, MIN_DT_S};
-        anyhow::ensure!(
-            dt.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&dt),
-            "--dt-s must be a step in seconds, at least {MIN_DT_S:e} and at most {MAX_DT_S}, got {dt}"
-        );
+        sim_server::scene::check_step("--dt-s", dt).map_err(anyhow::Error::msg)?;
     }
     let d = args.duration_s;
     let pid = std::process::id();
