@@ -111,6 +111,10 @@ pub struct RunSummary {
     pub poses_received: u64,
     /// Steps with a tool in contact.
     pub contact_steps: u64,
+    /// Steps where the tissue's surface held a tool's tip short of its
+    /// pose (it slipped past the tip, or the tip would have entered it:
+    /// the linear model far beyond its range; README, Contact).
+    pub held_outside_steps: u64,
     /// Tetrahedra removed by tools.
     pub tets_removed: u64,
     /// Largest |reaction force| on any tool (N).

@@ -241,6 +241,19 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                     self.sim.name()
                 );
             }
+            if report.held_outside {
+                if self.summary.held_outside_steps == 0 {
+                    let advice = if self.sim.model().nonlinear_tets() > 0 {
+                        "a finer mesh under the tool holds deeper"
+                    } else {
+                        "the linear model is far beyond its range: model = \"corotational\" in [material] holds deeper"
+                    };
+                    eprintln!(
+                        "sim-server: the tissue slipped past tool {i}'s tip (or the tip would have entered it): the tool is held outside, at the surface; {advice} (README, Contact)"
+                    );
+                }
+                self.summary.held_outside_steps += 1;
+            }
             if report.tets_removed > 0 {
                 self.removed_total += report.tets_removed as u64;
                 self.mesh_out.topology_version += 1;

@@ -167,6 +167,8 @@ pub struct ContactField {
     evaluations: usize,
     /// Per point: the penetration of the last evaluation (m, 0 if none).
     penetration_m: Vec<Real>,
+    /// Per part: its deepest point at the last evaluation (m, 0 if none).
+    part_depth_m: Vec<Real>,
     /// Per point: the Hessian of its contact energy with respect to its
     /// position relative to the tool at the last evaluation (zero if not
     /// in contact).
@@ -260,6 +262,7 @@ impl ContactField {
     pub fn clear(&mut self) {
         self.clear_points();
         self.parts.clear();
+        self.part_depth_m.clear();
         self.evaluations = 0;
         self.force_sum_n.fill(Vec3::ZERO);
     }
@@ -280,6 +283,7 @@ impl ContactField {
     /// Adds a swept tool part; returns its index for [`ContactField::push`].
     pub fn add_part(&mut self, part: PartSweep) -> u16 {
         self.parts.push(part);
+        self.part_depth_m.push(0.0);
         (self.parts.len() - 1) as u16
     }
 
@@ -321,6 +325,12 @@ impl ContactField {
     /// The parts of this step.
     pub fn parts(&self) -> &[PartSweep] {
         &self.parts
+    }
+
+    /// Part `part`'s deepest point at the last evaluation (m; 0: no
+    /// contact).
+    pub fn deepest_m(&self, part: usize) -> Real {
+        self.part_depth_m[part]
     }
 
     /// Per point: its penetration at the last evaluation (m; 0: no contact).

@@ -57,6 +57,7 @@ impl ContactField {
         let alpha = self.damping_s_per_m;
         let damped = alpha > 0.0 && !masses_kg.is_empty();
         let mut most_damping: Real = 0.0;
+        self.part_depth_m.fill(0.0);
         let count = self.points.len();
         let mut first = 0;
         while first < count {
@@ -123,6 +124,8 @@ impl ContactField {
                     vel += p.weights[k] * (uj - pj) / h_s;
                 }
                 self.penetration_m[i] = depth;
+                let deepest = &mut self.part_depth_m[p.part as usize];
+                *deepest = deepest.max(depth);
                 let n = gap / dist;
                 let turn = Mat3::IDENTITY - outer(n, n);
                 let axis = (seg.b_m - seg.a_m).normalize_or_zero();

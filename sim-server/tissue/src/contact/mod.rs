@@ -97,6 +97,7 @@ mod sampling;
 mod selection;
 mod stiffness;
 mod stiffness_thread;
+mod surface_crossing;
 mod surface_index;
 mod tool;
 mod tools;
@@ -159,4 +160,8 @@ pub struct ContactReport {
     /// The tool tried to cut and the backend refused: why (the precomputed
     /// backend cannot cut; the hybrid cuts only its tensor-mass part).
     pub cut_refused: Option<&'static str>,
+    /// The tissue's surface stopped the tip short of the pose asked (the
+    /// penalty law's proxy is held outside the tissue; see
+    /// `surface_crossing`).
+    pub held_outside: bool,
 }

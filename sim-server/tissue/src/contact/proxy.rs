@@ -3,8 +3,10 @@
 //! glitch, a re-homed device, a client that starts mid-air) drags the
 //! proxy along a bounded path instead of teleporting it through or into
 //! the tissue. A god-object in the sense of Zilles and Salisbury (1995),
-//! reduced to what a compliant contact needs: the contact itself keeps the
-//! proxy out of the tissue; the proxy only keeps it from tunnelling.
+//! reduced to what a compliant contact needs: the contact keeps the proxy
+//! out of the tissue, the proxy keeps it from tunnelling, and where tissue
+//! slips past the tip all the same, [`super::surface_crossing`] puts the
+//! proxy back outside ([`Proxy::stop_at`]).
 //!
 //! Each step the proxy heads for the requested tip at the speed that
 //! reaches it this step, no faster than `max_speed_m_s`, no faster than it
@@ -65,6 +67,14 @@ impl Proxy {
         self.velocity_m_s = step / dt_s;
         self.at_m = Some(next);
         next
+    }
+
+    /// The step that [`Proxy::follow`] just took ends at `at_m` instead
+    /// (the tissue's surface stopped it on the way from `from_m`): the
+    /// proxy keeps only the motion it made.
+    pub fn stop_at(&mut self, at_m: Vec3, from_m: Vec3, dt_s: Real) {
+        self.velocity_m_s = (at_m - from_m) / dt_s;
+        self.at_m = Some(at_m);
     }
 }
 

@@ -8,6 +8,7 @@ use super::field::ContactField;
 use super::local::LocalContact;
 use super::sampling::Sampler;
 use super::stiffness_thread::{ContactStiffness, StiffnessSolves};
+use super::surface_crossing::Crossing;
 use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
 use super::{ContactReport, Reaction};
@@ -79,6 +80,10 @@ pub struct Tools {
     law: ContactLaw,
     field: ContactField,
     sampler: Option<Sampler>,
+    /// The tips' surface test (penalty law).
+    crossing: Option<Crossing>,
+    /// Per tool: its tip's deepest point after the last step (m).
+    deepest_m: Vec<Real>,
     stiffness: Option<ContactStiffness>,
     /// Per tool: the last input with finite fields.
     last_inputs: Vec<Option<ToolInput>>,
@@ -371,6 +376,20 @@ impl Tools {
             self.index.refit(sim);
         } else {
             self.index.sync(sim);
+            if let Some(crossing) = &mut self.crossing {
+                deepest_tip_points(&self.field, &mut self.deepest_m);
+                let spacing = crossing.spacing_of_radius();
+                let due = |(t, d): (&ToolContact, &Real)| t.surface_check_due(*d, spacing);
+                if self.tools.iter().zip(&self.deepest_m).any(due) {
+                    // The tips are tested against the current surface.
+                    self.index.refit(sim);
+                    for (t, d) in self.tools.iter_mut().zip(&self.deepest_m) {
+                        if t.surface_check_due(*d, spacing) {
+                            t.keep_outside(sim, &self.index, &self.adjacency, crossing);
+                        }
+                    }
+                }
+            }
         }
         for t in &mut self.tools {
             t.hold(sim, &mut self.claims);
@@ -409,6 +428,17 @@ impl Tools {
     /// The force on tool `i` and its contact stiffness after the step.
     pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
         self.tools[i].reaction(sim, &self.adjacency, &self.field, self.stiffness_n_per_m[i])
+    }
+}
+
+/// Per tool, the deepest penetration among its tip's points at the field's
+/// last evaluation (m).
+fn deepest_tip_points(field: &ContactField, out: &mut [Real]) {
+    out.fill(0.0);
+    for (i, part) in field.parts().iter().enumerate() {
+        if part.tip {
+            out[part.tool] = out[part.tool].max(field.deepest_m(i));
+        }
     }
 }
 

@@ -16,6 +16,7 @@ use crate::contact::field::ContactField;
 use crate::contact::proxy::Proxy;
 use crate::contact::sampling::Sampler;
 use crate::contact::stiffness_thread::ContactStiffness;
+use crate::contact::surface_crossing::Crossing;
 use crate::contact::surface_index::SurfaceIndex;
 use crate::contact::tool::ToolContact;
 use crate::ids::VertexId;
@@ -108,6 +109,7 @@ impl Tools {
             let sampler = Sampler::new(sim.model(), config.stiffness_factor, config.point_spacing);
 
             tools.sampler = Some(sampler);
+            tools.crossing = Some(Crossing::new(sim.model(), config.point_spacing));
             tools.stiffness = Some(ContactStiffness::new(sim.model(), held));
         }
         for v in held {
@@ -149,6 +151,8 @@ impl Tools {
                 .with_friction(&decls.iter().map(|d| d.friction).collect::<Vec<_>>())
                 .with_implicit_springs(config.implicit_springs),
             sampler: None,
+            crossing: None,
+            deepest_m: vec![0.0; decls.len()],
             stiffness: None,
             last_inputs: vec![None; decls.len()],
             stiffness_n_per_m: vec![Mat3::ZERO; decls.len()],
