@@ -327,10 +327,15 @@ impl ContactField {
         &self.parts
     }
 
-    /// Part `part`'s deepest point at the last evaluation (m; 0: no
+    /// Tool `tool`'s deepest tip point at the last evaluation (m; 0: no
     /// contact).
-    pub fn deepest_m(&self, part: usize) -> Real {
-        self.part_depth_m[part]
+    pub fn deepest_tip_m(&self, tool: usize) -> Real {
+        self.parts
+            .iter()
+            .zip(&self.part_depth_m)
+            .filter(|(p, _)| p.tip && p.tool == tool)
+            .map(|(_, d)| *d)
+            .fold(0.0, Real::max)
     }
 
     /// Per point: its penetration at the last evaluation (m; 0: no contact).

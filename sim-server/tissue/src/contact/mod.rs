@@ -98,6 +98,7 @@ mod selection;
 mod stiffness;
 mod stiffness_thread;
 mod surface_crossing;
+mod surface_faces;
 mod surface_index;
 mod tool;
 mod tools;

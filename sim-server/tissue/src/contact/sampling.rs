@@ -12,11 +12,11 @@
 use super::adjacency::Adjacency;
 use super::field::{ContactField, ContactPoint, PartSweep};
 use super::selection::{REUSE_MARGIN_OF_RADIUS, SelectionCache};
+use super::surface_faces::SurfaceFaces;
 use super::surface_index::SurfaceIndex;
 use crate::backend::Backend;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
-use crate::mesh::TET_FACES;
 use crate::tensor_mass::ElasticModel;
 
 /// At most this many subdivisions per triangle edge (256 points): 32 gave
@@ -33,9 +33,8 @@ pub struct Sampler {
     spacing_of_radius: Real,
     /// The longest rest edge of a surface triangle (m), for the query.
     max_edge_m: Real,
-    /// Per (tet, face): the stamp of the last pass that took it.
-    face_stamp: Vec<u32>,
-    stamp: u32,
+    /// The surface triangles a pass has taken.
+    faces: SurfaceFaces,
     candidates: Vec<VertexId>,
     /// The last selection, replayed while it holds.
     cache: SelectionCache,
@@ -62,8 +61,7 @@ impl Sampler {
             kappa_n_per_m3: stiffness_factor * median,
             spacing_of_radius,
             max_edge_m,
-            face_stamp: vec![0; 4 * model.mesh().tet_count()],
-            stamp: 0,
+            faces: SurfaceFaces::new(model),
             candidates: Vec::new(),
             cache: SelectionCache::default(),
         }
@@ -183,6 +181,11 @@ impl Sampler {
         self.sample_part(sim, index, adj, part, field, extra_m, false);
     }
 
+    /// The longest rest edge of a surface triangle (m).
+    pub(super) fn max_edge_m(&self) -> Real {
+        self.max_edge_m
+    }
+
     /// How often selections were replayed and made afresh.
     pub fn selection_counts(&self) -> (u64, u64) {
         (self.cache.replays(), self.cache.selections())
@@ -232,16 +235,9 @@ impl Sampler {
         index.candidates(&query, keep_m + 1.5 * self.max_edge_m, &mut self.candidates);
         let to = SegmentQuery::new(&sweep.to);
         let keep2 = keep_m * keep_m;
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            // Wrapped (after 2^32 passes): old stamps must not match.
-            self.face_stamp.fill(0);
-            self.stamp = 1;
-        }
+        self.faces.begin();
         let spacing_m = (self.spacing_of_radius * r).max(1e-6);
         let model = sim.model();
-        let topo = model.topology();
-        let tets = model.mesh().tets();
         let rest = model.mesh().positions_m();
         // The box query of a long, slanted shaft returns much of the
         // organ: keep the vertices within reach of the swept part (its end
@@ -252,50 +248,35 @@ impl Sampler {
             if to.distance2(sim.position(v)) > vertex_reach2 {
                 continue;
             }
-            for &t in adj.tets_of(v) {
-                if !topo.is_alive(t) {
-                    continue;
+            self.faces.around(model, adj, v, |tri| {
+                let x = tri.map(|w| sim.position(w));
+                let x0 = tri.map(|w| rest[w.idx()]);
+                // Cheap rejection: the triangle's bounding sphere.
+                let centre = (x[0] + x[1] + x[2]) / 3.0;
+                let radius = x.iter().map(|p| p.distance(centre)).fold(0.0, Real::max);
+                if to.distance2(centre).sqrt() > radius + keep_m {
+                    return;
                 }
-                let tet = tets[t.idx()];
-                for (k, face) in TET_FACES.iter().enumerate() {
-                    let id = 4 * t.idx() + k;
-                    if tet[k] == v || self.face_stamp[id] == self.stamp {
-                        continue;
-                    }
-                    self.face_stamp[id] = self.stamp;
-                    if !topo.is_surface_face(t, k) {
-                        continue;
-                    }
-                    let tri = face.map(|l| tet[l]);
-                    let x = tri.map(|w| sim.position(w));
-                    let x0 = tri.map(|w| rest[w.idx()]);
-                    // Cheap rejection: the triangle's bounding sphere.
-                    let centre = (x[0] + x[1] + x[2]) / 3.0;
-                    let radius = x.iter().map(|p| p.distance(centre)).fold(0.0, Real::max);
-                    if to.distance2(centre).sqrt() > radius + keep_m {
-                        continue;
-                    }
-                    let area0 = 0.5 * (x0[1] - x0[0]).cross(x0[2] - x0[0]).length();
-                    let n = subdivisions(&x0, &x, spacing_m);
-                    let ids = tri.map(|w| w.0);
-                    if record {
-                        self.cache.note_lattice(ids, n, spacing_m);
-                    }
-                    let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
-                    let near = |c: Vec3, r: Real| to.distance2(c).sqrt() < keep_m + r;
-                    for_each_centroid_near(n, &x, near, |w| {
-                        let p = x[0] * w[0] + x[1] * w[1] + x[2] * w[2];
-                        if to.distance2(p) < keep2 {
-                            field.push(ContactPoint {
-                                vertices: ids,
-                                weights: w,
-                                part,
-                                stiffness_n_per_m: k_p,
-                            });
-                        }
-                    });
+                let area0 = 0.5 * (x0[1] - x0[0]).cross(x0[2] - x0[0]).length();
+                let n = subdivisions(&x0, &x, spacing_m);
+                let ids = tri.map(|w| w.0);
+                if record {
+                    self.cache.note_lattice(ids, n, spacing_m);
                 }
-            }
+                let k_p = self.kappa_n_per_m3 * area0 / (n * n) as Real;
+                let near = |c: Vec3, r: Real| to.distance2(c).sqrt() < keep_m + r;
+                for_each_centroid_near(n, &x, near, |w| {
+                    let p = x[0] * w[0] + x[1] * w[1] + x[2] * w[2];
+                    if to.distance2(p) < keep2 {
+                        field.push(ContactPoint {
+                            vertices: ids,
+                            weights: w,
+                            part,
+                            stiffness_n_per_m: k_p,
+                        });
+                    }
+                });
+            });
         }
         keep_m - step_reach_m(&sweep)
     }

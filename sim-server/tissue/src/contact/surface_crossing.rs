@@ -17,16 +17,16 @@
 //!
 //! The test is the ray-triangle intersection of Moller and Trumbore (1997)
 //! against the triangles of the surface vertices near the path (the
-//! [`SurfaceIndex`] BVH), each triangle oriented outwards by its
-//! tetrahedron's face order ([`crate::mesh::TET_FACES`]).
+//! [`SurfaceIndex`] BVH, then [`SurfaceFaces`]), each triangle oriented
+//! outwards by its tetrahedron's face order ([`crate::mesh::TET_FACES`]).
 
 use super::adjacency::Adjacency;
 use super::geometry::Segment;
+use super::surface_faces::SurfaceFaces;
 use super::surface_index::SurfaceIndex;
 use crate::backend::Backend;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
-use crate::mesh::TET_FACES;
 use crate::tensor_mass::ElasticModel;
 
 /// Barycentric slack of the intersection test: a path through an edge or
@@ -41,30 +41,19 @@ pub(super) struct Crossing {
     reach_m: Real,
     /// The contact points' spacing (tool radii).
     spacing_of_radius: Real,
-    /// Per (tet, face): the stamp of the last query that took it.
-    face_stamp: Vec<u32>,
-    stamp: u32,
+    faces: SurfaceFaces,
     candidates: Vec<VertexId>,
 }
 
 impl Crossing {
-    /// Scratch for `model`'s surface, sampled by contact points every
+    /// Scratch for `model`'s surface, whose longest rest triangle edge is
+    /// `longest_edge_m`, sampled by contact points every
     /// `spacing_of_radius` tool radii.
-    pub(super) fn new(model: &ElasticModel, spacing_of_radius: Real) -> Self {
-        let mesh = model.mesh();
-        let rest = mesh.positions_m();
-        let topo = model.topology();
-        let longest = topo
-            .surface_triangles(mesh)
-            .flat_map(|t| {
-                [(0, 1), (1, 2), (2, 0)].map(|(a, b)| rest[t[a].idx()].distance(rest[t[b].idx()]))
-            })
-            .fold(0.0, Real::max);
+    pub(super) fn new(model: &ElasticModel, longest_edge_m: Real, spacing_of_radius: Real) -> Self {
         Self {
-            reach_m: 2.0 * longest,
+            reach_m: 2.0 * longest_edge_m,
             spacing_of_radius,
-            face_stamp: vec![0; 4 * mesh.tet_count()],
-            stamp: 0,
+            faces: SurfaceFaces::new(model),
             candidates: Vec::new(),
         }
     }
@@ -136,36 +125,15 @@ impl Crossing {
             b_m: to_m,
         };
         index.candidates(&path, self.reach_m, &mut self.candidates);
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            self.face_stamp.fill(0);
-            self.stamp = 1;
-        }
-        let model = sim.model();
-        let topo = model.topology();
-        let tets = model.mesh().tets();
+        self.faces.begin();
         for ci in 0..self.candidates.len() {
-            let v = self.candidates[ci];
-            for &t in adj.tets_of(v) {
-                if !topo.is_alive(t) {
-                    continue;
-                }
-                let tet = tets[t.idx()];
-                for (k, face) in TET_FACES.iter().enumerate() {
-                    let id = 4 * t.idx() + k;
-                    if tet[k] == v || self.face_stamp[id] == self.stamp {
-                        continue;
-                    }
-                    self.face_stamp[id] = self.stamp;
-                    if !topo.is_surface_face(t, k) {
-                        continue;
-                    }
-                    let x = face.map(|l| sim.position(tet[l]));
+            self.faces
+                .around(sim.model(), adj, self.candidates[ci], |tri| {
+                    let x = tri.map(|w| sim.position(w));
                     if let Some((s, entering)) = crossing(from_m, dir, &x) {
                         f(s, entering);
                     }
-                }
-            }
+                });
         }
     }
 }

@@ -38,7 +38,7 @@ impl ToolContact {
     ) {
         let Some(pose) = self.pose else { return };
         let fulcrum = Vec3::from_array(self.decl.fulcrum_m);
-        let from = self.prev_pose.map_or(fulcrum, |p| p.end_m);
+        let from = self.step_start_m();
         // First the centre line just behind the tip: tissue that moved
         // over the tip's centre (a surface that snapped round it) puts it
         // inside, and the tool is taken back out along its axis to where
@@ -89,12 +89,15 @@ impl ToolContact {
         {
             return false;
         }
-        let fulcrum = Vec3::from_array(self.decl.fulcrum_m);
-        let motion_m = self
-            .prev_pose
-            .map_or(fulcrum, |p| p.end_m)
-            .distance(pose.end_m);
+        let motion_m = self.step_start_m().distance(pose.end_m);
         let r = self.decl.radius_m;
         deepest_m + motion_m >= r * (1.0 - spacing_of_radius - TISSUE_REACH_OF_RADIUS)
+    }
+
+    /// Where the tip's centre starts this step: where the last one left
+    /// it, or the fulcrum for a tool coming in.
+    fn step_start_m(&self) -> Vec3 {
+        let fulcrum = Vec3::from_array(self.decl.fulcrum_m);
+        self.prev_pose.map_or(fulcrum, |p| p.end_m)
     }
 }

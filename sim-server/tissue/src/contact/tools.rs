@@ -82,8 +82,6 @@ pub struct Tools {
     sampler: Option<Sampler>,
     /// The tips' surface test (penalty law).
     crossing: Option<Crossing>,
-    /// Per tool: its tip's deepest point after the last step (m).
-    deepest_m: Vec<Real>,
     stiffness: Option<ContactStiffness>,
     /// Per tool: the last input with finite fields.
     last_inputs: Vec<Option<ToolInput>>,
@@ -377,17 +375,18 @@ impl Tools {
         } else {
             self.index.sync(sim);
             if let Some(crossing) = &mut self.crossing {
-                deepest_tip_points(&self.field, &mut self.deepest_m);
                 let spacing = crossing.spacing_of_radius();
-                let due = |(t, d): (&ToolContact, &Real)| t.surface_check_due(*d, spacing);
-                if self.tools.iter().zip(&self.deepest_m).any(due) {
-                    // The tips are tested against the current surface.
-                    self.index.refit(sim);
-                    for (t, d) in self.tools.iter_mut().zip(&self.deepest_m) {
-                        if t.surface_check_due(*d, spacing) {
-                            t.keep_outside(sim, &self.index, &self.adjacency, crossing);
-                        }
+                let mut refitted = false;
+                for (i, t) in self.tools.iter_mut().enumerate() {
+                    if !t.surface_check_due(self.field.deepest_tip_m(i), spacing) {
+                        continue;
                     }
+                    if !refitted {
+                        // The tips are tested against the current surface.
+                        self.index.refit(sim);
+                        refitted = true;
+                    }
+                    t.keep_outside(sim, &self.index, &self.adjacency, crossing);
                 }
             }
         }
@@ -428,17 +427,6 @@ impl Tools {
     /// The force on tool `i` and its contact stiffness after the step.
     pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
         self.tools[i].reaction(sim, &self.adjacency, &self.field, self.stiffness_n_per_m[i])
-    }
-}
-
-/// Per tool, the deepest penetration among its tip's points at the field's
-/// last evaluation (m).
-fn deepest_tip_points(field: &ContactField, out: &mut [Real]) {
-    out.fill(0.0);
-    for (i, part) in field.parts().iter().enumerate() {
-        if part.tip {
-            out[part.tool] = out[part.tool].max(field.deepest_m(i));
-        }
     }
 }
 

@@ -108,8 +108,12 @@ impl Tools {
         if law == ContactLaw::Penalty {
             let sampler = Sampler::new(sim.model(), config.stiffness_factor, config.point_spacing);
 
+            tools.crossing = Some(Crossing::new(
+                sim.model(),
+                sampler.max_edge_m(),
+                config.point_spacing,
+            ));
             tools.sampler = Some(sampler);
-            tools.crossing = Some(Crossing::new(sim.model(), config.point_spacing));
             tools.stiffness = Some(ContactStiffness::new(sim.model(), held));
         }
         for v in held {
@@ -152,7 +156,6 @@ impl Tools {
                 .with_implicit_springs(config.implicit_springs),
             sampler: None,
             crossing: None,
-            deepest_m: vec![0.0; decls.len()],
             stiffness: None,
             last_inputs: vec![None; decls.len()],
             stiffness_n_per_m: vec![Mat3::ZERO; decls.len()],
