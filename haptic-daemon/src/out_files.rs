@@ -4,22 +4,25 @@
 //! replayed trajectory overwrote it.
 
 use anyhow::{Result, bail};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Whether two output paths name one file (which may not exist yet): their
 /// directories resolved, then their names compared.
-pub(crate) fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
-    let resolved = |p: &std::path::Path| {
+pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
+    let resolved = |p: &Path| {
         let dir = match p.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => std::path::PathBuf::from("."),
+            _ => PathBuf::from("."),
         };
         let dir = std::fs::canonicalize(&dir).unwrap_or(dir);
         p.file_name().map(|n| dir.join(n))
     };
     match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(x), Ok(y)) => x == y,
-        _ => resolved(a).is_some() && resolved(a) == resolved(b),
+        _ => {
+            let a = resolved(a);
+            a.is_some() && a == resolved(b)
+        }
     }
 }
 
