@@ -365,6 +365,7 @@ impl<D: Device> RtLoop<D> {
                     force_n: [0.0; 3],
                     stiffness_n_per_m: [[0.0; 3]; 3],
                     in_contact: false,
+                    catching_up: false,
                 });
                 // A restarted simulation counts from 0 again: start over
                 // rather than ignore it until its seq passes the old one.

@@ -227,6 +227,7 @@ mod tests {
             force_n: [0.0, 0.0, 0.3],
             stiffness_n_per_m: [[0.0; 3]; 3],
             in_contact: true,
+            catching_up: false,
         };
         let next = path(9);
         let a = caught

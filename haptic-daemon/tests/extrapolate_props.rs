@@ -32,6 +32,7 @@ fn sample(
             force_n,
             stiffness_n_per_m: k,
             in_contact,
+            catching_up: false,
         },
     )
 }

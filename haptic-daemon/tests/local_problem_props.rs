@@ -122,6 +122,7 @@ proptest! {
                 force_n: [0.0, 0.0, 0.1],
                 stiffness_n_per_m: [[100.0, 0.0, 0.0], [0.0, 100.0, 0.0], [0.0, 0.0, 100.0]],
                 in_contact: k % 2 == 0,
+                catching_up: false,
             };
             for (i, m) in moves.iter().enumerate() {
                 let tool = [

@@ -33,6 +33,7 @@ fn sample(k: u64, now: u64) -> ForceSample {
         force_n: [0.0, 0.0, z],
         stiffness_n_per_m: [[100.0, 0.0, 0.0], [0.0, 100.0, 0.0], [0.0, 0.0, 100.0]],
         in_contact: k % 500 < 400,
+        catching_up: false,
     }
 }
 

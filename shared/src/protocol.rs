@@ -101,7 +101,7 @@ pub struct ToolForce {
     pub stiffness_n_per_m: [[f64; 3]; 3],
     /// `seq` of the pose this step used; 0: none (no live pose).
     pub pose_seq: u64,
-    /// [`CONTACT`], [`GRIPPING`], [`CUTTING`] bits.
+    /// [`CONTACT`], [`GRIPPING`], [`CUTTING`], [`CATCHING_UP`] bits.
     pub flags: u32,
     /// Padding (keeps the layout explicit).
     pub reserved: u32,
@@ -113,6 +113,12 @@ pub const CONTACT: u32 = 1;
 pub const GRIPPING: u32 = 2;
 /// `ToolForce::flags`: the tool removed tissue this step.
 pub const CUTTING: u32 = 4;
+/// `ToolForce::flags`: the simulated tool is not at the pose asked for and
+/// does not follow the hand one for one this step (it is coming in slowly
+/// near the tissue after a let-go or a jump, or the tissue's surface holds
+/// it short): the force is the tool's at `position_m`, and a reader must
+/// not extrapolate it by the hand's motion from there.
+pub const CATCHING_UP: u32 = 8;
 
 /// Sim -> daemon: one message per simulation step.
 #[repr(C)]

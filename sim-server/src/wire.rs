@@ -8,8 +8,9 @@ use crate::contact::field::ONSET_OF_RADIUS;
 use crate::contact::{ContactReport, LocalContact, LocalSpec, Reaction, Tools};
 use crate::math::Vec3;
 use shared::protocol::{
-    CONTACT, CUTTING, ForceMsg, GRIPPING, LOCAL_MAX_PARTS, LOCAL_MAX_POINTS, LOCAL_MAX_VERTICES,
-    LocalContactMsg, LocalPart, LocalPoint, MAX_TOOLS, PROTOCOL_VERSION, ToolForce,
+    CATCHING_UP, CONTACT, CUTTING, ForceMsg, GRIPPING, LOCAL_MAX_PARTS, LOCAL_MAX_POINTS,
+    LOCAL_MAX_VERTICES, LocalContactMsg, LocalPart, LocalPoint, MAX_TOOLS, PROTOCOL_VERSION,
+    ToolForce,
 };
 
 /// Each tool's protocol flags from its report of the step.
@@ -18,7 +19,8 @@ pub fn tool_flags(reports: &[ContactReport]) -> [u32; MAX_TOOLS] {
     for (f, r) in flags.iter_mut().zip(reports) {
         *f = (u32::from(r.contact) * CONTACT)
             | (u32::from(r.gripping) * GRIPPING)
-            | (u32::from(r.tets_removed > 0) * CUTTING);
+            | (u32::from(r.tets_removed > 0) * CUTTING)
+            | (u32::from(r.catching_up) * CATCHING_UP);
     }
     flags
 }

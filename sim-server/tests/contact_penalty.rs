@@ -504,9 +504,10 @@ fn a_deferred_hand_over_gives_the_stiffness_a_step_late_and_zero_at_once_on_rele
     deferred.tools.hand_over_after_sample(true);
     let mut previous = Mat3::ZERO;
     let (mut touching_steps, mut released_steps) = (0, 0);
-    // The proxy brings the tool in from its fulcrum (13 cm above) first.
-    for i in 0..600 {
-        let tip = if i < 400 { tip_in } else { tip_out };
+    // The proxy brings the tool in from its fulcrum (13 cm above) first,
+    // into the tissue at the entry speed.
+    for i in 0..800 {
+        let tip = if i < 600 { tip_in } else { tip_out };
         let f = step(&mut in_step, tip, 1.0);
         let g = step(&mut deferred, tip, 1.0);
         assert_eq!(f, g, "step {i}: the hand-over changed the force");
@@ -525,7 +526,7 @@ fn a_deferred_hand_over_gives_the_stiffness_a_step_late_and_zero_at_once_on_rele
                 "step {i}: not the stiffness of a step earlier"
             );
         } else {
-            released_steps += (i > 400) as usize;
+            released_steps += (i > 600) as usize;
             assert_eq!(late, Mat3::ZERO, "step {i}: stiffness without contact");
         }
         deferred.tools.hand_over(&deferred.sim);

@@ -30,6 +30,8 @@
 //!   made unilateral ([`local`]): it never pulls along the contact normal
 //!   `F_n / |F_n|` and releases to exactly zero when the tool leaves. The
 //!   displacement is not capped (the safety filter clamps the magnitude).
+//! - A sample flagged `catching_up` (the simulated tool lags the hand):
+//!   `F_n`, whatever the method.
 //! - Any method whose result is not finite (a NaN or infinite query
 //!   position, or an overflow from huge but finite samples) gives `F_n`,
 //!   which is finite because only finite samples are stored. Hence
@@ -70,6 +72,10 @@ pub struct ForceSample {
     pub stiffness_n_per_m: M3,
     /// The tool touched the tissue in this step.
     pub in_contact: bool,
+    /// The simulated tool was not at the pose asked for and did not follow
+    /// the hand one for one (protocol flag `CATCHING_UP`): every method
+    /// renders the sample's force as it is.
+    pub catching_up: bool,
 }
 
 impl ForceSample {
@@ -87,6 +93,7 @@ impl ForceSample {
                 force_n: t.force_n,
                 stiffness_n_per_m: t.stiffness_n_per_m,
                 in_contact: t.flags & shared::protocol::CONTACT != 0,
+                catching_up: t.flags & shared::protocol::CATCHING_UP != 0,
             }
         })
     }
@@ -238,6 +245,12 @@ impl Extrapolator {
         };
         let f_n = last.force_n;
         let f = match (self.method, self.prev.as_ref()) {
+            // Where the simulated tool is not where the hand asked, the
+            // hand's motion from the sample's position is not the tool's:
+            // extrapolating across that gap renders contact the simulation
+            // does not have (a tool coming back to a still hand: 1.5 N
+            // rendered against the simulation's 0 to 1 N).
+            _ if last.catching_up => f_n,
             (Method::Constant, _) => f_n,
             (Method::LocalModel, _) if last.in_contact => local_model_unilateral(
                 f_n,

@@ -13,6 +13,7 @@ pub(super) fn sample(seq: u64, t_ns: u64, position_m: V3, force_n: V3) -> ForceS
         force_n,
         stiffness_n_per_m: [[0.0; 3]; 3],
         in_contact: false,
+        catching_up: false,
     }
 }
 
@@ -159,6 +160,39 @@ fn position_methods_with_equal_positions_are_constant() {
             "{}",
             m.name()
         );
+    }
+}
+
+#[test]
+fn a_sample_catching_up_is_rendered_as_it_is_by_every_method() {
+    // The simulated tool 5 mm above the hand, in contact: no method may
+    // extrapolate from where the tool is to where the hand is.
+    for m in Method::ALL {
+        let mut e = Extrapolator::new(m);
+        let mut s = sample(1, 0, [0.0, 0.0, 0.01], [0.0, 0.0, 0.5]);
+        s.stiffness_n_per_m = [[300.0, 0.0, 0.0], [0.0, 300.0, 0.0], [0.0, 0.0, 300.0]];
+        s.in_contact = true;
+        e.push(&s);
+        s.seq = 2;
+        s.t_ns = MS;
+        s.position_m = [0.0, 0.0, 0.009];
+        s.force_n = [0.0, 0.0, 0.6];
+        s.catching_up = true;
+        e.push(&s);
+        assert_eq!(
+            e.force(2 * MS, [0.0, 0.0, 0.004]),
+            [0.0, 0.0, 0.6],
+            "{}",
+            m.name()
+        );
+        // The same sample not flagged is extrapolated by the stiffness
+        // methods (what the flag prevents).
+        if matches!(m, Method::LocalModel | Method::LocalNormal) {
+            s.seq = 3;
+            s.catching_up = false;
+            e.push(&s);
+            assert!(e.force(2 * MS, [0.0, 0.0, 0.004])[2] > 2.0, "{}", m.name());
+        }
     }
 }
 

@@ -48,8 +48,9 @@
 //! [`Safety::ramp_in_from_output`] restarts the ramp-in from the current
 //! output instead of from zero: over `ramp_in_ns` the output blends from
 //! that force to the request (`F_from (1 - g) + g F_request`, the ordinary
-//! ramp-in being the case `F_from = 0`), clamped and slew-limited as
-//! always. The daemon calls it when its inputs jump for a reason it knows
+//! ramp-in being the case `F_from = 0`), never larger than the request
+//! (the blend is shortened to its magnitude: a force that fell meanwhile
+//! is let go, not held), clamped and slew-limited as always. The daemon calls it when its inputs jump for a reason it knows
 //! (the device pose was re-referenced after implausible samples, force
 //! samples are live again after a fast-forward), so the jump reaches the
 //! hand as a ramp, not a step. In any other state it does nothing (those
@@ -79,7 +80,7 @@ pub use config::{
 
 pub use passivity::{Passivity, PassivityConfig, PassivityError};
 
-use crate::math::{V3, ZERO, add, clamp_norm, is_finite, scale, step_toward};
+use crate::math::{V3, ZERO, add, clamp_norm, is_finite, norm, scale, step_toward};
 
 /// Why the force was (or is being) brought to zero.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -342,7 +343,14 @@ impl Safety {
                 let blend = if self.ramp_in_from_n == ZERO {
                     scale(request, gain)
                 } else {
-                    add(scale(self.ramp_in_from_n, 1.0 - gain), scale(request, gain))
+                    // Never more than the request: a force that fell (the
+                    // tool left the tissue while the pose jumped) is let go
+                    // at the slew limit, not held on for the ramp (after a
+                    // re-reference 50 mm out of the tissue the old force
+                    // decayed over 230 ms).
+                    let b = add(scale(self.ramp_in_from_n, 1.0 - gain), scale(request, gain));
+                    let (nb, nr) = (norm(b), norm(request));
+                    if nb > nr { scale(b, nr / nb) } else { b }
                 };
                 let damping = if position_m.is_some() {
                     self.passivity.damping_n(dt_ns)

@@ -202,6 +202,20 @@ fn ramp_in_from_output_blends_without_a_step() {
         t += MS;
     }
     assert_eq!(s.state(), SafetyState::Active);
+    // A request that falls is let go at the slew limit, not held for the
+    // ramp: the blend is never larger than the request.
+    s.ramp_in_from_output(t);
+    let slew_per_tick = s.config().max_slew_n_per_s * 1e-3;
+    let mut prev = s.output_n();
+    for k in 0..20u64 {
+        let f = s.filter(t, [0.0, 0.0, 0.5], Some(MS), true);
+        let want = (3.0 - slew_per_tick * (k + 1) as f64).max(0.5);
+        assert!((f[2] - want).abs() < 1e-9, "tick {k}: {f:?}, want {want}");
+        assert!(f[2] <= prev[2] + 1e-12, "tick {k}: {f:?} after {prev:?}");
+        prev = f;
+        t += MS;
+    }
+    assert!((prev[2] - 0.5).abs() < 1e-9, "{prev:?}");
     // In any other state it does nothing.
     let mut s = Safety::new(SafetyConfig::new(8.0).unwrap());
     s.ramp_in_from_output(T0);

@@ -66,6 +66,7 @@ pub(super) fn contact_config(
         "max_tool_accel_m_s2",
         c.max_tool_accel_m_s2,
     )?;
+    c.entry_speed_m_s = pos(&s.entry_speed_m_s, "entry_speed_m_s", c.entry_speed_m_s)?;
     if let Some(springs) = &s.springs {
         c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
     }

@@ -402,6 +402,9 @@ pub struct ContactSpec {
     pub max_tool_speed_m_s: Option<Spanned<f64>>,
     /// Acceleration limit of the simulated tool (m/s^2, default 100).
     pub max_tool_accel_m_s2: Option<Spanned<f64>>,
+    /// Near the tissue, how much faster than the hand the simulated tool
+    /// may move when it catches up (m/s, default 0.02).
+    pub entry_speed_m_s: Option<Spanned<f64>>,
     /// How the penalty springs are integrated (default: implicit).
     pub springs: Option<Spanned<SpringsName>>,
 }

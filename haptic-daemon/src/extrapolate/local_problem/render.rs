@@ -31,8 +31,10 @@ impl LocalProblem {
     ) -> Option<V3> {
         // A problem newer than the sample (a restarted simulation) or
         // much older (the simulation stopped sending them) says nothing
-        // about it.
+        // about it; nor does any while the simulated tool lags the hand
+        // (the sample is rendered as it is).
         if !self.ready
+            || latest.catching_up
             || latest.seq < self.seq
             || latest.t_ns.saturating_sub(self.t_ns) > MAX_AGE_NS
         {

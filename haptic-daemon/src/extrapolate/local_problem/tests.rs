@@ -194,6 +194,7 @@ fn bad_problems_are_refused() {
 fn sample_at(seq: u64, t_ns: u64, position_m: V3, force_n: V3) -> ForceSample {
     ForceSample {
         in_contact: true,
+        catching_up: false,
         ..super::super::tests::sample(seq, t_ns, position_m, force_n)
     }
 }

@@ -58,6 +58,10 @@ pub struct ContactConfig {
     pub max_tool_speed_m_s: Real,
     /// ... and changes its velocity at most this fast (m/s^2).
     pub max_tool_accel_m_s2: Real,
+    /// Near the tissue the proxy moves at most this much faster than the
+    /// hand (m/s): a tool coming back to a still hand (after a let-go, a
+    /// jump) enters the tissue at this speed, not at the speed limit.
+    pub entry_speed_m_s: Real,
     /// The penalty springs are integrated linearly implicitly at the end
     /// of each sub-step ([`super::implicit`]) instead of explicitly with
     /// the tissue's forces (which makes them size the sub-steps).
@@ -73,6 +77,7 @@ impl Default for ContactConfig {
             point_spacing: 0.5,
             max_tool_speed_m_s: 1.0,
             max_tool_accel_m_s2: 100.0,
+            entry_speed_m_s: 0.02,
             implicit_springs: true,
         }
     }

@@ -165,4 +165,10 @@ pub struct ContactReport {
     /// penalty law's proxy is held outside the tissue; see
     /// `surface_crossing`).
     pub held_outside: bool,
+    /// The simulated tool is not where the hand asked and does not follow
+    /// it one for one: it is coming in slowly near the tissue (after a
+    /// let-go, a jump) or held outside it. Its force is the tool's where
+    /// it is; extrapolating it by the hand's motion would render contact
+    /// the simulation does not have.
+    pub catching_up: bool,
 }

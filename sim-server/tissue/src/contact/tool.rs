@@ -58,6 +58,8 @@ pub struct ToolContact {
     removed: usize,
     /// The surface stopped the tip short of the pose asked this step.
     held_outside: bool,
+    /// The proxy was slowed near the tissue this step (it is catching up).
+    slowed: bool,
     cut_refused: Option<&'static str>,
     doomed: Vec<TetId>,
     /// Simulated time since the cavitron last burnt (s).
@@ -103,6 +105,7 @@ impl ToolContact {
             armed: false,
             removed: 0,
             held_outside: false,
+            slowed: false,
             cut_refused: None,
             doomed: Vec::new(),
             since_burn_s: Real::INFINITY,
@@ -141,6 +144,7 @@ impl ToolContact {
         self.constraints.clear();
         self.removed = 0;
         self.held_outside = false;
+        self.slowed = false;
         self.cut_refused = None;
         self.prev_pose = self.pose;
         let Some((tip_m, jaw)) = input else {
@@ -249,6 +253,7 @@ impl ToolContact {
             cut_refused: self.cut_refused,
             constrained_vertices: self.constraints.len(),
             held_outside: self.held_outside,
+            catching_up: self.slowed || self.held_outside || self.proxy.catching_up(),
         }
     }
 
@@ -510,5 +515,7 @@ impl ToolContact {
     }
 }
 
+#[path = "tool_approach.rs"]
+mod approach;
 #[path = "tool_outside.rs"]
 mod outside;

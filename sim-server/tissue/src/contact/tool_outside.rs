@@ -96,7 +96,7 @@ impl ToolContact {
 
     /// Where the tip's centre starts this step: where the last one left
     /// it, or the fulcrum for a tool coming in.
-    fn step_start_m(&self) -> Vec3 {
+    pub(super) fn step_start_m(&self) -> Vec3 {
         let fulcrum = Vec3::from_array(self.decl.fulcrum_m);
         self.prev_pose.map_or(fulcrum, |p| p.end_m)
     }

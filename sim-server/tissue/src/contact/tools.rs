@@ -378,15 +378,24 @@ impl Tools {
                 let spacing = crossing.spacing_of_radius();
                 let mut refitted = false;
                 for (i, t) in self.tools.iter_mut().enumerate() {
-                    if !t.surface_check_due(self.field.deepest_tip_m(i), spacing) {
-                        continue;
-                    }
-                    if !refitted {
+                    let deepest_m = self.field.deepest_tip_m(i);
+                    let touching = deepest_m > 0.0;
+                    let approach = t.approach_due();
+                    let check = t.surface_check_due(deepest_m, spacing);
+                    if (check || (approach && !touching)) && !refitted {
                         // The tips are tested against the current surface.
                         self.index.refit(sim);
                         refitted = true;
                     }
-                    t.keep_outside(sim, &self.index, &self.adjacency, crossing);
+                    if approach {
+                        let out_n = touching.then(|| self.field.force_n(i));
+                        t.approach(sim, &self.index, &self.adjacency, crossing, out_n);
+                    }
+                    // After the approach: its slower step may not reach the
+                    // surface any more.
+                    if t.surface_check_due(deepest_m, spacing) {
+                        t.keep_outside(sim, &self.index, &self.adjacency, crossing);
+                    }
                 }
             }
         }

@@ -52,6 +52,7 @@ impl Tools {
             ("point_spacing", config.point_spacing),
             ("max_tool_speed_m_s", config.max_tool_speed_m_s),
             ("max_tool_accel_m_s2", config.max_tool_accel_m_s2),
+            ("entry_speed_m_s", config.entry_speed_m_s),
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(ContactError::BadConstant {
@@ -132,7 +133,11 @@ impl Tools {
             .iter()
             .enumerate()
             .map(|(i, d)| {
-                let proxy = Proxy::new(config.max_tool_speed_m_s, config.max_tool_accel_m_s2);
+                let proxy = Proxy::new(
+                    config.max_tool_speed_m_s,
+                    config.max_tool_accel_m_s2,
+                    config.entry_speed_m_s,
+                );
                 ToolContact::new(d, i, model, law, proxy)
             })
             .collect();

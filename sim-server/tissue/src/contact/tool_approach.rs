@@ -1,0 +1,82 @@
+//! Phase 1a of a tool's update under the penalty law: a proxy that is
+//! catching up (coming in from its fulcrum after a let-go, following a
+//! pose that jumped) slows down near the tissue, so a still hand feels its
+//! tool come back at the entry speed instead of a blow at the speed limit
+//! (see [`crate::contact::proxy`]).
+//!
+//! Ahead of the proxy the tissue is found as the tips' surface test finds
+//! it ([`crate::contact::surface_crossing`]: the first surface triangle
+//! the tip's centre line would enter), over the distance the proxy needs
+//! to slow down; the step is then taken again no faster than lets the
+//! proxy slow to the hand's speed plus the entry speed by the time its tip
+//! reaches the surface. A tip already touching takes that speed at once.
+
+use super::ToolContact;
+use crate::backend::Backend;
+use crate::contact::ToolKind;
+use crate::contact::adjacency::Adjacency;
+use crate::contact::config::ContactLaw;
+use crate::contact::geometry::ToolPose;
+use crate::contact::surface_crossing::Crossing;
+use crate::contact::surface_index::SurfaceIndex;
+use crate::math::Vec3;
+
+impl ToolContact {
+    /// Whether [`ToolContact::approach`] may slow the proxy this step: it
+    /// is catching up ([`crate::contact::proxy::Proxy::catching_up`]: a
+    /// proxy following the hand never is) faster than it may near the
+    /// tissue. Not for the cavitron (it burns its way where the
+    /// hand takes it) nor jaws holding tissue (they carry it along).
+    pub(in crate::contact) fn approach_due(&self) -> bool {
+        self.pose.is_some()
+            && self.law == ContactLaw::Penalty
+            && self.decl.kind != ToolKind::Cavitron
+            && !self.gripping
+            && self.proxy.speed_m_s() > self.proxy.near_tissue_speed_m_s()
+            && self.proxy.catching_up()
+    }
+
+    /// Phase 1a (when [`ToolContact::approach_due`]): the step is taken
+    /// again slower if the tip touched the tissue at the last step
+    /// (`touching`, the tissue then pushing the tool with `out_n`) and
+    /// moves into it, or if the surface is within the proxy's braking
+    /// distance ahead. `index` must be refitted to the current positions
+    /// unless `touching`. A tool leaving the tissue is not held back: a
+    /// hand that left must not feel the tissue it left.
+    pub(in crate::contact) fn approach<B: Backend + ?Sized>(
+        &mut self,
+        sim: &B,
+        index: &SurfaceIndex,
+        adj: &Adjacency,
+        crossing: &mut Crossing,
+        touching: Option<Vec3>,
+    ) {
+        let Some(pose) = self.pose else { return };
+        let from = self.step_start_m();
+        let step_m = from.distance(pose.end_m);
+        let distance_m = if let Some(out_n) = touching {
+            if (pose.end_m - from).dot(out_n) > 0.0 {
+                return;
+            }
+            0.0
+        } else {
+            let dir = (pose.end_m - from).normalize_or_zero();
+            // This step, the next, the braking and the tip's radius.
+            let r = self.decl.radius_m;
+            let look_m = self.proxy.braking_distance_m() + 2.0 * step_m + r;
+            let Some(s) = crossing.first_entry(sim, index, adj, from, from + dir * look_m) else {
+                return;
+            };
+            s * look_m - r - step_m
+        };
+        let limit_m_s = self.proxy.approach_speed_m_s(distance_m);
+        if self.proxy.speed_m_s() <= limit_m_s {
+            return;
+        }
+        let at = self.proxy.slow_to(limit_m_s, sim.dt_s());
+        self.slowed = true;
+        let pose = ToolPose::new(&self.decl, at, self.direction);
+        self.direction = pose.direction;
+        self.pose = Some(pose);
+    }
+}
