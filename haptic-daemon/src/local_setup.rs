@@ -229,12 +229,14 @@ mod tests {
             in_contact: true,
             catching_up: false,
         };
+        // (At 16 ms: the hand's 0.2 mm from 13.5 ms is slow enough for a
+        // problem to render.)
         let next = path(9);
         let a = caught
-            .render(&sample, 14 * ms, next, f64::INFINITY)
+            .render(&sample, 16 * ms, next, f64::INFINITY)
             .unwrap();
         let b = by_hand
-            .render(&sample, 14 * ms, next, f64::INFINITY)
+            .render(&sample, 16 * ms, next, f64::INFINITY)
             .unwrap();
         assert_eq!(a, b);
         // Without inertia in the message: quasi-static, nothing stepped.

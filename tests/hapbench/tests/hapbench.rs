@@ -439,3 +439,38 @@ fn hapbench_extrapolation_refuses_runs_no_memory_holds() {
         );
     }
 }
+
+/// A fast lateral stroke over the liver (tests/data/liver-fast-stroke.csv:
+/// +-20 mm at 6 Hz, 0.75 m/s at most) with a 1 kHz simulation: the contact
+/// problem's condensed tissue rang there (one-tick spikes of 1 N, then
+/// zero force while the simulation said 0.3-0.6 N: 3.6x the constant
+/// hold's error, 13 ticks at zero); a tool that fast is rendered from the
+/// newest sample instead (`local_problem::MAX_TOOL_SPEED_M_S`).
+#[test]
+fn hapbench_extrapolation_local_problem_does_not_ring_on_a_fast_stroke() {
+    let dir = scratch_dir("hapbench-stroke");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let path = data.join("liver-fast-stroke.csv");
+    let v = hapbench(
+        &[
+            "extrapolation",
+            "--trajectory",
+            path.to_str().unwrap(),
+            "--sim-rate",
+            "1000",
+        ],
+        &dir.join("stroke.json"),
+        None,
+    );
+    let m = |method: &str, key: &str| v["methods"][method][key].as_f64().unwrap();
+    let (problem, hold) = (
+        m("local-problem", "rms_error_n"),
+        m("constant", "rms_error_n"),
+    );
+    assert!(
+        problem <= 1.2 * hold,
+        "local-problem {problem} N RMS, constant {hold} N"
+    );
+    let worst = m("local-problem", "max_error_n");
+    assert!(worst < 0.5, "local-problem off by {worst} N at worst");
+}

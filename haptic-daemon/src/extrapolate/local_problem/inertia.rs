@@ -139,6 +139,7 @@ impl LocalProblem {
             return false;
         }
         self.begin_solve(false);
+        self.track_tool(t_ns, tool_m);
         match self.solve_within_budget(tool_m) {
             Some((change, _)) => {
                 self.remember(t_ns, change);

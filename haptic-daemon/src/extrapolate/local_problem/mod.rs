@@ -61,6 +61,15 @@ pub use shared::protocol::{
 pub const CHANGE_OF_STIFFNESS: f64 = 1.5;
 /// A problem taken this long before the newest sample is not used (ns).
 pub const MAX_AGE_NS: u64 = 100_000_000;
+/// A tool moving faster than this (m/s) is not rendered from the problem
+/// (the caller falls back to the newest sample's `local-normal`): the
+/// tissue's mass condensed on the problem's few vertices (Guyan) makes a
+/// fast slide ring, a one-tick spike of 1-1.5 N then a dip to zero, where
+/// the simulation's force stays between 0.3 and 0.6 N. Measured with
+/// `hapbench extrapolation` on the liver, strokes of +-20 mm at a 1 kHz
+/// simulation: at 1.5 Hz (0.19 m/s at most) the problem errs 0.55x the
+/// constant hold, at 3 Hz (0.38 m/s) 1.4x, at 6 Hz (0.75 m/s) 3.6x.
+pub const MAX_TOOL_SPEED_M_S: f64 = 0.25;
 /// With inertia: the problem's force change is kept for this many ticks,
 /// to re-base it on a newer sample (256 ms at 1 kHz, beyond
 /// [`MAX_AGE_NS`]).
@@ -171,6 +180,9 @@ pub struct LocalProblem {
     forces: Vec<f64>,
     /// The trust region: the most a vertex moves per iteration (m).
     max_move_m: f64,
+    /// The tool's last two positions given (renders and catch-up steps)
+    /// at distinct times (ns), the newer second.
+    tool_track: [Option<(u64, V3)>; 2],
     /// The points that may touch in this solve (indices).
     active: Vec<u16>,
     /// delta at the start of the solve.
@@ -253,6 +265,7 @@ impl Clone for LocalProblem {
         copy(&mut self.trial, &o.trial);
         copy(&mut self.forces, &o.forces);
         self.max_move_m = o.max_move_m;
+        self.tool_track = o.tool_track;
         self.time_budget = o.time_budget;
         self.active.clear();
         self.active.extend_from_slice(&o.active);
@@ -320,6 +333,7 @@ impl LocalProblem {
             trial: Vec::with_capacity(n),
             forces: Vec::with_capacity(n),
             max_move_m: 0.0,
+            tool_track: [None; 2],
             active: Vec::with_capacity(MAX_POINTS),
             start: Vec::with_capacity(n),
             sd: Vec::with_capacity(n),
@@ -377,6 +391,29 @@ impl LocalProblem {
             (Some(b), Some(t0)) => t0.elapsed() >= b,
             _ => false,
         }
+    }
+
+    /// Keeps the tool's position at `t_ns` for its speed (one older than
+    /// the newest kept is not kept).
+    pub(super) fn track_tool(&mut self, t_ns: u64, tool_m: V3) {
+        match self.tool_track[1] {
+            Some((t, _)) if t == t_ns => self.tool_track[1] = Some((t, tool_m)),
+            Some((t, _)) if t > t_ns => {}
+            _ => self.tool_track = [self.tool_track[1], Some((t_ns, tool_m))],
+        }
+    }
+
+    /// Whether the tool at `tool_m` at `now_ns` moves faster than
+    /// [`MAX_TOOL_SPEED_M_S`] since the last position kept before then.
+    pub(super) fn too_fast(&self, now_ns: u64, tool_m: V3) -> bool {
+        let before = match self.tool_track {
+            [_, Some((t, x))] if t < now_ns => Some((t, x)),
+            [Some((t, x)), _] if t < now_ns => Some((t, x)),
+            _ => None,
+        };
+        before.is_some_and(|(t_ns, at_m)| {
+            norm(sub(tool_m, at_m)) > MAX_TOOL_SPEED_M_S * (now_ns - t_ns) as f64 * 1e-9
+        })
     }
 
     /// The force message `seq` of the step the problem was taken at.

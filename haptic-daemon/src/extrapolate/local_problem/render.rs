@@ -11,7 +11,9 @@ impl LocalProblem {
     /// `latest` being the newest force sample (taken at the problem's step
     /// or after it): the sample's force plus the change of the points'
     /// force on the tool from the sample to `tool_m`; zero when no point
-    /// touches the tool there. Quasi-static, the change is from the
+    /// touches the tool there. `None` (the caller falls back to another
+    /// method) also when the tool moves faster than
+    /// [`super::MAX_TOOL_SPEED_M_S`]. Quasi-static, the change is from the
     /// sample's position; with inertia ([`LocalProblem::set_inertia`]) each
     /// call is a time step of the problem from its own step on, and the
     /// change is from where the problem was at the sample's `t_ns` (its
@@ -40,6 +42,12 @@ impl LocalProblem {
         {
             return None;
         }
+        // The tool's speed since the last position the problem was given
+        // (this tick's is rendered from the sample if it is too fast; the
+        // problem is stepped all the same, so that it goes on from the
+        // hand's path when the tool slows).
+        let too_fast = self.too_fast(now_ns, tool_m);
+        self.track_tool(now_ns, tool_m);
         // One budget for the whole tick.
         self.begin_solve(true);
         // Quasi-static, the base first (its solve moves the warm start);
@@ -58,6 +66,9 @@ impl LocalProblem {
             Some(base) => base,
             None => self.base_for(latest)?,
         };
+        if too_fast {
+            return None;
+        }
         if !touching {
             return Some(ZERO);
         }

@@ -33,6 +33,8 @@ impl LocalProblem {
         )?;
         self.seq = msg.seq;
         self.t_ns = msg.t_ns;
+        // The tool's first position is the problem's own.
+        self.track_tool(msg.t_ns, msg.tool_position_m);
         Ok(())
     }
 
@@ -88,6 +90,7 @@ impl LocalProblem {
             .fold(f64::INFINITY, f64::min)
             * TRUST_OF_RADIUS;
         self.base = None;
+        self.tool_track = [None; 2];
         self.hist_len = 0;
         self.hist_next = 0;
         self.seq = 0;

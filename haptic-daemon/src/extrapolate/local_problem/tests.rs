@@ -209,9 +209,10 @@ fn render_uses_a_problem_only_with_the_samples_it_describes() {
     let own = sample_at(10, p.t_ns, centre, f);
     let at = p.render(&own, own.t_ns, centre, f64::INFINITY).unwrap();
     assert!(norm(sub(at, f)) < 1e-12, "{at:?}");
-    // A later sample 1 mm deeper: its force, plus the change from there.
+    // A later sample 1 mm deeper: its force, plus the change from there
+    // (20 ms later: a tool moving 1 mm in 2 ms is too fast for a problem).
     let deeper = [centre[0], centre[1], centre[2] - 0.001];
-    let later = sample_at(12, p.t_ns + 2_000_000, deeper, [0.0, 0.0, 0.7]);
+    let later = sample_at(12, p.t_ns + 20_000_000, deeper, [0.0, 0.0, 0.7]);
     let same = p.render(&later, later.t_ns, deeper, f64::INFINITY).unwrap();
     assert!(norm(sub(same, later.force_n)) < 1e-9, "{same:?}");
     // An older problem than the sample (a restarted simulation), or one
@@ -244,6 +245,35 @@ fn render_uses_a_problem_only_with_the_samples_it_describes() {
     assert!(norm(df) > 0.05 + 1e-6, "{df:?}");
     assert!((norm(dc) - 0.05).abs() < 1e-12, "{dc:?}");
     assert!(norm(sub(scale(df, 0.05 / norm(df)), dc)) < 1e-12);
+}
+
+#[test]
+fn render_leaves_a_tool_too_fast_for_the_problem_to_the_fallback() {
+    let (mut p, centre) = press(0.001);
+    p.seq = 10;
+    p.t_ns = 1_000_000_000;
+    let f = [0.0, 0.0, 0.5];
+    let ms = 1_000_000;
+    // Slowly (1 mm in 10 ms, 0.1 m/s) the problem renders; 1 mm in a
+    // millisecond (1 m/s, past MAX_TOOL_SPEED_M_S) it does not, and again
+    // once the tool goes slowly.
+    let (mut t, mut x) = (p.t_ns, 0.0);
+    for (dt_ns, dx, renders) in [
+        (10 * ms, 0.001, true),
+        (ms, 0.001, false),
+        (10 * ms, 0.0005, true),
+    ] {
+        t += dt_ns;
+        x += dx;
+        let sample = sample_at(10, p.t_ns, centre, f);
+        let r = p.render(
+            &sample,
+            t,
+            [centre[0] - x, centre[1], centre[2]],
+            f64::INFINITY,
+        );
+        assert_eq!(r.is_some(), renders, "{dx} m in {dt_ns} ns");
+    }
 }
 
 #[test]
