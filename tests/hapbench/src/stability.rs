@@ -383,7 +383,11 @@ pub fn run(args: &Args) -> Result<()> {
         0.05,
         &base(0.4, "", ""),
         None,
-        Box::new(|_| [0.03, 0.01, 0.02 - 0.05]),
+        // Down from the top to 50 mm below it (through the 20 mm block)
+        // in 0.25 s, a fast hand (0.2 m/s): the tool follows a moving hand
+        // at its pace, where it would only creep towards a hand standing
+        // that deep from the start (the proxy's entry speed).
+        Box::new(|t| [0.03, 0.01, 0.02 + 0.003 - 0.053 * (t / 0.25).min(1.0)]),
         d,
     ));
     cases.push(run_case(
