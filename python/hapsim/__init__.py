@@ -10,6 +10,7 @@ haptic-daemon, viewer) over shared memory.
 The payloads and rules are those of docs/protocol.md (version 1)."""
 
 from .protocol import (
+    CATCHING_UP,
     CONTACT,
     CUTTING,
     GRIPPING,
@@ -33,6 +34,7 @@ from .session import (
 )
 
 __all__ = [
+    "CATCHING_UP",
     "CONTACT",
     "CUTTING",
     "GRIPPING",

@@ -13,6 +13,10 @@ TOOL_PRESENT = 1
 CONTACT = 1
 GRIPPING = 2
 CUTTING = 4
+#: The simulated tool is not at the pose asked for (coming back in slowly
+#: after a let-go or a jump, or held outside the tissue): render the force
+#: as it is, do not extrapolate it by the hand's motion.
+CATCHING_UP = 8
 
 
 class ToolPose(ctypes.Structure):

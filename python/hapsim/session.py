@@ -52,7 +52,7 @@ class ForceSample:
     stiffness_n_per_m: np.ndarray
     #: (tools,): seq of the pose the step used (0: none).
     pose_seq: np.ndarray
-    #: (tools,): CONTACT | GRIPPING | CUTTING bits.
+    #: (tools,): CONTACT | GRIPPING | CUTTING | CATCHING_UP bits.
     flags: np.ndarray
 
     @staticmethod

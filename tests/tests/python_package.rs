@@ -33,6 +33,22 @@ fn the_python_package_installs_and_its_example_presses_the_liver() {
         "pip install python/: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // The flag bits are the protocol's.
+    let out = Command::new("python3")
+        .args([
+            "-c",
+            "import hapsim; print(hapsim.CONTACT, hapsim.GRIPPING, hapsim.CUTTING, hapsim.CATCHING_UP)",
+        ])
+        .env("PYTHONPATH", &site)
+        .output()
+        .expect("python3");
+    use shared::protocol::{CATCHING_UP, CONTACT, CUTTING, GRIPPING};
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout).trim(),
+        format!("{CONTACT} {GRIPPING} {CUTTING} {CATCHING_UP}"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let session = format!("pypkg{}", std::process::id());
     let sim = spawn_sim_server(&session, &["--duration-s", "20"]);
     // A pose's jaw outside 0..1 (or NaN) is refused by its own name; a
