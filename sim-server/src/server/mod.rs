@@ -115,6 +115,10 @@ pub struct RunSummary {
     /// pose (it slipped past the tip, or the tip would have entered it:
     /// the linear model far beyond its range; README, Contact).
     pub held_outside_steps: u64,
+    /// Steps where a tool was catching up with its pose near the tissue
+    /// (coming back in at the entry speed after a let-go or a jump, or
+    /// held outside): its samples carry the `CATCHING_UP` flag.
+    pub catching_up_steps: u64,
     /// Tetrahedra removed by tools.
     pub tets_removed: u64,
     /// Largest |reaction force| on any tool (N).

@@ -254,6 +254,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 }
                 self.summary.held_outside_steps += 1;
             }
+            self.summary.catching_up_steps += u64::from(report.catching_up);
             if report.tets_removed > 0 {
                 self.removed_total += report.tets_removed as u64;
                 self.mesh_out.topology_version += 1;
