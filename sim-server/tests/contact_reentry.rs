@@ -101,33 +101,40 @@ fn a_tool_that_comes_back_to_a_still_hand_enters_without_a_blow() {
 /// A pose that jumps for 5 ms (1 m away, or 20 mm deeper) and comes back:
 /// the tool is back in the contact it left, without a blow on the way
 /// back in. (The daemon rejects such poses before they get here; this is
-/// what the simulation does with one that gets through: away, the tool
-/// follows it out at its acceleration limit and the force dips.)
+/// what the simulation does with one that gets through.)
 #[test]
 fn a_pose_that_jumps_for_5_ms_comes_back_to_the_contact_it_left() {
     for jump in [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -0.02)] {
         let mut p = scene("hook", "");
         let before = settle(&mut p, tip_in(), 1500).z;
         let mut hi = 0.0f64;
-        let mut flagged = 0;
+        let (mut flagged, mut below_half) = (0, 0);
         for k in 0..1000 {
             let tip = if k < 5 { tip_in() + jump } else { tip_in() };
             let (f, c) = step(&mut p, Some(tip));
             hi = hi.max(f);
             flagged += usize::from(c);
+            below_half += usize::from(f < 0.5 * before);
         }
         let after = settle(&mut p, tip_in(), 1).z;
         assert!(
             (after - before).abs() < 0.02 * before,
             "jump {jump}: {after} N"
         );
-        // Away, the tool comes back into the tissue without a blow (1.11x
-        // measured). Deeper, it follows the jump in for the 5 ms (1.77x on
-        // this small probe, as before the entry speed existed).
+        // Away, the tool follows the jump out at its acceleration limit and
+        // comes straight back (it followed the hand a moment ago: not
+        // slowed to the entry speed), without a blow (1.18x measured) and
+        // below half the force for 9 ms (56 when it was slowed). Deeper,
+        // it follows the jump in for the 5 ms (1.77x on this small probe,
+        // as before the entry speed existed).
         if jump.z > 0.0 {
             assert!(
                 hi < 1.2 * before,
                 "jump {jump}: up to {hi} N against {before} N"
+            );
+            assert!(
+                below_half <= 15,
+                "jump {jump}: {below_half} steps below half"
             );
         }
         assert!(flagged >= 5, "jump {jump}: {flagged} steps flagged");

@@ -64,6 +64,9 @@ pub struct ToolContact {
     doomed: Vec<TetId>,
     /// Simulated time since the cavitron last burnt (s).
     since_burn_s: Real,
+    /// Simulated time since the proxy last followed the hand (s; infinite
+    /// after a let-go, until it has caught up).
+    catching_up_s: Real,
 }
 
 /// The cavitron burns at most this often (simulated s): every step of a
@@ -109,6 +112,7 @@ impl ToolContact {
             cut_refused: None,
             doomed: Vec::new(),
             since_burn_s: Real::INFINITY,
+            catching_up_s: Real::INFINITY,
         }
     }
 
@@ -149,6 +153,7 @@ impl ToolContact {
         self.prev_pose = self.pose;
         let Some((tip_m, jaw)) = input else {
             self.since_burn_s = Real::INFINITY;
+            self.catching_up_s = Real::INFINITY;
             self.pose = None;
             self.proxy.reset();
             self.gripped.clear();

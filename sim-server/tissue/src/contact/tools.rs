@@ -380,6 +380,7 @@ impl Tools {
                 for (i, t) in self.tools.iter_mut().enumerate() {
                     let deepest_m = self.field.deepest_tip_m(i);
                     let touching = deepest_m > 0.0;
+                    t.note_catching_up(sim.dt_s());
                     let approach = t.approach_due();
                     let check = t.surface_check_due(deepest_m, spacing);
                     if (check || (approach && !touching)) && !refitted {
