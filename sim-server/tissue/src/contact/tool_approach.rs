@@ -40,11 +40,11 @@ impl ToolContact {
         };
     }
 
-    /// Whether [`ToolContact::approach`] may slow the proxy this step: it
-    /// is catching up ([`crate::contact::proxy::Proxy::catching_up`]: a
-    /// proxy following the hand never is) faster than it may near the
-    /// tissue, and has not followed the hand for
-    /// [`RECENTLY_FOLLOWING_S`]. Not for the cavitron (it burns its way
+    /// Whether [`ToolContact::approach`] may slow the proxy this step
+    /// (after [`ToolContact::note_catching_up`]): it has been catching up
+    /// ([`crate::contact::proxy::Proxy::catching_up`]: a proxy following
+    /// the hand never is) for longer than [`RECENTLY_FOLLOWING_S`], faster
+    /// than it may near the tissue. Not for the cavitron (it burns its way
     /// where the hand takes it) nor jaws holding tissue (they carry it
     /// along).
     pub(in crate::contact) fn approach_due(&self) -> bool {
@@ -54,7 +54,6 @@ impl ToolContact {
             && self.decl.kind != ToolKind::Cavitron
             && !self.gripping
             && self.proxy.speed_m_s() > self.proxy.near_tissue_speed_m_s()
-            && self.proxy.catching_up()
     }
 
     /// Phase 1a (when [`ToolContact::approach_due`]): the step is taken
