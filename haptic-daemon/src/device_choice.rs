@@ -17,18 +17,19 @@ use shared::source::Source;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-pub(crate) fn make_device(spec: &str, max_force_n: f64) -> Result<DeviceChoice> {
+/// Makes the device `spec` names; the built-in poke of `simulated` aims at
+/// `poke` (see [`Path::poke_over`]), or at the z axis without it.
+pub(crate) fn make_device(
+    spec: &str,
+    max_force_n: f64,
+    poke: Option<Path>,
+) -> Result<DeviceChoice> {
     let (kind, arg) = spec
         .split_once(':')
         .map_or((spec, None), |(k, a)| (k, Some(a)));
     match (kind, arg) {
         ("simulated", None) => {
-            let path = Path::Poke {
-                start_m: [0.0, 0.0, 0.05],
-                direction: [0.0, 0.0, -1.0],
-                depth_m: 0.03,
-                period_s: 4.0,
-            };
+            let path = poke.unwrap_or_else(Path::default_poke);
             Ok(DeviceChoice::Simulated(Simulated::new(
                 path,
                 HandModel::default(),

@@ -95,7 +95,12 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
     let method = args.extrapolation;
     let session = SessionName::new(&args.session)?;
     let transport = args.remote.transport(&session)?;
-    let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N)?;
+    let (poke, poke_warning) = if args.device == "simulated" {
+        aim_poke(&transport, &session, args.quiet)
+    } else {
+        (None, None)
+    };
+    let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N, poke)?;
     let device_max = device.specs().max_force_n;
     let limit = force_limit(args.max_force, device_max)?;
     let safety = SafetyConfig::new(limit)?;
@@ -188,6 +193,7 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
     }
     let s = stats.lock().expect("stats");
     let mut warnings = warnings;
+    warnings.extend(poke_warning);
     if shared.flags.version_mismatch.load(Ordering::Relaxed) {
         warnings.push(format!(
             "ignored force samples of another protocol version (this daemon speaks {})",
@@ -237,6 +243,49 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
+}
+
+/// How long `--device simulated` waits for a running simulation's scene
+/// to aim its built-in poke.
+const SCENE_WAIT: Duration = Duration::from_secs(1);
+
+/// The built-in poke aimed at the simulation's organ (its rest bounding
+/// box, from the `scene` stream), or `None` (the poke down the z axis)
+/// when no simulation is there or none answers within [`SCENE_WAIT`], with
+/// the warning that says so (printed, and kept for the summary).
+fn aim_poke(
+    transport: &Transport,
+    session: &SessionName,
+    quiet: bool,
+) -> (Option<haptic_daemon::device::Path>, Option<String>) {
+    // No simulation there, no wait: a daemon started first pokes the axis.
+    let scene = transport.scene_now(session, SCENE_WAIT).ok().flatten();
+    let path =
+        scene.and_then(|s| haptic_daemon::device::Path::poke_over(s.bounds_min_m, s.bounds_max_m));
+    match (&path, quiet) {
+        (
+            Some(haptic_daemon::device::Path::Poke {
+                start_m, depth_m, ..
+            }),
+            false,
+        ) => say!(
+            "simulated device: poking the scene's organ at x = {:.1} mm, y = {:.1} mm, from z = {:.1} mm down {:.1} mm and back every 4 s",
+            start_m[0] * 1e3,
+            start_m[1] * 1e3,
+            start_m[2] * 1e3,
+            depth_m * 1e3
+        ),
+        (None, _) => {
+            let w = format!(
+                "no simulation's scene at start (none running, or none answering within {} s): the simulated device pokes down the z axis from z = 50 mm to 20 mm (give it a path with simulated:FILE.csv)",
+                SCENE_WAIT.as_secs()
+            );
+            say!("warning: {w}");
+            return (None, Some(w));
+        }
+        _ => {}
+    }
+    (path, None)
 }
 
 /// The rate and duration, checked before anything starts.

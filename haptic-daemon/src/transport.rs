@@ -5,7 +5,7 @@
 //! outputs are [`IoPorts`].
 
 use shared::SessionName;
-use shared::protocol::{ForceMsg, LocalContactMsg, PoseMsg, TelemetryBatch};
+use shared::protocol::{ForceMsg, LocalContactMsg, PoseMsg, SceneInfo, TelemetryBatch};
 use shared::reaper::Reaper;
 use shared::remote::{Inbox, Link, RemoteError, RemotePublisher};
 use shared::services::{self, Ipc, IpcNode, ServiceError};
@@ -98,6 +98,45 @@ impl Transport {
                 None,
             ),
         })
+    }
+
+    /// The scene's description, if a simulation is there to give it
+    /// within `wait` (it publishes it once at start and keeps it for
+    /// clients that join later); `None` at once when no simulation is
+    /// there (nobody publishes the stream; remotely: no bridge with a
+    /// simulation behind it).
+    pub fn scene_now(
+        &self,
+        session: &SessionName,
+        wait: Duration,
+    ) -> Result<Option<SceneInfo>, TransportError> {
+        let (mut source, _node) = match self {
+            Transport::Shm => {
+                let n = services::node("haptic-daemon-scene")?;
+                let service = services::scene_service(&n, session)?;
+                if services::publisher_count(&service) == 0 {
+                    return Ok(None);
+                }
+                (Source::Shm(services::subscriber(&service)?), Some(n))
+            }
+            Transport::Remote(link) => {
+                if !link.sim_alive() {
+                    return Ok(None);
+                }
+                let inbox = Inbox::subscribe_with_query(link, services::stream::SCENE, 2)?;
+                (Source::Remote(inbox), None)
+            }
+        };
+        let start = std::time::Instant::now();
+        loop {
+            if let Some(info) = source.pop() {
+                return Ok(Some(info));
+            }
+            if start.elapsed() >= wait {
+                return Ok(None);
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
     }
 
     /// The telemetry batches (a recorder's: every one).

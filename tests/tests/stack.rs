@@ -59,6 +59,50 @@ fn simulation_and_daemon_talk_and_forces_stay_safe() {
     }
 }
 
+/// `--device simulated` aims its poke at the organ the simulation says it
+/// has (the `scene` stream's bounding box): on hapbench's probe box it
+/// presses the box's centre 6 mm deep; the poke down the z axis it made
+/// whatever the scene only grazed the box's corner (0.028 N).
+#[test]
+fn the_simulated_hand_pokes_the_organ_of_the_scene_it_is_given() {
+    let session = format!("aim{}", std::process::id());
+    let dir = scratch_dir("stack-aim");
+    let daemon_json = dir.join("daemon.json");
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/box-probe.toml");
+    let sim = Command::new(binary("sim-server"))
+        .args(["run", "--quiet", "--duration-s", "5", "--session", &session])
+        .arg("--scene")
+        .arg(&scene)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sim-server");
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
+    let daemon = daemon_run(&session)
+        .args([
+            "--device",
+            "simulated",
+            "--duration-s",
+            "3",
+            "--max-force",
+            "4",
+        ])
+        .arg("--json")
+        .arg(&daemon_json)
+        .output()
+        .expect("run haptic-daemon");
+    assert!(
+        daemon.status.success(),
+        "daemon: {}",
+        String::from_utf8_lossy(&daemon.stderr)
+    );
+    finish(sim, Duration::from_secs(10), "sim-server");
+    let d = read_json(&daemon_json);
+    assert_eq!(d["warnings"].as_array().map(Vec::len), Some(0), "{d}");
+    let max = d["max_force_n"].as_f64().unwrap();
+    assert!(max > 0.2 && max <= 4.0, "the poke pressed the box: {d}");
+}
+
 #[test]
 fn the_headless_demo_cuts_touches_and_stays_within_the_device_limit() {
     let dir = scratch_dir("demo");

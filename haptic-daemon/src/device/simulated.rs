@@ -46,7 +46,55 @@ pub enum Path {
     },
 }
 
+/// The built-in poke's start above the organ's top (m).
+const POKE_ABOVE_M: f64 = 0.003;
+/// The built-in poke's depth below the organ's top: this fraction of the
+/// organ's height, at most [`POKE_MAX_BELOW_M`].
+const POKE_BELOW_OF_HEIGHT: f64 = 0.3;
+/// The deepest the built-in poke presses below the organ's top (m).
+const POKE_MAX_BELOW_M: f64 = 0.027;
+/// The built-in poke's period (s).
+const POKE_PERIOD_S: f64 = 4.0;
+
 impl Path {
+    /// The built-in poke when the scene is not known: straight down the z
+    /// axis from z = 50 mm to 20 mm and back every 4 s (the embedded
+    /// liver's top is at 47 mm).
+    pub fn default_poke() -> Self {
+        Path::Poke {
+            start_m: [0.0, 0.0, 0.05],
+            direction: [0.0, 0.0, -1.0],
+            depth_m: 0.03,
+            period_s: POKE_PERIOD_S,
+        }
+    }
+
+    /// The built-in poke aimed at an organ whose rest bounding box is
+    /// `min_m`..`max_m` (the simulation's `SceneInfo`): straight down over
+    /// the box's centre, from 3 mm above its top to 30% of its height below
+    /// it (at most 27 mm), and back every 4 s. On the embedded liver this
+    /// is [`Path::default_poke`] within 0.2 mm. `None` for a box that is
+    /// not finite or not ordered.
+    pub fn poke_over(min_m: V3, max_m: V3) -> Option<Self> {
+        let ordered =
+            (0..3).all(|d| min_m[d].is_finite() && max_m[d].is_finite() && min_m[d] <= max_m[d]);
+        if !ordered {
+            return None;
+        }
+        let height = max_m[2] - min_m[2];
+        let below = (POKE_BELOW_OF_HEIGHT * height).min(POKE_MAX_BELOW_M);
+        Some(Path::Poke {
+            start_m: [
+                0.5 * (min_m[0] + max_m[0]),
+                0.5 * (min_m[1] + max_m[1]),
+                max_m[2] + POKE_ABOVE_M,
+            ],
+            direction: [0.0, 0.0, -1.0],
+            depth_m: POKE_ABOVE_M + below,
+            period_s: POKE_PERIOD_S,
+        })
+    }
+
     fn at(&self, t_s: f64) -> (V3, f64) {
         match self {
             Path::Trajectory(t) => t.sample(t_s),
@@ -176,6 +224,43 @@ mod tests {
             depth_m: 0.02,
             period_s: 2.0,
         }
+    }
+
+    #[test]
+    fn the_built_in_poke_aims_at_the_organ_it_is_given() {
+        // The embedded liver's rest box (`sim-server check`): the poke of
+        // an unknown scene, within 0.2 mm.
+        let liver = Path::poke_over([-0.1100, -0.0750, -0.0432], [0.1104, 0.0750, 0.0470]);
+        let (
+            Some(Path::Poke {
+                start_m, depth_m, ..
+            }),
+            Path::Poke {
+                start_m: s0,
+                depth_m: d0,
+                ..
+            },
+        ) = (liver, Path::default_poke())
+        else {
+            panic!("pokes");
+        };
+        for d in 0..3 {
+            assert!((start_m[d] - s0[d]).abs() < 2e-4, "{start_m:?} vs {s0:?}");
+        }
+        assert!((depth_m - d0).abs() < 2e-4, "{depth_m} vs {d0}");
+        // hapbench's 60 x 40 x 20 mm probe box: over its centre (which the
+        // unknown-scene poke at x = y = 0 only grazed at a corner), from
+        // 3 mm above its top to 6 mm into it.
+        let Some(b) = Path::poke_over([0.0; 3], [0.06, 0.04, 0.02]) else {
+            panic!("a box");
+        };
+        let (top, bottom) = (b.at(0.0).0, b.at(2.0).0);
+        assert!((top[0] - 0.03).abs() < 1e-12 && (top[1] - 0.02).abs() < 1e-12);
+        assert!((top[2] - 0.023).abs() < 1e-12, "{top:?}");
+        assert!((bottom[2] - 0.014).abs() < 1e-12, "{bottom:?}");
+        // Not a box: no aim.
+        assert!(Path::poke_over([0.0; 3], [f64::NAN, 1.0, 1.0]).is_none());
+        assert!(Path::poke_over([0.0, 0.0, 1.0], [1.0, 1.0, 0.0]).is_none());
     }
 
     #[test]
