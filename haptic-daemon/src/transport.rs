@@ -114,7 +114,13 @@ impl Transport {
             Transport::Shm => {
                 let n = services::node("haptic-daemon-scene")?;
                 let service = services::scene_service(&n, session)?;
-                if services::publisher_count(&service) == 0 {
+                // A simulation opens its force stream just before its
+                // scene stream: either says it is there (and the scene is
+                // delivered from its history).
+                let force = services::force_service(&n, session)?;
+                if services::publisher_count(&service) == 0
+                    && services::publisher_count(&force) == 0
+                {
                     return Ok(None);
                 }
                 (Source::Shm(services::subscriber(&service)?), Some(n))
