@@ -6,18 +6,20 @@
 //! ```sh
 //! cargo run --release -p sim-server --example indentation -- \
 //!     --cell-m 0.00125 --law penalty [--width-m 0.024] [--at-m 0.012,0.012] \
-//!     [--depths-mm 1,2,4] [--stiffness-factor 64]
+//!     [--depths-mm 1,2,4] [--stiffness-factor 64] [--backend tensor-mass|precomputed]
 //! ```
 //!
 //! The block is `width x width x 20 mm` (E 5 kPa, nu 0.45, damping 40 /s),
 //! its bottom fixed, meshed with cubes of `--cell-m`; the probe is a hook of
 //! radius 2.5 mm coming straight down at `--at-m` (x, y), at 10 mm/s
-//! between depths, held 1.5 s at each. Explicit tensor-mass at a 1 ms step.
+//! between depths, held 1.5 s at each, at a 1 ms step on the explicit
+//! tensor-mass backend (default) or the precomputed (static) one.
 
 use anyhow::{Context, Result, bail};
+use sim_server::backend::{Backend, Precomputed};
 use sim_server::contact::ToolInput;
 use sim_server::prelude::*;
-use sim_server::prepare::prepare;
+use sim_server::prepare::{Prepared, prepare, prepare_with};
 use sim_server::scene::{SceneSource, build_scene};
 use std::path::PathBuf;
 
@@ -37,6 +39,7 @@ struct Args {
     at_m: [f64; 2],
     depths_mm: Vec<f64>,
     stiffness_factor: f64,
+    backend: String,
 }
 
 fn numbers(flag: &str, text: &str) -> Result<Vec<f64>> {
@@ -59,6 +62,7 @@ fn parse() -> Result<Args> {
         at_m: [0.012, 0.012],
         depths_mm: vec![1.0, 2.0, 4.0],
         stiffness_factor: 64.0,
+        backend: "tensor-mass".into(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -73,8 +77,9 @@ fn parse() -> Result<Args> {
             },
             "--depths-mm" => a.depths_mm = numbers(&flag, &value)?,
             "--stiffness-factor" => a.stiffness_factor = numbers(&flag, &value)?[0],
+            "--backend" => a.backend = value,
             _ => bail!(
-                "unknown flag {flag}: --cell-m, --law, --width-m, --at-m, --depths-mm, --stiffness-factor"
+                "unknown flag {flag}: --cell-m, --law, --width-m, --at-m, --depths-mm, --stiffness-factor, --backend"
             ),
         }
     }
@@ -131,12 +136,27 @@ stiffness_factor = {factor}
         text,
     };
     let built = build_scene(&src, &src.parse()?)?;
-    let mut p = prepare::<f64>(built, Some(1e-3))?;
+    match a.backend.as_str() {
+        "tensor-mass" => press_all(&a, &mut prepare::<f64>(built, Some(1e-3))?),
+        "precomputed" => {
+            let fixed = built.fixed.clone();
+            let mut p = prepare_with(built, Some(1e-3), |model, _, dt_s| {
+                Precomputed::new(model, &fixed, dt_s, None, |_, _| {})
+            })?;
+            press_all(&a, &mut p)
+        }
+        other => bail!("--backend {other:?}: tensor-mass or precomputed"),
+    }
+}
+
+/// The press and the forces at each depth, printed.
+fn press_all<B: Backend>(a: &Args, p: &mut Prepared<B>) -> Result<()> {
     println!(
-        "cell {} mm, {} tetrahedra, law {}: depth (mm), force (N)",
+        "cell {} mm, {} tetrahedra, law {}, {}: depth (mm), force (N)",
         a.cell_m * 1e3,
         p.sim.model().mesh().tet_count(),
-        a.law
+        a.law,
+        p.sim.name()
     );
     let top = HEIGHT_M + RADIUS_M;
     let mut press = |depth_m: f64| {

@@ -26,6 +26,7 @@ mod holds;
 mod hybrid;
 mod implicit;
 mod precomputed;
+mod precomputed_contact;
 
 pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
 pub use hybrid::{Hybrid, HybridConfig, HybridError};
@@ -111,7 +112,8 @@ pub trait Backend {
         true
     }
     /// Whether [`Backend::step_with_contact`] evaluates the penalty contact
-    /// at every sub-step (the penalty law needs it).
+    /// (the penalty law needs it): at every sub-step of a dynamic backend,
+    /// or as each step's equilibrium on a static one.
     fn integrates_contact(&self) -> bool {
         false
     }

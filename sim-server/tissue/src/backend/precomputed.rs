@@ -53,6 +53,12 @@ pub struct Precomputed {
     /// Holding forces of this step: (surface index, force).
     applied: Vec<(u32, Vec3)>,
     work: Vec<Vec3>,
+    /// The penalty contact's forces on the vertices listed in
+    /// `contact_loaded` (zero elsewhere; [`super::precomputed_contact`]).
+    contact_n: Vec<Vec3>,
+    contact_loaded: Vec<u32>,
+    /// The contact solve's scratch.
+    pub(super) contact: super::precomputed_contact::ContactSolve,
     /// Whether the last load came from the disk cache.
     pub from_cache: bool,
 }
@@ -139,6 +145,9 @@ impl Precomputed {
             holds: Holds::new(),
             applied: Vec::new(),
             work: Vec::new(),
+            contact_n: vec![Vec3::ZERO; n],
+            contact_loaded: Vec::new(),
+            contact: Default::default(),
             from_cache,
         })
     }
@@ -157,31 +166,65 @@ impl Precomputed {
     fn response(&self, s: u32, a: usize) -> &[Vec3] {
         response(&self.responses, self.u.len(), s, a)
     }
-}
 
-/// The response of all `n` vertices to a unit force along `a` on surface vertex `s`.
-fn response(responses: &[Vec3], n: usize, s: u32, a: usize) -> &[Vec3] {
-    let at = (3 * s as usize + a) * n;
-    &responses[at..at + n]
-}
-
-impl Backend for Precomputed {
-    fn name(&self) -> &'static str {
-        "precomputed"
-    }
-    fn model(&self) -> &ElasticModel {
-        &self.model
-    }
-    fn dt_s(&self) -> Real {
-        self.dt_s
+    /// Newton iterations of the last step's contact solve (0 without
+    /// contact).
+    pub fn contact_iterations(&self) -> usize {
+        self.contact.iterations
     }
 
-    fn step(&mut self) {
+    pub(super) fn vertex_len(&self) -> usize {
+        self.u.len()
+    }
+
+    /// Whether a force on vertex `v` is represented and it is not held.
+    pub(super) fn loadable(&self, v: usize) -> bool {
+        self.slot[v] != NONE && self.held[v].is_none()
+    }
+
+    /// The responses of every vertex to a unit force along `a` on the
+    /// loadable vertex `v`.
+    pub(super) fn response_of(&self, v: u32, a: usize) -> &[Vec3] {
+        self.response(self.slot[v as usize], a)
+    }
+
+    pub(super) fn displacement_of(&self, v: u32) -> Vec3 {
+        Vec3::from_array(self.u[v as usize])
+    }
+
+    pub(super) fn set_displacement(&mut self, v: u32, d_m: Vec3) {
+        self.u[v as usize] = d_m.to_array();
+    }
+
+    pub(super) fn clear_contact_forces(&mut self) {
+        for &v in &self.contact_loaded {
+            self.contact_n[v as usize] = Vec3::ZERO;
+        }
+        self.contact_loaded.clear();
+    }
+
+    /// The contact forces `force` on `vertices` (loadable ones) for the
+    /// next [`Precomputed::step_static`].
+    pub(super) fn set_contact_forces(&mut self, vertices: &[u32], force: &[[Real; 3]]) {
+        self.clear_contact_forces();
+        for &v in vertices {
+            self.contact_n[v as usize] = Vec3::from_array(force[v as usize]);
+            self.contact_loaded.push(v);
+        }
+    }
+
+    /// The static solution for the loads, the contact forces and the holds.
+    pub(super) fn step_static(&mut self) {
         let n = self.u.len();
         let mut u = std::mem::take(&mut self.work);
         u.clear();
         u.resize(n, Vec3::ZERO);
-        for (v, f) in self.fext.iter().enumerate() {
+        let loads = (self.fext.iter().enumerate()).chain(
+            self.contact_loaded
+                .iter()
+                .map(|&v| (v as usize, &self.contact_n[v as usize])),
+        );
+        for (v, f) in loads {
             let s = self.slot[v];
             if s == NONE || *f == Vec3::ZERO {
                 continue;
@@ -227,6 +270,43 @@ impl Backend for Precomputed {
             };
         }
         self.work = u;
+    }
+}
+
+/// The response of all `n` vertices to a unit force along `a` on surface vertex `s`.
+fn response(responses: &[Vec3], n: usize, s: u32, a: usize) -> &[Vec3] {
+    let at = (3 * s as usize + a) * n;
+    &responses[at..at + n]
+}
+
+impl Backend for Precomputed {
+    fn name(&self) -> &'static str {
+        "precomputed"
+    }
+    fn model(&self) -> &ElasticModel {
+        &self.model
+    }
+    fn dt_s(&self) -> Real {
+        self.dt_s
+    }
+
+    fn step(&mut self) {
+        self.clear_contact_forces();
+        self.step_static();
+    }
+
+    fn integrates_contact(&self) -> bool {
+        true
+    }
+
+    fn step_with_contact(
+        &mut self,
+        field: &mut crate::contact::ContactField,
+        _resample_every_s: Real,
+        _resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+    ) {
+        // Static: one solve a step, nothing to re-select within it.
+        self.step_with_penalty(field);
     }
 
     fn displacement(&self, v: VertexId) -> Vec3 {

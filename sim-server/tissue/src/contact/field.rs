@@ -267,6 +267,14 @@ impl ContactField {
         self.force_sum_n.fill(Vec3::ZERO);
     }
 
+    /// Forgets the reactions summed so far in this step: a solver that
+    /// evaluates the springs several times in a step (the precomputed
+    /// backend's Newton iterations) reports its last evaluation only.
+    pub(crate) fn restart_report(&mut self) {
+        self.evaluations = 0;
+        self.force_sum_n.fill(Vec3::ZERO);
+    }
+
     /// Drops the points (within a step, before they are selected again);
     /// the parts and the step's reactions stay.
     pub fn clear_points(&mut self) {

@@ -146,6 +146,16 @@ pub enum ContactError {
         /// The backend's name.
         backend: &'static str,
     },
+    /// A tool asks for friction on a static backend.
+    #[error(
+        "tool {tool:?} has friction, whose stick-slip springs follow the tissue's motion between steps; the {backend} backend is static (it solves each step's equilibrium, with no motion between): remove friction_static/friction_dynamic or use the tensor-mass backend"
+    )]
+    FrictionStatic {
+        /// The tool's name.
+        tool: String,
+        /// The backend's name.
+        backend: &'static str,
+    },
     /// A tool's friction coefficients are out of range.
     #[error("tool {tool:?}: {why}")]
     BadFriction {

@@ -84,7 +84,12 @@ impl Tools {
                 });
             }
             Some(law) => law,
-            None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
+            // The static backend (precomputed) solves the penalty law when
+            // asked: a Newton solve a step, so the paper's cheap law stays
+            // its default (README, contact laws).
+            None if sim.integrates_contact() && sim.dynamic() && !decls.is_empty() => {
+                ContactLaw::Penalty
+            }
             None => ContactLaw::Projection,
         };
         // The penalty law's springs only (the projection law reads no factor).
@@ -97,13 +102,19 @@ impl Tools {
                 max: MAX_IMPLICIT_STIFFNESS_FACTOR,
             });
         }
-        if law == ContactLaw::Projection
-            && let Some(d) = decls.iter().find(|d| d.friction.is_active())
-        {
-            return Err(ContactError::FrictionUnsupported {
-                tool: d.name.clone(),
-                backend: sim.name(),
-            });
+        if let Some(d) = decls.iter().find(|d| d.friction.is_active()) {
+            if law == ContactLaw::Projection {
+                return Err(ContactError::FrictionUnsupported {
+                    tool: d.name.clone(),
+                    backend: sim.name(),
+                });
+            }
+            if !sim.dynamic() {
+                return Err(ContactError::FrictionStatic {
+                    tool: d.name.clone(),
+                    backend: sim.name(),
+                });
+            }
         }
         let mut tools = Self::build(decls, sim.model(), law, config);
         if law == ContactLaw::Penalty {

@@ -1,0 +1,146 @@
+//! The penalty contact on the precomputed (static) backend: the same
+//! static forces as the explicit backend settled, a probe over a cell's
+//! centre feels the tissue (the projection law misses it), the law is the
+//! scene's choice there (projection by default), and friction is refused.
+
+use sim_server::backend::{Backend, Precomputed};
+use sim_server::contact::{ContactError, ContactLaw, ToolInput};
+use sim_server::prelude::*;
+use sim_server::prepare::{PrepareError, Prepared, prepare, prepare_with};
+use sim_server::scene::{BuiltScene, SceneSource, build_scene};
+use std::path::PathBuf;
+
+/// A 24 x 24 x 20 mm block on `cell_m` cells, bottom fixed, a 2.5 mm probe
+/// over (x, y); `extra` appended.
+fn block(cell_m: f64, x: f64, y: f64, extra: &str) -> BuiltScene {
+    let text = format!(
+        r#"
+[mesh]
+generate = {{ shape = "box", size_m = [0.024, 0.024, 0.02], cell_m = {cell_m} }}
+[material]
+young_pa = 5000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 40.0
+[[fixed]]
+name = "bottom"
+select = {{ box_m = [[-0.001, -0.001, -0.001], [0.025, 0.025, 0.0001]] }}
+[[tool]]
+name = "probe"
+kind = "hook"
+fulcrum_m = [{x}, {y}, 0.15]
+length_m = 0.3
+radius_m = 0.0025
+tip_length_m = 0.01
+{extra}
+"#
+    );
+    let src = SceneSource {
+        name: "<block>".into(),
+        dir: PathBuf::from("."),
+        text,
+    };
+    build_scene(&src, &src.parse().unwrap()).unwrap()
+}
+
+fn precomputed(
+    scene: BuiltScene,
+) -> Result<Prepared<Precomputed>, PrepareError<sim_server::backend::PrecomputedError>> {
+    let fixed = scene.fixed.clone();
+    prepare_with(scene, Some(1e-3), |model, _, dt_s| {
+        Precomputed::new(model, &fixed, dt_s, None, |_, _| {})
+    })
+}
+
+/// Presses the probe at (x, y) to each of `depths_m` below the top at
+/// 10 mm/s and holds 1.5 s there; the force at the end of each hold.
+fn press<B: Backend>(p: &mut Prepared<B>, x: f64, y: f64, depths_m: &[f64]) -> Vec<Vec3> {
+    let top = 0.02 + 0.0025;
+    let mut at = |d: f64| {
+        let input = [Some(ToolInput {
+            tip_m: Vec3::new(x, y, top - d),
+            jaw_opening: 1.0,
+        })];
+        p.tools.update(&mut p.sim, &input);
+        p.tools.step(&mut p.sim);
+        p.tools.reaction(0, &p.sim).force_n
+    };
+    for _ in 0..300 {
+        at(-0.002);
+    }
+    let mut depth: f64 = 0.0;
+    depths_m
+        .iter()
+        .map(|&target| {
+            while (target - depth).abs() > 1e-12 {
+                depth += (target - depth).clamp(-1e-5, 1e-5);
+                at(depth);
+            }
+            let mut f = Vec3::ZERO;
+            for _ in 0..1500 {
+                f = at(depth);
+            }
+            f
+        })
+        .collect()
+}
+
+#[test]
+fn the_static_penalty_contact_settles_where_the_explicit_one_does() {
+    let penalty = "[contact]\nlaw = \"penalty\"\n";
+    let depths = [0.001, 0.002, 0.004];
+    let mut dynamic = prepare::<f64>(block(0.0025, 0.012, 0.012, penalty), Some(1e-3)).unwrap();
+    let settled = press(&mut dynamic, 0.012, 0.012, &depths);
+    let mut p = precomputed(block(0.0025, 0.012, 0.012, penalty)).unwrap();
+    assert_eq!(p.tools.law(), ContactLaw::Penalty);
+    let solved = press(&mut p, 0.012, 0.012, &depths);
+    for ((a, b), d) in settled.iter().zip(&solved).zip(depths) {
+        assert!(a.z > 0.01, "{a} at {d}");
+        assert!(
+            (*a - *b).length() < 2e-3 * a.length(),
+            "{d} m: explicit settled {a} N, precomputed {b} N"
+        );
+    }
+}
+
+#[test]
+fn a_probe_over_a_cell_s_centre_feels_the_static_penalty_contact() {
+    // 4.8 mm cells: (12, 12) mm is a cell's centre, 3.4 mm from every
+    // vertex, beyond the probe's 2.5 mm: the projection law's hit test
+    // finds no vertex and the probe goes through.
+    let projection = press(
+        &mut precomputed(block(0.005, 0.012, 0.012, "")).unwrap(),
+        0.012,
+        0.012,
+        &[0.002],
+    );
+    let penalty = press(
+        &mut precomputed(block(0.005, 0.012, 0.012, "[contact]\nlaw = \"penalty\"\n")).unwrap(),
+        0.012,
+        0.012,
+        &[0.002],
+    );
+    assert_eq!(
+        projection[0],
+        Vec3::ZERO,
+        "the projection law: {}",
+        projection[0]
+    );
+    assert!(penalty[0].z > 0.05, "the penalty law: {}", penalty[0]);
+}
+
+#[test]
+fn friction_is_refused_on_the_static_backend() {
+    let scene = block(
+        0.005,
+        0.012,
+        0.012,
+        "friction_static = 0.5\n[contact]\nlaw = \"penalty\"\n",
+    );
+    let err = precomputed(scene).err().expect("refused");
+    let PrepareError::Contact(ContactError::FrictionStatic { tool, backend }) = &err else {
+        panic!("{err}");
+    };
+    assert_eq!((tool.as_str(), *backend), ("probe", "precomputed"));
+    assert!(err.to_string().contains("static"), "{err}");
+}

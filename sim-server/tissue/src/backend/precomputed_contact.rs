@@ -1,0 +1,284 @@
+//! The penalty contact on the precomputed backend: the static equilibrium
+//! of the tissue and the contact springs, solved every step on the
+//! precomputed responses (where the paper's projection law used to be the
+//! only one here, and missed a tool between vertices).
+//!
+//! The backend is a linear static map S from the surface forces to the
+//! displacements (its responses T, with the tools' holds). With the penalty
+//! springs' forces f(u) on the contact vertices C, a step finds u with
+//! u = S(f(u)): Newton on the contact vertices' displacements,
+//!
+//! ```text
+//! (I + T_CC H) delta = -(u_C - S(f(u))_C),
+//! ```
+//!
+//! H the springs' Hessian (each point's k n n^T spread over its triangle),
+//! T_CC the responses of the contact vertices to each other (read from the
+//! precomputed responses, no solve): the contact problem on the compliance
+//! W = T_CC that SOFA's constraint solvers and LCPForceFeedback pose
+//! (Duriez et al. 2006, Saupin et al. 2008), here with the penalty law's
+//! springs instead of complementarity. Each iteration evaluates the springs
+//! and applies S once (the holds included, exactly); the Jacobian leaves
+//! out the holds' coupling and the turning of the normal round the tool,
+//! which slows convergence where they matter but not the fixed point it
+//! converges to. The last S(f(u)) is the step's state and its springs the
+//! tools' reactions. Static: no damping (no velocity), and no friction (its
+//! springs need the motion between sub-steps; a scene asking for it here is
+//! refused).
+
+use super::Backend;
+use super::precomputed::Precomputed;
+use crate::contact::ContactField;
+use crate::math::{Real, Vec3};
+
+/// Newton iterations at most per step.
+const MAX_ITERATIONS: usize = 12;
+/// Converged when no contact vertex moves more than this (m).
+const TOLERANCE_M: Real = 1e-10;
+/// Contact vertices beyond which the Jacobian keeps only its diagonal
+/// blocks (a dense solve of 3 x this many unknowns costs about a
+/// millisecond).
+const DENSE_LIMIT: usize = 150;
+
+/// Scratch of the contact solve (buffers reused across steps).
+#[derive(Default)]
+pub(super) struct ContactSolve {
+    /// Per vertex: the contact force of this iteration (N).
+    force: Vec<[Real; 3]>,
+    /// Per vertex: its slot among the contact vertices, `u32::MAX` if none.
+    slot: Vec<u32>,
+    /// The contact vertices.
+    vertices: Vec<u32>,
+    /// Their displacements at this iteration's evaluation.
+    u_at: Vec<Vec3>,
+    /// The Newton system (row-major, 3c x 3c) and its right side.
+    jacobian: Vec<Real>,
+    rhs: Vec<Real>,
+    /// H per contact-vertex pair, summed over points (3c x 3c, row-major).
+    hessian: Vec<Real>,
+    /// Newton iterations of the last step.
+    pub iterations: usize,
+}
+
+impl Precomputed {
+    /// One step under the penalty contact `field` (see the module docs).
+    pub(super) fn step_with_penalty(&mut self, field: &mut ContactField) {
+        let n = self.vertex_len();
+        let mut cs = std::mem::take(&mut self.contact);
+        if cs.force.len() != n {
+            cs.force = vec![[0.0; 3]; n];
+            cs.slot = vec![u32::MAX; n];
+        }
+        cs.iterations = 0;
+        if field.is_idle() {
+            self.clear_contact_forces();
+            self.step_static();
+        } else {
+            // Warm: from the last step's contact forces (its equilibrium,
+            // with this step's loads, holds and tool pose), where the free
+            // solution would start the press's whole depth away.
+            self.step_static();
+            self.solve_contact(field, &mut cs);
+        }
+        self.contact = cs;
+    }
+
+    fn solve_contact(&mut self, field: &mut ContactField, cs: &mut ContactSolve) {
+        for k in 0..MAX_ITERATIONS {
+            cs.iterations = k + 1;
+            field.restart_report();
+            let (rest, u) = (self.model().mesh().positions_m(), self.displacements());
+            field.static_forces(rest, u, &mut cs.force);
+            self.gather_contact_vertices(field, cs);
+            // S(f(u)): the forces on the loadable contact vertices.
+            self.set_contact_forces(&cs.vertices, &cs.force);
+            for (s, &v) in cs.vertices.iter().enumerate() {
+                cs.u_at[s] = self.displacement_of(v);
+            }
+            self.step_static();
+            let c = cs.vertices.len();
+            if c == 0 {
+                break;
+            }
+            // Residual r = u_C - S(f(u))_C.
+            let mut worst: Real = 0.0;
+            cs.rhs.clear();
+            for (s, &v) in cs.vertices.iter().enumerate() {
+                let r = cs.u_at[s] - self.displacement_of(v);
+                worst = worst.max(r.abs().max_element());
+                cs.rhs.extend_from_slice(&[-r.x, -r.y, -r.z]);
+            }
+            if worst <= TOLERANCE_M || k + 1 == MAX_ITERATIONS {
+                break;
+            }
+            self.assemble_jacobian(field, cs);
+            solve_dense(&mut cs.jacobian, &mut cs.rhs, 3 * c);
+            // A step longer than the residual itself overshoots where the
+            // contact set changes within it: at most the residual's size.
+            let step = cs.rhs.iter().fold(0.0 as Real, |m, x| m.max(x.abs()));
+            if step > worst {
+                let scale = worst / step;
+                cs.rhs.iter_mut().for_each(|x| *x *= scale);
+            }
+            // The next iterate: u_C + delta, the rest at S(f(u)) (the
+            // springs read only their triangles' vertices).
+            for (s, &v) in cs.vertices.iter().enumerate() {
+                let d = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+                self.set_displacement(v, cs.u_at[s] + d);
+            }
+        }
+        for &v in &cs.vertices {
+            cs.slot[v as usize] = u32::MAX;
+        }
+    }
+
+    /// The loadable (free surface, not held) vertices of the acting points.
+    fn gather_contact_vertices(&self, field: &ContactField, cs: &mut ContactSolve) {
+        for &v in &cs.vertices {
+            cs.slot[v as usize] = u32::MAX;
+        }
+        cs.vertices.clear();
+        for (i, p) in field.points().iter().enumerate() {
+            if field.penetrations_m()[i] <= 0.0 {
+                continue;
+            }
+            for v in p.vertices {
+                let vi = v as usize;
+                if cs.slot[vi] == u32::MAX && self.loadable(vi) {
+                    cs.slot[vi] = cs.vertices.len() as u32;
+                    cs.vertices.push(v);
+                }
+            }
+        }
+        cs.u_at.clear();
+        cs.u_at.resize(cs.vertices.len(), Vec3::ZERO);
+    }
+
+    /// J = I + T_CC H over the contact vertices (only H's diagonal blocks
+    /// beyond [`DENSE_LIMIT`] vertices).
+    fn assemble_jacobian(&self, field: &ContactField, cs: &mut ContactSolve) {
+        let c = cs.vertices.len();
+        let m = 3 * c;
+        let dense = c <= DENSE_LIMIT;
+        cs.hessian.clear();
+        cs.hessian.resize(m * m, 0.0);
+        let hessians = field.spring_hessians();
+        for (i, p) in field.points().iter().enumerate() {
+            if field.penetrations_m()[i] <= 0.0 {
+                continue;
+            }
+            let g = hessians[i];
+            for a in 0..3 {
+                let sa = cs.slot[p.vertices[a] as usize];
+                if sa == u32::MAX {
+                    continue;
+                }
+                for b in 0..3 {
+                    let sb = cs.slot[p.vertices[b] as usize];
+                    if sb == u32::MAX || (!dense && sa != sb) {
+                        continue;
+                    }
+                    let w = p.weights[a] * p.weights[b];
+                    for r in 0..3 {
+                        for q in 0..3 {
+                            cs.hessian[(3 * sa as usize + r) * m + 3 * sb as usize + q] +=
+                                w * g.col(q)[r];
+                        }
+                    }
+                }
+            }
+        }
+        cs.jacobian.clear();
+        cs.jacobian.resize(m * m, 0.0);
+        for i in 0..m {
+            cs.jacobian[i * m + i] = 1.0;
+        }
+        // J[(s, r), :] += sum over (t, q) of T[(s, r), (t, q)] H[(t, q), :],
+        // T[(s, r), (t, q)] the displacement along r of vertex s under a
+        // unit force along q on vertex t.
+        for t in 0..c {
+            for q in 0..3 {
+                let column = self.response_of(cs.vertices[t], q);
+                let row_h = &cs.hessian[(3 * t + q) * m..(3 * t + q + 1) * m];
+                if row_h.iter().all(|x| *x == 0.0) {
+                    continue;
+                }
+                for s in 0..c {
+                    let d = column[cs.vertices[s] as usize];
+                    for r in 0..3 {
+                        let coef = d[r];
+                        if coef == 0.0 {
+                            continue;
+                        }
+                        let row = &mut cs.jacobian[(3 * s + r) * m..(3 * s + r + 1) * m];
+                        for (j, h) in row.iter_mut().zip(row_h) {
+                            *j += coef * h;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Solves a x = b in place (`a` row-major m x m, destroyed; `b` becomes x)
+/// by Gaussian elimination with partial pivoting; a singular pivot leaves
+/// that unknown at zero.
+fn solve_dense(a: &mut [Real], b: &mut [Real], m: usize) {
+    for col in 0..m {
+        let pivot = (col..m)
+            .max_by(|&i, &j| a[i * m + col].abs().total_cmp(&a[j * m + col].abs()))
+            .unwrap_or(col);
+        if a[pivot * m + col].abs() < 1e-300 {
+            continue;
+        }
+        if pivot != col {
+            for k in 0..m {
+                a.swap(pivot * m + k, col * m + k);
+            }
+            b.swap(pivot, col);
+        }
+        let p = a[col * m + col];
+        for row in col + 1..m {
+            let f = a[row * m + col] / p;
+            if f == 0.0 {
+                continue;
+            }
+            for k in col..m {
+                a[row * m + k] -= f * a[col * m + k];
+            }
+            b[row] -= f * b[col];
+        }
+    }
+    for col in (0..m).rev() {
+        let p = a[col * m + col];
+        if p.abs() < 1e-300 {
+            b[col] = 0.0;
+            continue;
+        }
+        let mut s = b[col];
+        for k in col + 1..m {
+            s -= a[col * m + k] * b[k];
+        }
+        b[col] = s / p;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::solve_dense;
+
+    #[test]
+    fn the_dense_solve_solves_a_system_that_needs_pivoting() {
+        // A zero first pivot: the rows must be exchanged.
+        let mut a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let x = [1.0, 2.0, 3.0];
+        let mut b: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| a[i * 3 + j] * x[j]).sum())
+            .collect();
+        solve_dense(&mut a, &mut b, 3);
+        for (got, want) in b.iter().zip(x) {
+            assert!((got - want).abs() < 1e-12, "{b:?}");
+        }
+    }
+}
