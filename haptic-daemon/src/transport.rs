@@ -17,6 +17,10 @@ use thiserror::Error;
 /// How often dead peers' resources are removed (shared memory).
 const REAP_EVERY: Duration = Duration::from_millis(20);
 
+/// How long [`Transport::scene_now`] waits for a simulation's scene stream
+/// once its force stream is open.
+const SCENE_STREAM_WAIT: Duration = Duration::from_millis(100);
+
 /// Force samples a remote daemon's ring holds (64 ms at 1 kHz).
 const REMOTE_FORCE_RING: usize = 64;
 /// Contact problems a remote daemon's ring holds (problems come at most
@@ -104,24 +108,32 @@ impl Transport {
     /// within `wait` (it publishes it once at start and keeps it for
     /// clients that join later); `None` at once when no simulation is
     /// there (nobody publishes the stream; remotely: no bridge with a
-    /// simulation behind it).
+    /// simulation behind it). On shared memory a simulation opens its
+    /// force stream just before its scene stream: with only the former
+    /// there, the scene stream is waited for [`SCENE_STREAM_WAIT`] (a
+    /// client publishing forces without a scene, as the tests' stand-ins
+    /// do, costs the daemon no more).
     pub fn scene_now(
         &self,
         session: &SessionName,
         wait: Duration,
     ) -> Result<Option<SceneInfo>, TransportError> {
+        let start = std::time::Instant::now();
         let (mut source, _node) = match self {
             Transport::Shm => {
                 let n = services::node("haptic-daemon-scene")?;
                 let service = services::scene_service(&n, session)?;
-                // A simulation opens its force stream just before its
-                // scene stream: either says it is there (and the scene is
-                // delivered from its history).
                 let force = services::force_service(&n, session)?;
-                if services::publisher_count(&service) == 0
-                    && services::publisher_count(&force) == 0
-                {
-                    return Ok(None);
+                loop {
+                    if services::publisher_count(&service) > 0 {
+                        break;
+                    }
+                    if services::publisher_count(&force) == 0
+                        || start.elapsed() >= SCENE_STREAM_WAIT
+                    {
+                        return Ok(None);
+                    }
+                    std::thread::sleep(Duration::from_millis(2));
                 }
                 (Source::Shm(services::subscriber(&service)?), Some(n))
             }
@@ -133,7 +145,6 @@ impl Transport {
                 (Source::Remote(inbox), None)
             }
         };
-        let start = std::time::Instant::now();
         loop {
             if let Some(info) = source.pop() {
                 return Ok(Some(info));
