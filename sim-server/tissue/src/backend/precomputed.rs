@@ -57,6 +57,8 @@ pub struct Precomputed {
     /// `contact_loaded` (zero elsewhere; [`super::precomputed_contact`]).
     contact_n: Vec<Vec3>,
     contact_loaded: Vec<u32>,
+    /// The loads' part of a contact step's solution ([`Precomputed::prepare_rows`]).
+    u_ext: Vec<Vec3>,
     /// The contact solve's scratch.
     pub(super) contact: super::precomputed_contact::ContactSolve,
     /// Whether the last load came from the disk cache.
@@ -147,6 +149,7 @@ impl Precomputed {
             work: Vec::new(),
             contact_n: vec![Vec3::ZERO; n],
             contact_loaded: Vec::new(),
+            u_ext: Vec::new(),
             contact: Default::default(),
             from_cache,
         })
@@ -213,6 +216,81 @@ impl Precomputed {
         }
     }
 
+    /// The external loads' part of the solution (all vertices), for
+    /// [`Precomputed::step_rows`] through this step, and the holds'
+    /// factorisation brought up to date.
+    pub(super) fn prepare_rows(&mut self) {
+        let n = self.u.len();
+        self.u_ext.clear();
+        self.u_ext.resize(n, Vec3::ZERO);
+        for (v, f) in self.fext.iter().enumerate() {
+            let s = self.slot[v];
+            if s == NONE || *f == Vec3::ZERO {
+                continue;
+            }
+            for a in 0..3 {
+                if f[a] != 0.0 {
+                    let r = response(&self.responses, n, s, a);
+                    for (o, r) in self.u_ext.iter_mut().zip(r) {
+                        *o += f[a] * *r;
+                    }
+                }
+            }
+        }
+        self.refresh_holds();
+    }
+
+    /// [`Precomputed::step_static`] at `rows` only (the other vertices keep
+    /// their displacements): the loads of [`Precomputed::prepare_rows`],
+    /// the contact forces and the holds, the holds' forces solved exactly.
+    pub(super) fn step_rows(&mut self, rows: &[u32]) {
+        let n = self.u.len();
+        let (responses, slot, surface) = (&self.responses, &self.slot, &self.surface);
+        let (contact_n, loaded, u_ext) = (&self.contact_n, &self.contact_loaded, &self.u_ext);
+        let free = |v: usize| {
+            let mut u = u_ext[v];
+            for &c in loaded {
+                let (f, s) = (contact_n[c as usize], slot[c as usize]);
+                for a in 0..3 {
+                    u += f[a] * response(responses, n, s, a)[v];
+                }
+            }
+            u
+        };
+        self.applied.clear();
+        let (held, applied) = (&self.held, &mut self.applied);
+        self.holds.solve(
+            |s| {
+                let v = surface[s as usize].idx();
+                held[v].unwrap_or(Vec3::ZERO) - free(v)
+            },
+            |s, f| applied.push((s, f)),
+        );
+        for &v in rows {
+            let v = v as usize;
+            let u = match held[v] {
+                Some(d) => d,
+                None => (self.applied.iter()).fold(free(v), |u, &(s, f)| {
+                    (0..3).fold(u, |u, b| u + f[b] * response(responses, n, s, b)[v])
+                }),
+            };
+            self.u[v] = u.to_array();
+        }
+    }
+
+    fn refresh_holds(&mut self) {
+        if self.holds.is_dirty() {
+            let n = self.u.len();
+            let (surface, responses, slot) = (&self.surface, &self.responses, &self.slot);
+            let held = (self.held.iter().enumerate())
+                .filter(|(v, h)| h.is_some() && slot[*v] != NONE)
+                .map(|(v, _)| slot[v]);
+            self.holds.refresh(held, |i, j, b| {
+                response(responses, n, j, b)[surface[i as usize].idx()]
+            });
+        }
+    }
+
     /// The static solution for the loads, the contact forces and the holds.
     pub(super) fn step_static(&mut self) {
         let n = self.u.len();
@@ -237,16 +315,8 @@ impl Precomputed {
                 }
             }
         }
+        self.refresh_holds();
         let (surface, responses) = (&self.surface, &self.responses);
-        if self.holds.is_dirty() {
-            let slot = &self.slot;
-            let held = (self.held.iter().enumerate())
-                .filter(|(v, h)| h.is_some() && slot[*v] != NONE)
-                .map(|(v, _)| slot[v]);
-            self.holds.refresh(held, |i, j, b| {
-                response(responses, n, j, b)[surface[i as usize].idx()]
-            });
-        }
         self.applied.clear();
         let (held, applied) = (&self.held, &mut self.applied);
         self.holds.solve(

@@ -18,7 +18,8 @@
 //! W = T_CC that SOFA's constraint solvers and LCPForceFeedback pose
 //! (Duriez et al. 2006, Saupin et al. 2008), here with the penalty law's
 //! springs instead of complementarity. Each iteration evaluates the springs
-//! and applies S once (the holds included, exactly); the Jacobian leaves
+//! and applies S at the points' vertices only (the holds included,
+//! exactly), the whole body once at the end of the step; the Jacobian leaves
 //! out the holds' coupling and the turning of the normal round the tool,
 //! which slows convergence where they matter but not the fixed point it
 //! converges to. The last S(f(u)) is the step's state and its springs the
@@ -56,8 +57,27 @@ pub(super) struct ContactSolve {
     rhs: Vec<Real>,
     /// H per contact-vertex pair, summed over points (3c x 3c, row-major).
     hessian: Vec<Real>,
+    /// The vertices of the step's contact points (each once).
+    rows: Vec<u32>,
     /// Newton iterations of the last step.
     pub iterations: usize,
+}
+
+/// The vertices of `field`'s points, each once, into `cs.rows` (the slots
+/// left clean).
+fn gather_rows(field: &ContactField, cs: &mut ContactSolve) {
+    cs.rows.clear();
+    for p in field.points() {
+        for v in p.vertices {
+            if cs.slot[v as usize] == u32::MAX {
+                cs.slot[v as usize] = 0;
+                cs.rows.push(v);
+            }
+        }
+    }
+    for &v in &cs.rows {
+        cs.slot[v as usize] = u32::MAX;
+    }
 }
 
 impl Precomputed {
@@ -76,9 +96,14 @@ impl Precomputed {
         } else {
             // Warm: from the last step's contact forces (its equilibrium,
             // with this step's loads, holds and tool pose), where the free
-            // solution would start the press's whole depth away.
-            self.step_static();
+            // solution would start the press's whole depth away. The
+            // iterations need the springs' vertices only; the whole body
+            // once, at the end.
+            self.prepare_rows();
+            gather_rows(field, &mut cs);
+            self.step_rows(&cs.rows);
             self.solve_contact(field, &mut cs);
+            self.step_static();
         }
         self.contact = cs;
     }
@@ -95,7 +120,7 @@ impl Precomputed {
             for (s, &v) in cs.vertices.iter().enumerate() {
                 cs.u_at[s] = self.displacement_of(v);
             }
-            self.step_static();
+            self.step_rows(&cs.rows);
             let c = cs.vertices.len();
             if c == 0 {
                 break;
