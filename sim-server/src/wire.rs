@@ -148,29 +148,30 @@ pub const LOCAL_EVERY_S: f64 = 0.008;
 
 /// The contact problem of tool `tool` the wire can carry: points
 /// [`LOCAL_MARGIN_M`] beyond the step's reach, within the message's
-/// capacity, with the tissue's inertia, at most one every
-/// [`LOCAL_EVERY_S`].
-pub fn local_spec(tool: usize) -> LocalSpec {
+/// capacity, with the tissue's inertia when the backend has any
+/// (`dynamic`; a static one's problems are quasi-static, as it is), at
+/// most one every [`LOCAL_EVERY_S`].
+pub fn local_spec(tool: usize, dynamic: bool) -> LocalSpec {
     LocalSpec {
         tool,
         margin_m: LOCAL_MARGIN_M,
         max_vertices: LOCAL_MAX_VERTICES,
         max_points: LOCAL_MAX_POINTS,
-        inertia: true,
+        inertia: dynamic,
         every_s: LOCAL_EVERY_S,
     }
 }
 
 /// Tool `tool`'s contact problem after the last step into `lc`, now, as
-/// the wire can carry it (with the inertia); false when there is none
-/// (see [`Tools::local_contact`]).
+/// the wire can carry it (with the inertia of a dynamic backend); false
+/// when there is none (see [`Tools::local_contact`]).
 pub fn local_contact_into<B: Backend>(
     tools: &mut Tools,
     sim: &B,
     tool: usize,
     lc: &mut LocalContact,
 ) -> bool {
-    tools.local_contact(sim, local_spec(tool), lc)
+    tools.local_contact(sim, local_spec(tool, sim.dynamic()), lc)
 }
 
 #[cfg(test)]

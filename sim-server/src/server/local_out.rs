@@ -29,6 +29,9 @@ pub struct LocalOut {
     state_times_ns: [u64; STEP_TIMES],
     /// `seq` of the newest force message.
     last_seq: u64,
+    /// Whether the backend has inertia (its problems carry it; a static
+    /// backend's are quasi-static).
+    dynamic: bool,
     /// Problems published.
     pub published: u64,
     /// Problems that could not be published, or were too old to be (a
@@ -38,12 +41,13 @@ pub struct LocalOut {
 
 impl LocalOut {
     /// Opens the stream in `session`.
-    pub fn new(node: &IpcNode, session: &SessionName) -> Result<Self, RunError> {
+    pub fn new(node: &IpcNode, session: &SessionName, dynamic: bool) -> Result<Self, RunError> {
         let factory = services::local_contact_service(node, session)?;
         let publisher = services::publisher(&factory)?;
         Ok(Self {
             factory,
             publisher,
+            dynamic,
             wanted: false,
             checked_ns: 0,
             state_times_ns: [0; STEP_TIMES],
@@ -73,7 +77,7 @@ impl LocalOut {
             let wanted = !tools.is_empty() && services::subscriber_count(&self.factory) > 0;
             if wanted != self.wanted {
                 self.wanted = wanted;
-                tools.set_local_contact(wanted.then(|| local_spec(0)));
+                tools.set_local_contact(wanted.then(|| local_spec(0, self.dynamic)));
             }
         }
         self.publish_ready(tools);

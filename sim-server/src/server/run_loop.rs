@@ -114,7 +114,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             });
         }
         let force_pub = services::publisher(&force_service)?;
-        let local_out = LocalOut::new(&node, &cfg.session)?;
+        let local_out = LocalOut::new(&node, &cfg.session, sim.dynamic())?;
         let n = sim.model().vertex_count();
         let max_tris = 4 * sim.model().mesh().tet_count();
         let recorder = match &cfg.save_frames {
