@@ -137,7 +137,11 @@ impl Precomputed {
                 break;
             }
             self.assemble_jacobian(field, cs);
-            solve_dense(&mut cs.jacobian, &mut cs.rhs, 3 * c);
+            if !crate::math::solve_in_place(&mut cs.jacobian, &mut cs.rhs, 3 * c, 1) {
+                // A singular Jacobian (round-off only: I + T H with T and H
+                // positive): keep S(f(u)), the consistent state.
+                break;
+            }
             // A step longer than the residual itself overshoots where the
             // contact set changes within it: at most the residual's size.
             let step = cs.rhs.iter().fold(0.0 as Real, |m, x| m.max(x.abs()));
@@ -247,68 +251,6 @@ impl Precomputed {
                     }
                 }
             }
-        }
-    }
-}
-
-/// Solves a x = b in place (`a` row-major m x m, destroyed; `b` becomes x)
-/// by Gaussian elimination with partial pivoting; a singular pivot leaves
-/// that unknown at zero.
-fn solve_dense(a: &mut [Real], b: &mut [Real], m: usize) {
-    for col in 0..m {
-        let pivot = (col..m)
-            .max_by(|&i, &j| a[i * m + col].abs().total_cmp(&a[j * m + col].abs()))
-            .unwrap_or(col);
-        if a[pivot * m + col].abs() < 1e-300 {
-            continue;
-        }
-        if pivot != col {
-            for k in 0..m {
-                a.swap(pivot * m + k, col * m + k);
-            }
-            b.swap(pivot, col);
-        }
-        let p = a[col * m + col];
-        for row in col + 1..m {
-            let f = a[row * m + col] / p;
-            if f == 0.0 {
-                continue;
-            }
-            for k in col..m {
-                a[row * m + k] -= f * a[col * m + k];
-            }
-            b[row] -= f * b[col];
-        }
-    }
-    for col in (0..m).rev() {
-        let p = a[col * m + col];
-        if p.abs() < 1e-300 {
-            b[col] = 0.0;
-            continue;
-        }
-        let mut s = b[col];
-        for k in col + 1..m {
-            s -= a[col * m + k] * b[k];
-        }
-        b[col] = s / p;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::solve_dense;
-
-    #[test]
-    fn the_dense_solve_solves_a_system_that_needs_pivoting() {
-        // A zero first pivot: the rows must be exchanged.
-        let mut a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
-        let x = [1.0, 2.0, 3.0];
-        let mut b: Vec<f64> = (0..3)
-            .map(|i| (0..3).map(|j| a[i * 3 + j] * x[j]).sum())
-            .collect();
-        solve_dense(&mut a, &mut b, 3);
-        for (got, want) in b.iter().zip(x) {
-            assert!((got - want).abs() < 1e-12, "{b:?}");
         }
     }
 }

@@ -290,7 +290,7 @@ impl Solver {
         }
         self.x.clear();
         self.x.extend_from_slice(&self.b);
-        if !solve_in_place(&mut self.m, &mut self.x, nv, 3) {
+        if !crate::math::solve_in_place(&mut self.m, &mut self.x, nv, 3) {
             return a;
         }
         let mut k = a;
@@ -396,74 +396,4 @@ fn build(model: &ElasticModel, held: &[VertexId]) -> Option<Factorized> {
         }
     }
     Factorized::new(model, &d).ok()
-}
-
-/// Solves M X = B in place (M n x n row-major, B n x k row-major, X
-/// written into B) by Gaussian elimination with partial pivoting; false if
-/// M is singular. Hand-written because it runs every step on buffers kept
-/// across steps (a dense crate's LU would allocate its factors each time),
-/// for n of a few tens.
-fn solve_in_place(m: &mut [Real], b: &mut [Real], n: usize, k: usize) -> bool {
-    for col in 0..n {
-        let pivot = (col..n)
-            .max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))
-            .unwrap_or(col);
-        if m[pivot * n + col].abs() < 1e-300 {
-            return false;
-        }
-        if pivot != col {
-            for j in 0..n {
-                m.swap(col * n + j, pivot * n + j);
-            }
-            for j in 0..k {
-                b.swap(col * k + j, pivot * k + j);
-            }
-        }
-        let d = m[col * n + col];
-        for i in col + 1..n {
-            let f = m[i * n + col] / d;
-            if f == 0.0 {
-                continue;
-            }
-            for j in col..n {
-                m[i * n + j] -= f * m[col * n + j];
-            }
-            for j in 0..k {
-                b[i * k + j] -= f * b[col * k + j];
-            }
-        }
-    }
-    for col in (0..n).rev() {
-        let d = m[col * n + col];
-        for j in 0..k {
-            let mut x = b[col * k + j];
-            for i in col + 1..n {
-                x -= m[col * n + i] * b[i * k + j];
-            }
-            b[col * k + j] = x / d;
-        }
-    }
-    true
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn gaussian_elimination_solves_a_pivoting_system() {
-        // The first pivot is zero: partial pivoting must swap.
-        let mut m = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 2.0, 0.0, 3.0];
-        let x_true = [1.0, -2.0, 0.5];
-        let a = m.clone();
-        let mut b: Vec<Real> = (0..3)
-            .map(|i| (0..3).map(|j| a[i * 3 + j] * x_true[j]).sum())
-            .collect();
-        assert!(solve_in_place(&mut m, &mut b, 3, 1));
-        for (x, t) in b.iter().zip(x_true) {
-            assert!((x - t).abs() < 1e-12, "{b:?}");
-        }
-        let mut singular = vec![1.0, 2.0, 2.0, 4.0];
-        assert!(!solve_in_place(&mut singular, &mut [1.0, 1.0], 2, 1));
-    }
 }
