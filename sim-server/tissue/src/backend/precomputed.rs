@@ -170,12 +170,6 @@ impl Precomputed {
         response(&self.responses, self.u.len(), s, a)
     }
 
-    /// Newton iterations of the last step's contact solve (0 without
-    /// contact).
-    pub fn contact_iterations(&self) -> usize {
-        self.contact.iterations
-    }
-
     pub(super) fn vertex_len(&self) -> usize {
         self.u.len()
     }
@@ -367,6 +361,16 @@ impl Backend for Precomputed {
 
     fn integrates_contact(&self) -> bool {
         true
+    }
+
+    /// The penalty law's Newton iterations (0 without contact or under the
+    /// projection law), capped at the iteration limit short of the
+    /// tolerance.
+    fn linear_solve(&self) -> Option<super::SolveReport> {
+        Some(super::SolveReport {
+            iterations: self.contact.iterations,
+            capped: self.contact.capped,
+        })
     }
 
     fn step_with_contact(
