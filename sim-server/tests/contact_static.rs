@@ -94,6 +94,13 @@ fn the_static_penalty_contact_settles_where_the_explicit_one_does() {
     let mut p = precomputed(block(0.0025, 0.012, 0.012, penalty)).unwrap();
     assert_eq!(p.tools.law(), ContactLaw::Penalty);
     let solved = press(&mut p, 0.012, 0.012, &depths);
+    // Held still, the contact solve converges at once from the last step's
+    // forces, within the limit (the run summary's solve_* keys).
+    let report = p.sim.linear_solve().expect("the contact solve's report");
+    assert!(
+        (1..=2).contains(&report.iterations) && !report.capped,
+        "{report:?}"
+    );
     for ((a, b), d) in settled.iter().zip(&solved).zip(depths) {
         assert!(a.z > 0.01, "{a} at {d}");
         assert!(
