@@ -23,7 +23,10 @@
 //! out the holds' coupling and the turning of the normal round the tool,
 //! which slows convergence where they matter but not the fixed point it
 //! converges to. The last S(f(u)) is the step's state and its springs the
-//! tools' reactions. Static: no damping (no velocity), and no friction (its
+//! tools' reactions. Experimental: a step that ends at the iteration
+//! limit keeps its last iterate, which can be far from the solution (force
+//! spikes in 2 of 9 real-time liver runs; README); no line search guards
+//! it yet. Static: no damping (no velocity), and no friction (its
 //! springs need the motion between sub-steps; a scene asking for it here is
 //! refused).
 
