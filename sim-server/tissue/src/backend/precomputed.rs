@@ -217,20 +217,13 @@ impl Precomputed {
         let n = self.u.len();
         self.u_ext.clear();
         self.u_ext.resize(n, Vec3::ZERO);
-        for (v, f) in self.fext.iter().enumerate() {
-            let s = self.slot[v];
-            if s == NONE || *f == Vec3::ZERO {
-                continue;
-            }
-            for a in 0..3 {
-                if f[a] != 0.0 {
-                    let r = response(&self.responses, n, s, a);
-                    for (o, r) in self.u_ext.iter_mut().zip(r) {
-                        *o += f[a] * *r;
-                    }
-                }
-            }
-        }
+        let (responses, slot) = (&self.responses, &self.slot);
+        add_responses(
+            responses,
+            slot,
+            &mut self.u_ext,
+            self.fext.iter().enumerate(),
+        );
         self.refresh_holds();
     }
 
@@ -251,15 +244,8 @@ impl Precomputed {
             }
             u
         };
-        self.applied.clear();
-        let (held, applied) = (&self.held, &mut self.applied);
-        self.holds.solve(
-            |s| {
-                let v = surface[s as usize].idx();
-                held[v].unwrap_or(Vec3::ZERO) - free(v)
-            },
-            |s, f| applied.push((s, f)),
-        );
+        let held = &self.held;
+        solve_holds(&mut self.holds, held, surface, &mut self.applied, free);
         for &v in rows {
             let v = v as usize;
             let u = match held[v] {
@@ -291,35 +277,18 @@ impl Precomputed {
         let mut u = std::mem::take(&mut self.work);
         u.clear();
         u.resize(n, Vec3::ZERO);
-        let loads = (self.fext.iter().enumerate()).chain(
-            self.contact_loaded
-                .iter()
-                .map(|&v| (v as usize, &self.contact_n[v as usize])),
-        );
-        for (v, f) in loads {
-            let s = self.slot[v];
-            if s == NONE || *f == Vec3::ZERO {
-                continue;
-            }
-            for a in 0..3 {
-                if f[a] != 0.0 {
-                    for (o, r) in u.iter_mut().zip(self.response(s, a)) {
-                        *o += f[a] * *r;
-                    }
-                }
-            }
-        }
         self.refresh_holds();
-        let (surface, responses) = (&self.surface, &self.responses);
-        self.applied.clear();
-        let (held, applied) = (&self.held, &mut self.applied);
-        self.holds.solve(
-            |s| {
-                let v = surface[s as usize].idx();
-                held[v].unwrap_or(Vec3::ZERO) - u[v]
-            },
-            |s, f| applied.push((s, f)),
+        let (responses, slot) = (&self.responses, &self.slot);
+        let contact =
+            (self.contact_loaded.iter()).map(|&v| (v as usize, &self.contact_n[v as usize]));
+        add_responses(
+            responses,
+            slot,
+            &mut u,
+            self.fext.iter().enumerate().chain(contact),
         );
+        let (surface, held) = (&self.surface, &self.held);
+        solve_holds(&mut self.holds, held, surface, &mut self.applied, |v| u[v]);
         for &(s, f) in &self.applied {
             for b in 0..3 {
                 for (o, r) in u.iter_mut().zip(response(responses, n, s, b)) {
@@ -335,6 +304,49 @@ impl Precomputed {
         }
         self.work = u;
     }
+}
+
+/// Adds to `out` (every vertex) the responses to the forces `loads`
+/// ((vertex, force)) on the vertices that have responses (`slot`).
+fn add_responses<'a>(
+    responses: &[Vec3],
+    slot: &[u32],
+    out: &mut [Vec3],
+    loads: impl Iterator<Item = (usize, &'a Vec3)>,
+) {
+    let n = out.len();
+    for (v, f) in loads {
+        let s = slot[v];
+        if s == NONE || *f == Vec3::ZERO {
+            continue;
+        }
+        for a in 0..3 {
+            if f[a] != 0.0 {
+                for (o, r) in out.iter_mut().zip(response(responses, n, s, a)) {
+                    *o += f[a] * *r;
+                }
+            }
+        }
+    }
+}
+
+/// The holds' forces into `applied` ((surface index, force)), `free(v)`
+/// being vertex v's displacement without them.
+fn solve_holds(
+    holds: &mut Holds,
+    held: &[Option<Vec3>],
+    surface: &[VertexId],
+    applied: &mut Vec<(u32, Vec3)>,
+    free: impl Fn(usize) -> Vec3,
+) {
+    applied.clear();
+    holds.solve(
+        |s| {
+            let v = surface[s as usize].idx();
+            held[v].unwrap_or(Vec3::ZERO) - free(v)
+        },
+        |s, f| applied.push((s, f)),
+    );
 }
 
 /// The response of all `n` vertices to a unit force along `a` on surface vertex `s`.

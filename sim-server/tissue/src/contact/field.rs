@@ -263,8 +263,7 @@ impl ContactField {
         self.clear_points();
         self.parts.clear();
         self.part_depth_m.clear();
-        self.evaluations = 0;
-        self.force_sum_n.fill(Vec3::ZERO);
+        self.restart_report();
     }
 
     /// Forgets the reactions summed so far in this step: a solver that
