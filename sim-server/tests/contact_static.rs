@@ -151,3 +151,74 @@ fn friction_is_refused_on_the_static_backend() {
     assert_eq!((tool.as_str(), *backend), ("probe", "precomputed"));
     assert!(err.to_string().contains("static"), "{err}");
 }
+
+/// The embedded liver on the precomputed backend under the penalty law,
+/// poked 30 mm down over its centre and back in 4 s, one step a
+/// millisecond, with a stall on the way out (7 ms of the hand's motion in
+/// one step, as after the simulation lost the CPU): per step, the force
+/// and whether its contact solve stopped short of the tolerance; and the
+/// largest displacement change from before the poke once the tool is out.
+fn liver_poke(stall_at_s: f64) -> (Vec<f64>, usize, f64) {
+    let text = format!(
+        "{}\n[contact]\nlaw = \"penalty\"\n",
+        sim_server::scene::DEFAULT_SCENE
+    );
+    let src = SceneSource {
+        name: "<liver>".into(),
+        dir: PathBuf::from("."),
+        text,
+    };
+    let mut p = precomputed(build_scene(&src, &src.parse().unwrap()).unwrap()).unwrap();
+    assert_eq!(p.tools.law(), ContactLaw::Penalty);
+    let z_at = |t: f64| 0.05 - 0.015 * (1.0 - (std::f64::consts::TAU * t / 4.0).cos());
+    let step = |p: &mut Prepared<Precomputed>, t: f64| {
+        let input = [
+            Some(ToolInput {
+                tip_m: Vec3::new(0.0, 0.0, z_at(t)),
+                jaw_opening: 1.0,
+            }),
+            None,
+        ];
+        p.tools.update(&mut p.sim, &input);
+        p.tools.step(&mut p.sim);
+        let capped = p.sim.linear_solve().is_some_and(|r| r.capped);
+        (p.tools.reaction(0, &p.sim).force_n.length(), capped)
+    };
+    step(&mut p, 0.0);
+    let before = p.sim.displacements().to_vec();
+    let (mut forces, mut capped) = (Vec::new(), 0);
+    let mut ms = 0;
+    while ms <= 4000 {
+        let (f, c) = step(&mut p, ms as f64 * 1e-3);
+        forces.push(f);
+        capped += usize::from(c);
+        ms += if ms == (stall_at_s * 1e3) as usize {
+            7
+        } else {
+            1
+        };
+    }
+    let moved = (before.iter().zip(p.sim.displacements()))
+        .map(|(a, b)| (Vec3::from_array(*a) - Vec3::from_array(*b)).length())
+        .fold(0.0, f64::max);
+    (forces, capped, moved)
+}
+
+#[test]
+fn the_static_penalty_contact_on_the_liver_converges_every_step_and_lets_go() {
+    for stall_at_s in [2.3, 2.7] {
+        let (forces, capped, moved) = liver_poke(stall_at_s);
+        let peak = forces.iter().copied().fold(0.0, f64::max);
+        let jump = (forces.windows(2))
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "stall at {stall_at_s} s: peak {peak} N, largest step change {jump} N, {capped} capped, moved {moved} m after"
+        );
+        assert!(peak > 0.5, "{peak}");
+        assert_eq!(capped, 0, "steps short of the tolerance");
+        assert!(jump < 0.05 * peak, "a step changed the force by {jump} N");
+        assert_eq!(*forces.last().unwrap(), 0.0);
+        assert!(moved < 1e-9, "the tissue did not come back: {moved} m");
+    }
+}

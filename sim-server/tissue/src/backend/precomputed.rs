@@ -200,6 +200,11 @@ impl Precomputed {
         self.contact_loaded.clear();
     }
 
+    /// The contact forces of the last solve, (vertex, force).
+    pub(super) fn contact_forces(&self) -> impl Iterator<Item = (u32, Vec3)> + '_ {
+        (self.contact_loaded.iter()).map(|&v| (v, self.contact_n[v as usize]))
+    }
+
     /// The contact forces `force` on `vertices` (loadable ones) for the
     /// next [`Precomputed::step_static`].
     pub(super) fn set_contact_forces(&mut self, vertices: &[u32], force: &[[Real; 3]]) {

@@ -4,31 +4,44 @@
 //! only one here, and missed a tool between vertices).
 //!
 //! The backend is a linear static map S from the surface forces to the
-//! displacements (its responses T, with the tools' holds). With the penalty
-//! springs' forces f(u) on the contact vertices C, a step finds u with
-//! u = S(f(u)): Newton on the contact vertices' displacements,
+//! displacements (its responses T, with the tools' holds): u = a + T G for
+//! contact forces G. With the penalty springs' forces f(u), a step finds
+//! the forces G = f(S(G)), which is where the potential
 //!
 //! ```text
-//! (I + T_CC H) delta = -(u_C - S(f(u))_C),
+//! E(G) = 1/2 G^T T G + Phi(S(G))      (Phi: the springs' energy)
 //! ```
 //!
-//! H the springs' Hessian (each point's k n n^T spread over its triangle),
+//! is stationary: the tissue's elastic energy plus the springs'. Newton
+//! on the contact vertices,
+//!
+//! ```text
+//! (I + H T_CC) dG = f(u) - G,
+//! ```
+//!
+//! H the springs' slopes (each point's k n n^T spread over its triangle),
 //! T_CC the responses of the contact vertices to each other (read from the
 //! precomputed responses, no solve): the contact problem on the compliance
 //! W = T_CC that SOFA's constraint solvers and LCPForceFeedback pose
 //! (Duriez et al. 2006, Saupin et al. 2008), here with the penalty law's
-//! springs instead of complementarity. Each iteration evaluates the springs
-//! and applies S at the points' vertices only (the holds included,
-//! exactly), the whole body once at the end of the step; the Jacobian leaves
-//! out the holds' coupling and the turning of the normal round the tool,
-//! which slows convergence where they matter but not the fixed point it
-//! converges to. The last S(f(u)) is the step's state and its springs the
-//! tools' reactions. Experimental: a step that ends at the iteration
-//! limit keeps its last iterate, which can be far from the solution (force
-//! spikes in 2 of 9 real-time liver runs; README); no line search guards
-//! it yet. Static: no damping (no velocity), and no friction (its
-//! springs need the motion between sub-steps; a scene asking for it here is
-//! refused).
+//! springs instead of complementarity. Each iterate is a consistent state
+//! u = S(G) (S applied exactly at the points' vertices, the holds
+//! included; the whole body once at the end of the step), and a step along
+//! dG is taken only as far as E decreases enough (Armijo backtracking;
+//! S is affine, so a shorter step needs no new application of S, only the
+//! springs again). Without that line search (until 2026-11-27) the
+//! iterates could cycle between contact sets from one step to the next
+//! and, after a stall of the simulation, settled in 1 of 9 real-time liver
+//! runs on a second equilibrium with surface caught on the far side of the
+//! tip (forces of 4-16 N against 1.2 N, the tissue hanging on the tool
+//! after it withdrew): the springs' energy is not convex round a tip, and
+//! a method that only descends stays with the equilibrium it starts next
+//! to. Where the Newton direction does not descend (its Jacobian leaves
+//! out the holds' coupling and the turning of the normal round the tool)
+//! the step is dG = f - G, which always does (T is positive). The springs'
+//! forces at the last state are the tools' reactions. Static: no damping
+//! (no velocity), and no friction (its springs need the motion between
+//! sub-steps; a scene asking for it here is refused).
 
 use super::Backend;
 use super::precomputed::Precomputed;
@@ -37,33 +50,46 @@ use crate::math::{Real, Vec3};
 
 /// Newton iterations at most per step.
 const MAX_ITERATIONS: usize = 12;
-/// Converged when no contact vertex moves more than this (m): 10 nm, a
-/// force error of about 1e-5 N at the contact's stiffness. At 0.1 nm
-/// most contact steps of a real-time run ended at the iteration limit
-/// (the box poke: 2,330 of 4,022; now 7 of 4,021), the same forces.
+/// Converged when the Newton step moves no contact vertex more than this
+/// (m): 10 nm, a force error of about 1e-5 N at the contact's stiffness.
 const TOLERANCE_M: Real = 1e-8;
 /// Contact vertices beyond which the Jacobian keeps only its diagonal
 /// blocks (a dense solve of 3 x this many unknowns costs about a
 /// millisecond).
 const DENSE_LIMIT: usize = 150;
+/// Armijo's sufficient decrease: a step must lower E by at least this
+/// fraction of what its slope promises.
+const ARMIJO: Real = 1e-4;
+/// Halvings of a step before the iterations stop where they are.
+const MAX_HALVINGS: usize = 8;
 
 /// Scratch of the contact solve (buffers reused across steps).
 #[derive(Default)]
 pub(super) struct ContactSolve {
-    /// Per vertex: the contact force of this iteration (N).
+    /// Per vertex: the springs' force at the current state (N).
     force: Vec<[Real; 3]>,
+    /// Per vertex: the contact force applied to the tissue, G (N).
+    applied: Vec<[Real; 3]>,
+    /// Per vertex: the trial G + alpha dG (N).
+    trial: Vec<[Real; 3]>,
+    /// The vertices where `applied` may be non-zero.
+    applied_vertices: Vec<u32>,
     /// Per vertex: its slot among the contact vertices, `u32::MAX` if none.
     slot: Vec<u32>,
-    /// The contact vertices.
+    /// The contact vertices: the loadable vertices of the acting points
+    /// and those of `applied_vertices`.
     vertices: Vec<u32>,
-    /// Their displacements at this iteration's evaluation.
+    /// Per vertex (written at `rows`): the current state's displacement
+    /// and the full Newton step's change of it.
     u_at: Vec<Vec3>,
+    du: Vec<Vec3>,
     /// The Newton system (row-major, 3c x 3c) and its right side.
     jacobian: Vec<Real>,
     rhs: Vec<Real>,
     /// H per contact-vertex pair, summed over points (3c x 3c, row-major).
     hessian: Vec<Real>,
-    /// The vertices of the step's contact points (each once).
+    /// The vertices of the step's contact points and of the applied
+    /// forces (each once).
     rows: Vec<u32>,
     /// Newton iterations of the last step.
     pub iterations: usize,
@@ -72,21 +98,27 @@ pub(super) struct ContactSolve {
     pub capped: bool,
 }
 
-/// The vertices of `field`'s points, each once, into `cs.rows` (the slots
-/// left clean).
+/// The vertices of `field`'s points and of the applied forces, each once,
+/// into `cs.rows` (the slots left clean).
 fn gather_rows(field: &ContactField, cs: &mut ContactSolve) {
     cs.rows.clear();
-    for p in field.points() {
-        for v in p.vertices {
-            if cs.slot[v as usize] == u32::MAX {
-                cs.slot[v as usize] = 0;
-                cs.rows.push(v);
-            }
+    let points = field.points().iter().flat_map(|p| p.vertices);
+    for v in points.chain(cs.applied_vertices.iter().copied()) {
+        if cs.slot[v as usize] == u32::MAX {
+            cs.slot[v as usize] = 0;
+            cs.rows.push(v);
         }
     }
     for &v in &cs.rows {
         cs.slot[v as usize] = u32::MAX;
     }
+}
+
+/// The sum over the contact vertices of a . b (per-vertex arrays).
+fn dot(vertices: &[u32], a: &[[Real; 3]], b: &[Vec3]) -> Real {
+    (vertices.iter())
+        .map(|&v| Vec3::from_array(a[v as usize]).dot(b[v as usize]))
+        .sum()
 }
 
 impl Precomputed {
@@ -96,7 +128,11 @@ impl Precomputed {
         let mut cs = std::mem::take(&mut self.contact);
         if cs.force.len() != n {
             cs.force = vec![[0.0; 3]; n];
+            cs.applied = vec![[0.0; 3]; n];
+            cs.trial = vec![[0.0; 3]; n];
             cs.slot = vec![u32::MAX; n];
+            cs.u_at = vec![Vec3::ZERO; n];
+            cs.du = vec![Vec3::ZERO; n];
         }
         cs.iterations = 0;
         cs.capped = false;
@@ -110,91 +146,206 @@ impl Precomputed {
             // iterations need the springs' vertices only; the whole body
             // once, at the end.
             self.prepare_rows();
+            self.warm_start(&mut cs);
             gather_rows(field, &mut cs);
+            self.set_contact_forces(&cs.applied_vertices, &cs.applied);
             self.step_rows(&cs.rows);
             self.solve_contact(field, &mut cs);
+            self.set_contact_forces(&cs.applied_vertices, &cs.applied);
             self.step_static();
         }
         self.contact = cs;
     }
 
+    /// G from the last step's contact forces, on vertices still loadable.
+    fn warm_start(&self, cs: &mut ContactSolve) {
+        for &v in &cs.applied_vertices {
+            cs.applied[v as usize] = [0.0; 3];
+        }
+        cs.applied_vertices.clear();
+        for (v, f) in self.contact_forces() {
+            if self.loadable(v as usize) {
+                cs.applied[v as usize] = f.to_array();
+                cs.applied_vertices.push(v);
+            }
+        }
+    }
+
+    /// The springs at the current state: their forces into `cs.force`, the
+    /// field's report and penetrations, and their energy (J).
+    fn evaluate_springs(&self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
+        field.restart_report();
+        let (rest, u) = (self.model().mesh().positions_m(), self.displacements());
+        field.static_forces(rest, u, &mut cs.force);
+        field.spring_energy_j()
+    }
+
     fn solve_contact(&mut self, field: &mut ContactField, cs: &mut ContactSolve) {
+        for &v in &cs.rows {
+            cs.u_at[v as usize] = self.displacement_of(v);
+        }
+        let mut energy = self.evaluate_springs(field, cs);
+        // Whether the field's last evaluation is of the current state.
+        let mut current = true;
         for k in 0..MAX_ITERATIONS {
             cs.iterations = k + 1;
-            field.restart_report();
-            let (rest, u) = (self.model().mesh().positions_m(), self.displacements());
-            field.static_forces(rest, u, &mut cs.force);
             self.gather_contact_vertices(field, cs);
-            // S(f(u)): the forces on the loadable contact vertices.
-            self.set_contact_forces(&cs.vertices, &cs.force);
-            for (s, &v) in cs.vertices.iter().enumerate() {
-                cs.u_at[s] = self.displacement_of(v);
-            }
-            self.step_rows(&cs.rows);
             let c = cs.vertices.len();
             if c == 0 {
                 break;
             }
-            // Residual r = u_C - S(f(u))_C.
-            let mut worst: Real = 0.0;
-            cs.rhs.clear();
-            for (s, &v) in cs.vertices.iter().enumerate() {
-                let r = cs.u_at[s] - self.displacement_of(v);
-                worst = worst.max(r.abs().max_element());
-                cs.rhs.extend_from_slice(&[-r.x, -r.y, -r.z]);
+            // The Newton direction: (I + H T) dG = f - G, the transpose of
+            // J = I + T H.
+            self.newton_rhs(cs);
+            self.assemble_jacobian(field, cs);
+            let m = 3 * c;
+            for i in 0..m {
+                for j in i + 1..m {
+                    cs.jacobian.swap(i * m + j, j * m + i);
+                }
             }
+            if !crate::math::solve_in_place(&mut cs.jacobian, &mut cs.rhs, m, 1) {
+                // Singular (round-off only: I + H T with T and H positive).
+                self.newton_rhs(cs);
+            }
+            self.try_direction(cs);
+            let mut slope = self.slope(cs);
+            let worst = (cs.rows.iter()).fold(0.0 as Real, |w, &v| {
+                w.max(cs.du[v as usize].abs().max_element())
+            });
             if worst <= TOLERANCE_M {
+                // Converged: the last (tiny) step taken whole.
+                self.take_step(cs, 1.0);
+                current = false;
                 break;
             }
             if k + 1 == MAX_ITERATIONS {
                 cs.capped = true;
                 break;
             }
-            self.assemble_jacobian(field, cs);
-            if !crate::math::solve_in_place(&mut cs.jacobian, &mut cs.rhs, 3 * c, 1) {
-                // A singular Jacobian (round-off only: I + T H with T and H
-                // positive): keep S(f(u)), the consistent state.
+            if slope >= 0.0 {
+                // Not a descent direction: dG = f - G, which is one.
+                self.newton_rhs(cs);
+                self.try_direction(cs);
+                slope = self.slope(cs);
+                if slope >= 0.0 {
+                    break;
+                }
+            }
+            // G^T dU and dG^T dU: E along the step is
+            // E(0) + a G^T dU + a^2/2 dG^T dU + Phi(a) - Phi(0).
+            let g_du = dot(&cs.vertices, &cs.applied, &cs.du);
+            let curvature: Real = (cs.vertices.iter().enumerate())
+                .map(|(s, &v)| {
+                    let dg = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+                    dg.dot(cs.du[v as usize])
+                })
+                .sum();
+            let mut alpha: Real = 1.0;
+            let mut taken = false;
+            for _ in 0..=MAX_HALVINGS {
+                for &v in &cs.rows {
+                    let u = cs.u_at[v as usize] + alpha * cs.du[v as usize];
+                    self.set_displacement(v, u);
+                }
+                let trial = self.evaluate_springs(field, cs);
+                let change = alpha * g_du + 0.5 * alpha * alpha * curvature + trial - energy;
+                if change <= ARMIJO * alpha * slope {
+                    energy = trial;
+                    taken = true;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            if !taken {
+                // No decrease along it: stay (the state is consistent).
+                self.restore_rows(cs);
+                current = false;
                 break;
             }
-            // A step longer than the residual itself overshoots where the
-            // contact set changes within it: at most the residual's size.
-            let step = cs.rhs.iter().fold(0.0 as Real, |m, x| m.max(x.abs()));
-            if step > worst {
-                let scale = worst / step;
-                cs.rhs.iter_mut().for_each(|x| *x *= scale);
-            }
-            // The next iterate: u_C + delta, the rest at S(f(u)) (the
-            // springs read only their triangles' vertices).
-            for (s, &v) in cs.vertices.iter().enumerate() {
-                let d = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
-                self.set_displacement(v, cs.u_at[s] + d);
-            }
+            self.take_step(cs, alpha);
+        }
+        if !current {
+            self.evaluate_springs(field, cs);
         }
         for &v in &cs.vertices {
             cs.slot[v as usize] = u32::MAX;
         }
     }
 
-    /// The loadable (free surface, not held) vertices of the acting points.
+    /// `cs.rhs` = f - G over the contact vertices.
+    fn newton_rhs(&self, cs: &mut ContactSolve) {
+        cs.rhs.clear();
+        for &v in &cs.vertices {
+            let d =
+                Vec3::from_array(cs.force[v as usize]) - Vec3::from_array(cs.applied[v as usize]);
+            cs.rhs.extend_from_slice(&[d.x, d.y, d.z]);
+        }
+    }
+
+    /// The state for G + dG (`cs.rhs`) at the rows, and its change from
+    /// the current one into `cs.du` (the rows keep the current state).
+    fn try_direction(&mut self, cs: &mut ContactSolve) {
+        for (s, &v) in cs.vertices.iter().enumerate() {
+            let g = Vec3::from_array(cs.applied[v as usize]);
+            let dg = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+            cs.trial[v as usize] = (g + dg).to_array();
+        }
+        self.set_contact_forces(&cs.vertices, &cs.trial);
+        self.step_rows(&cs.rows);
+        for &v in &cs.rows {
+            cs.du[v as usize] = self.displacement_of(v) - cs.u_at[v as usize];
+        }
+        self.restore_rows(cs);
+    }
+
+    /// The rows back at the current state.
+    fn restore_rows(&mut self, cs: &ContactSolve) {
+        for &v in &cs.rows {
+            self.set_displacement(v, cs.u_at[v as usize]);
+        }
+    }
+
+    /// E's slope along the direction at its start: (G - f)^T dU.
+    fn slope(&self, cs: &ContactSolve) -> Real {
+        dot(&cs.vertices, &cs.applied, &cs.du) - dot(&cs.vertices, &cs.force, &cs.du)
+    }
+
+    /// G += alpha dG and the rows' state with it (S is affine).
+    fn take_step(&mut self, cs: &mut ContactSolve, alpha: Real) {
+        for (s, &v) in cs.vertices.iter().enumerate() {
+            let dg = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+            let g = Vec3::from_array(cs.applied[v as usize]) + alpha * dg;
+            cs.applied[v as usize] = g.to_array();
+        }
+        // The contact vertices hold every applied vertex (loadable, as
+        // they all are).
+        cs.applied_vertices.clear();
+        cs.applied_vertices.extend_from_slice(&cs.vertices);
+        for &v in &cs.rows {
+            let u = cs.u_at[v as usize] + alpha * cs.du[v as usize];
+            cs.u_at[v as usize] = u;
+            self.set_displacement(v, u);
+        }
+    }
+
+    /// The contact vertices: the loadable vertices of the acting points and
+    /// of the applied forces.
     fn gather_contact_vertices(&self, field: &ContactField, cs: &mut ContactSolve) {
         for &v in &cs.vertices {
             cs.slot[v as usize] = u32::MAX;
         }
         cs.vertices.clear();
-        for (i, p) in field.points().iter().enumerate() {
-            if field.penetrations_m()[i] <= 0.0 {
-                continue;
-            }
-            for v in p.vertices {
-                let vi = v as usize;
-                if cs.slot[vi] == u32::MAX && self.loadable(vi) {
-                    cs.slot[vi] = cs.vertices.len() as u32;
-                    cs.vertices.push(v);
-                }
+        let acting = (field.points().iter().zip(field.penetrations_m()))
+            .filter(|(_, d)| **d > 0.0)
+            .flat_map(|(p, _)| p.vertices);
+        for v in acting.chain(cs.applied_vertices.iter().copied()) {
+            let vi = v as usize;
+            if cs.slot[vi] == u32::MAX && self.loadable(vi) {
+                cs.slot[vi] = cs.vertices.len() as u32;
+                cs.vertices.push(v);
             }
         }
-        cs.u_at.clear();
-        cs.u_at.resize(cs.vertices.len(), Vec3::ZERO);
     }
 
     /// J = I + T_CC H over the contact vertices (only H's diagonal blocks

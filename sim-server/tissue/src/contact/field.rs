@@ -120,6 +120,21 @@ pub fn spring(k_n_per_m: Real, depth_m: Real, radius_m: Real) -> (Real, Real) {
     }
 }
 
+/// A point's spring energy (J) at penetration `depth_m`: the integral of
+/// [`spring`]'s force over the depth (`k d^3 / (6 d0)` below the onset,
+/// `k (d^2 / 2 - d0 d / 2 + d0^2 / 6)` above), the merit a static solve
+/// descends on.
+pub fn spring_energy(k_n_per_m: Real, depth_m: Real, radius_m: Real) -> Real {
+    let d0 = ONSET_OF_RADIUS * radius_m;
+    if depth_m <= 0.0 {
+        0.0
+    } else if depth_m < d0 {
+        k_n_per_m * depth_m * depth_m * depth_m / (6.0 * d0)
+    } else {
+        k_n_per_m * (0.5 * depth_m * depth_m - 0.5 * d0 * depth_m + d0 * d0 / 6.0)
+    }
+}
+
 /// The contact damping is scaled down where its coefficient over a
 /// vertex's mass, times the sub-step, would exceed this (explicit damping
 /// stays monotone below 1).
@@ -364,6 +379,19 @@ impl ContactField {
     /// Per point: the spring part of its Hessian alone, slope n n^T (N/m).
     pub fn spring_hessians(&self) -> &[Mat3] {
         &self.spring_hessians
+    }
+
+    /// The springs' energy at the last evaluation (J): the sum of
+    /// [`spring_energy`] over the points in contact (no damping, no
+    /// friction: the potential a static solve descends on).
+    pub fn spring_energy_j(&self) -> Real {
+        (self.points.iter().zip(&self.penetration_m))
+            .filter(|(_, d)| **d > 0.0)
+            .map(|(p, d)| {
+                let radius_m = self.parts[p.part as usize].radius_m;
+                spring_energy(p.stiffness_n_per_m, *d, radius_m)
+            })
+            .sum()
     }
 
     /// Zeroes the forces the last evaluation wrote in `out`.

@@ -65,6 +65,30 @@ fn the_spring_is_smooth_at_the_onset() {
 }
 
 #[test]
+fn the_spring_is_the_derivative_of_its_energy() {
+    let r = 0.002;
+    let d0 = ONSET_OF_RADIUS * r;
+    assert_eq!(spring_energy(100.0, 0.0, r), 0.0);
+    assert_eq!(spring_energy(100.0, -1e-3, r), 0.0);
+    for d in [0.3 * d0, d0 * 0.999, d0 * 1.001, 3.0 * d0, 0.5 * r] {
+        let h = 1e-10;
+        let fd = (spring_energy(100.0, d + h, r) - spring_energy(100.0, d - h, r)) / (2.0 * h);
+        let f = spring(100.0, d, r).0;
+        assert!((fd - f).abs() < 1e-6 * f.max(1e-6), "{d}: {fd} against {f}");
+    }
+    // The field sums it over the points in contact.
+    let (mut f, rest) = field(0.0015);
+    let u = vec![[0.0; 3]; 3];
+    let mut out = vec![[0.0; 3]; 3];
+    f.static_forces(&rest, &u, &mut out);
+    let e = f.spring_energy_j();
+    assert!(
+        (e - spring_energy(100.0, 0.0005, 0.002)).abs() < 1e-15,
+        "{e}"
+    );
+}
+
+#[test]
 fn damping_never_pulls() {
     let (mut f, rest) = field(0.0015);
     f.damping_s_per_m = 10.0;
