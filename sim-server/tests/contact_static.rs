@@ -110,6 +110,61 @@ fn the_static_penalty_contact_settles_where_the_explicit_one_does() {
     }
 }
 
+/// The top vertices in a ring 3.5-5.5 mm round the probe's axis, held
+/// where they are (as a grip beside the probe holds tissue).
+fn hold_a_ring<B: Backend>(p: &mut Prepared<B>) -> usize {
+    let ring: Vec<VertexId> = (0..p.sim.model().vertex_count())
+        .map(VertexId::from)
+        .filter(|v| {
+            let x = p.sim.model().mesh().positions_m()[v.idx()];
+            let r = ((x.x - 0.012).powi(2) + (x.y - 0.012).powi(2)).sqrt();
+            x.z > 0.02 - 1e-9 && (0.0035..0.0055).contains(&r)
+        })
+        .collect();
+    for &v in &ring {
+        p.sim.prescribe(v, Vec3::ZERO);
+    }
+    ring.len()
+}
+
+#[test]
+fn a_static_penalty_contact_beside_held_tissue_settles_where_the_explicit_one_does() {
+    let penalty = "[contact]\nlaw = \"penalty\"\n";
+    let depths = [0.002];
+    let mut dynamic = prepare::<f64>(block(0.0025, 0.012, 0.012, penalty), Some(1e-3)).unwrap();
+    let held = hold_a_ring(&mut dynamic);
+    assert!(held >= 4, "{held}");
+    let settled = press(&mut dynamic, 0.012, 0.012, &depths);
+    let mut p = precomputed(block(0.0025, 0.012, 0.012, penalty)).unwrap();
+    assert_eq!(hold_a_ring(&mut p), held);
+    // On the way in (10 um a step), the solve's iterations: its Jacobian
+    // has the holds' coupling, so Newton converges quadratically beside
+    // them too.
+    let mut iterations = Vec::new();
+    for i in 0..=400 {
+        let input = [Some(ToolInput {
+            tip_m: Vec3::new(0.012, 0.012, 0.0245 - 1e-5 * i as f64),
+            jaw_opening: 1.0,
+        })];
+        p.tools.update(&mut p.sim, &input);
+        p.tools.step(&mut p.sim);
+        let report = p.sim.linear_solve().expect("the contact solve's report");
+        assert!(!report.capped, "step {i}: {report:?}");
+        iterations.push(report.iterations);
+    }
+    let mean = iterations.iter().sum::<usize>() as f64 / iterations.len() as f64;
+    // Without the coupling: mean 3.6, at most 9 (with it 2.0 and 4).
+    let most = iterations.iter().copied().max().unwrap_or(0);
+    assert!(mean < 2.5 && most <= 5, "mean {mean}, at most {most}");
+    let solved = press(&mut p, 0.012, 0.012, &depths);
+    let (a, b) = (settled[0], solved[0]);
+    assert!(a.z > 0.01, "{a}");
+    assert!(
+        (a - b).length() < 2e-3 * a.length(),
+        "explicit settled {a} N, precomputed {b} N"
+    );
+}
+
 #[test]
 fn a_probe_over_a_cell_s_centre_feels_the_static_penalty_contact() {
     // 4.8 mm cells: (12, 12) mm is a cell's centre, 3.4 mm from every

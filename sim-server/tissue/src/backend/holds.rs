@@ -36,6 +36,11 @@ impl Holds {
         self.dirty = true;
     }
 
+    /// Held sources at the last refresh.
+    pub fn len(&self) -> usize {
+        self.sources.len()
+    }
+
     /// Whether [`Holds::changed`] was called since the last refresh.
     pub fn is_dirty(&self) -> bool {
         self.dirty

@@ -200,6 +200,32 @@ impl Precomputed {
         self.contact_loaded.clear();
     }
 
+    /// Held surface vertices (hold sources) now.
+    pub(super) fn hold_count(&self) -> usize {
+        self.holds.len()
+    }
+
+    /// The holding forces ((surface index, force) into `out`) that keep
+    /// the held vertices in place under a unit force along `a` on the
+    /// loadable vertex `v`: with them, its response is the one the holds
+    /// allow (nothing without holds).
+    pub(super) fn holding_response(&mut self, v: u32, a: usize, out: &mut Vec<(u32, Vec3)>) {
+        out.clear();
+        let n = self.u.len();
+        let (responses, surface) = (&self.responses, &self.surface);
+        let column = response(responses, n, self.slot[v as usize], a);
+        self.holds.solve(
+            |s| -column[surface[s as usize].idx()],
+            |s, f| out.push((s, f)),
+        );
+    }
+
+    /// The responses of every vertex to a unit force along `a` on surface
+    /// vertex (source) `s`.
+    pub(super) fn source_response(&self, s: u32, a: usize) -> &[Vec3] {
+        self.response(s, a)
+    }
+
     /// The contact forces of the last solve, (vertex, force).
     pub(super) fn contact_forces(&self) -> impl Iterator<Item = (u32, Vec3)> + '_ {
         (self.contact_loaded.iter()).map(|&v| (v, self.contact_n[v as usize]))
