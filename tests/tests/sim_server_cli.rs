@@ -959,3 +959,61 @@ fn run_asks_for_sched_fifo_and_says_what_it_got() {
         "{err}"
     );
 }
+
+#[test]
+fn run_takes_the_contact_law_and_a_backend_refuses_one_it_cannot_run() {
+    let dir = scratch_dir("run-law");
+    let scene = dir.join("probe.toml");
+    let probe = r#"[[fixed]]
+name = "bottom"
+select = { box_m = [[-0.001, -0.001, -0.001], [0.041, 0.021, 0.0001]] }
+
+[[tool]]
+name = "probe"
+kind = "hook"
+fulcrum_m = [0.02, 0.01, 0.15]
+length_m = 0.3
+radius_m = 0.0025
+tip_length_m = 0.01
+"#;
+    std::fs::write(&scene, format!("{BLOCK}{probe}")).unwrap();
+    let session = format!("law{}", std::process::id());
+    for (backend, law, expect) in [
+        ("tensor-mass", None, "penalty"),
+        ("tensor-mass", Some("projection"), "projection"),
+        ("precomputed", None, "projection"),
+        ("precomputed", Some("penalty"), "penalty"),
+    ] {
+        let json = dir.join(format!("{backend}-{expect}.json"));
+        let mut cmd = Command::new(binary("sim-server"));
+        cmd.args(["run", "--headless", "--quiet", "--steps", "5"])
+            .args(["--session", &session, "--backend", backend, "--scene"])
+            .arg(&scene)
+            .arg("--json")
+            .arg(&json)
+            .env("XDG_CACHE_HOME", dir.join("cache"));
+        if let Some(law) = law {
+            cmd.args(["--contact-law", law]);
+        }
+        run_ok(&mut cmd);
+        assert_eq!(read_json(&json)["contact_law"], expect, "{backend} {law:?}");
+    }
+    let out = Command::new(binary("sim-server"))
+        .args(["run", "--headless", "--steps", "1", "--session", &session])
+        .args([
+            "--backend",
+            "implicit",
+            "--contact-law",
+            "penalty",
+            "--scene",
+        ])
+        .arg(&scene)
+        .output()
+        .expect("run sim-server");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("the implicit backend has only the projection law"),
+        "{err}"
+    );
+}

@@ -57,6 +57,10 @@ pub struct DemoArgs {
     /// `sim-server run --rt-priority`; 0: normal priority).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=98))]
     pub rt_priority: i32,
+    /// The contact law instead of the scene's (as `sim-server run
+    /// --contact-law`).
+    #[arg(long, value_enum)]
+    pub contact_law: Option<super::ContactLawArg>,
 }
 
 /// Starts the viewer on `session` when it makes sense: not headless, a
@@ -232,6 +236,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let backend = args.backend.map(BackendName::from);
     let (src, mut scene) = load_scene(None)?;
     super::override_step(&mut scene, args.dt_s)?;
+    super::override_contact_law(&mut scene, args.contact_law);
     if scene.tools.len() < 2 {
         bail!("the demo scene needs two tools");
     }

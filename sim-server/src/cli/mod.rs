@@ -42,6 +42,27 @@ impl From<BackendArg> for BackendName {
     }
 }
 
+/// The contact laws a `--contact-law` flag names (`[contact] law`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ContactLawArg {
+    /// Compliant springs on points of the surface triangles (tensor-mass,
+    /// precomputed).
+    Penalty,
+    /// The paper's law: touched vertices prescribed on the tool's plane.
+    Projection,
+}
+
+/// `--contact-law`: the scene's `[contact] law` replaced (the backend
+/// refuses a law it cannot run when the tools are built).
+fn override_contact_law(scene: &mut BuiltScene, law: Option<ContactLawArg>) {
+    if let Some(law) = law {
+        scene.contact.law = Some(match law {
+            ContactLawArg::Penalty => sim_server::contact::ContactLaw::Penalty,
+            ContactLawArg::Projection => sim_server::contact::ContactLaw::Projection,
+        });
+    }
+}
+
 /// `--implicit-iterations`: the per-step budget, 0 for none.
 pub fn implicit_step_iterations(n: usize) -> Option<usize> {
     (n > 0).then_some(n)

@@ -74,6 +74,11 @@ pub struct RunArgs {
     /// `solve_capped_steps`). README, Backends.
     #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
     pub implicit_iterations: usize,
+    /// The contact law instead of the scene's `[contact] law` (penalty:
+    /// tensor-mass and precomputed; projection: every backend). README,
+    /// Contact.
+    #[arg(long, value_enum)]
+    pub contact_law: Option<super::ContactLawArg>,
 }
 
 /// Runs until SIGINT/SIGTERM, the step count or the duration.
@@ -98,6 +103,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     let (src, mut scene) = load_scene(args.scene.as_deref())?;
     super::override_step(&mut scene, args.dt_s)?;
+    super::override_contact_law(&mut scene, args.contact_law);
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;

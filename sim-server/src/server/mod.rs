@@ -187,6 +187,8 @@ pub struct RunSummary {
     pub solve_capped_steps: u64,
     /// Live tetrahedra with a nonlinear (StVK, corotational) model at the start.
     pub nonlinear_tets: usize,
+    /// The tools' contact law: "penalty" or "projection".
+    pub contact_law: &'static str,
     /// Most StVK elements compressed below half their volume (in the
     /// volume barrier) at the end of any step: tissue squeezed beyond
     /// what the model is meant for.

@@ -131,6 +131,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let summary = RunSummary {
             finite: true,
             nonlinear_tets: sim.model().nonlinear_tets(),
+            contact_law: match contacts.law() {
+                sim_server::contact::ContactLaw::Penalty => "penalty",
+                sim_server::contact::ContactLaw::Projection => "projection",
+            },
             ..RunSummary::default()
         };
         if !cfg.headless {

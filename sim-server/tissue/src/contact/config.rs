@@ -10,7 +10,8 @@ pub enum ContactLaw {
     /// Compliant Hunt-Crossley contact between the tool capsules and points
     /// on the surface triangles, evaluated every integrator sub-step
     /// ([`super::field`]): continuous in the tool pose. Needs a backend that
-    /// integrates it (tensor-mass).
+    /// integrates it (tensor-mass) or solves each step's equilibrium with
+    /// it (precomputed, [`crate::backend`]).
     Penalty,
     /// The paper's law (4.1-4.2): the touched vertices are prescribed on a
     /// plane tangent to the tool. Exact non-penetration at vertices, but
@@ -44,8 +45,9 @@ pub const MAX_IMPLICIT_STIFFNESS_FACTOR: Real = 1e4;
 /// Contact settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactConfig {
-    /// The law; `None`: penalty where the backend integrates it, else
-    /// projection.
+    /// The law; `None`: penalty where the backend integrates it
+    /// dynamically (tensor-mass), else projection (precomputed solves the
+    /// penalty law when asked).
     pub law: Option<ContactLaw>,
     /// Penalty springs relative to the tissue's own vertex stiffness.
     pub stiffness_factor: Real,

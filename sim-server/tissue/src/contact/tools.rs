@@ -109,7 +109,7 @@ pub enum ContactError {
     /// The scene asks for the penalty law on a backend that cannot
     /// integrate it.
     #[error(
-        "[contact] law = \"penalty\" needs a backend that integrates it at every sub-step (tensor-mass); the {backend} backend has only the projection law (law = \"projection\")"
+        "[contact] law = \"penalty\" needs a backend that integrates it at every sub-step or solves each step's equilibrium with it (tensor-mass, precomputed); the {backend} backend has only the projection law (law = \"projection\")"
     )]
     PenaltyUnsupported {
         /// The backend's name.
