@@ -115,6 +115,21 @@ pub fn run_ok(mut cmd: impl std::borrow::BorrowMut<std::process::Command>) -> st
     out
 }
 
+/// Runs `cmd` to completion and returns its stderr, failing the test if it
+/// succeeded (for the refusals a user meets).
+pub fn run_err(mut cmd: impl std::borrow::BorrowMut<std::process::Command>) -> String {
+    let cmd = cmd.borrow_mut();
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {:?}: {e}", cmd.get_program()));
+    assert!(
+        !out.status.success(),
+        "{:?} succeeded where it should have refused",
+        cmd.get_program()
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 /// Reads a JSON file a binary wrote (panics naming the file if it cannot).
 pub fn read_json(path: &std::path::Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));

@@ -2,7 +2,7 @@
 //! JSON keys that scripts rely on, with values that make sense.
 
 use std::process::Command;
-use system_tests::{binary, read_json, run_ok, scratch_dir};
+use system_tests::{binary, read_json, run_err, run_ok, scratch_dir};
 
 /// A 4 x 2 x 2 cm block on 1 cm cells, its material, and a blank line: the
 /// start of the small scenes below (9 lines).
@@ -63,12 +63,13 @@ fn bench_writes_the_documented_json_keys() {
 
 #[test]
 fn bench_refuses_bad_arguments_clearly() {
-    let out = Command::new(binary("sim-server"))
-        .args(["bench", "--tets", "1000", "--threads", "0"])
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(Command::new(binary("sim-server")).args([
+        "bench",
+        "--tets",
+        "1000",
+        "--threads",
+        "0",
+    ]));
     assert!(err.contains("--threads"), "{err}");
     let out = Command::new(binary("sim-server"))
         .args(["bench", "--generate", "sphere"])
@@ -381,23 +382,23 @@ fn run_takes_every_backend_and_refuses_unknown_ones() {
         format!("{BLOCK}[simulation]\nbackend = \"hybrid\"\n"),
     )
     .unwrap();
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--steps", "1", "--scene"])
-        .arg(&scene)
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(
+        Command::new(binary("sim-server"))
+            .args(["run", "--headless", "--steps", "1", "--scene"])
+            .arg(&scene),
+    );
     assert!(
         err.contains("unsplit.toml:11:") && err.contains("[hybrid]"),
         "{err}"
     );
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--backend", "hybird", "--headless", "--steps", "1"])
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(Command::new(binary("sim-server")).args([
+        "run",
+        "--backend",
+        "hybird",
+        "--headless",
+        "--steps",
+        "1",
+    ]));
     assert!(
         err.contains("invalid value 'hybird'")
             && err.contains("[possible values: tensor-mass, implicit, precomputed, hybrid]"),
@@ -914,12 +915,14 @@ fn run_asks_for_sched_fifo_and_says_what_it_got() {
     let json = dir.join("rt.json");
     let session = format!("rt{}", std::process::id());
     // Real time only: a headless run never sleeps and would hold a core.
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--steps", "1", "--rt-priority", "10"])
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(Command::new(binary("sim-server")).args([
+        "run",
+        "--headless",
+        "--steps",
+        "1",
+        "--rt-priority",
+        "10",
+    ]));
     assert!(
         err.contains("--rt-priority") && err.contains("--headless"),
         "{err}"
@@ -948,12 +951,14 @@ fn run_asks_for_sched_fifo_and_says_what_it_got() {
         ),
         other => panic!("rt_priority {other:?}"),
     }
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--steps", "1", "--rt-priority", "99"])
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(Command::new(binary("sim-server")).args([
+        "run",
+        "--headless",
+        "--steps",
+        "1",
+        "--rt-priority",
+        "99",
+    ]));
     assert!(
         err.contains("--rt-priority") && err.contains("0..=98"),
         "{err}"
