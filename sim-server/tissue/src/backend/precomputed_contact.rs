@@ -225,9 +225,10 @@ impl Precomputed {
                 w.max(cs.du[v as usize].abs().max_element())
             });
             if worst <= TOLERANCE_M {
-                // Converged: the last (tiny) step taken whole.
-                self.take_step(cs, 1.0);
-                current = false;
+                // Converged: the state is within the tolerance of the
+                // solution (the step left is that small), and the springs
+                // were evaluated at it (no evaluation for a step that would
+                // not change them measurably).
                 break;
             }
             if k + 1 == MAX_ITERATIONS {
