@@ -52,17 +52,20 @@
 use super::Backend;
 use super::precomputed::Precomputed;
 use crate::contact::ContactField;
-use crate::math::{Real, Vec3};
+use crate::math::{Mat3, Real, Vec3};
 
 /// Newton iterations at most per step.
 const MAX_ITERATIONS: usize = 12;
 /// Converged when the Newton step moves no contact vertex more than this
 /// (m): 10 nm, a force error of about 1e-5 N at the contact's stiffness.
 const TOLERANCE_M: Real = 1e-8;
-/// Contact vertices beyond which the Jacobian keeps only its diagonal
-/// blocks (a dense solve of 3 x this many unknowns costs about a
-/// millisecond).
-const DENSE_LIMIT: usize = 150;
+/// Contact vertices beyond which the Newton direction takes each vertex's
+/// own block of the system alone, (I + H_vv T_vv) dG_v = (f - G)_v: the
+/// whole system costs O(c^2) memory and O(c^3) time (on this VM about
+/// 0.3 ms an iteration at this many vertices, 3-5 ms at 140), which a broad
+/// tool on a fine mesh would make unbounded; the line search keeps the
+/// cheaper direction safe (where it does not descend, f - G).
+const DENSE_LIMIT: usize = 64;
 /// The Jacobian includes the holds' coupling (each contact vertex's
 /// response with the holding forces it calls for) when that costs at most
 /// about this many operations a Newton iteration: always for a grip on a
@@ -100,6 +103,8 @@ pub(super) struct ContactSolve {
     rhs: Vec<Real>,
     /// H per contact-vertex pair, summed over points (3c x 3c, row-major).
     hessian: Vec<Real>,
+    /// Beyond [`DENSE_LIMIT`]: H's diagonal blocks, per contact vertex.
+    blocks: Vec<Mat3>,
     /// One column of T_CC (3c) and the holding forces of its unit force.
     column: Vec<Real>,
     holding: Vec<(u32, Vec3)>,
@@ -291,6 +296,11 @@ impl Precomputed {
     /// direction f - G where that matrix is singular.
     fn newton_direction(&mut self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
         self.newton_rhs(cs);
+        if cs.vertices.len() > DENSE_LIMIT {
+            self.block_direction(field, cs, whole);
+            self.try_direction(cs);
+            return;
+        }
         self.assemble_jacobian(field, cs, whole);
         let m = cs.rhs.len();
         for i in 0..m {
@@ -379,13 +389,48 @@ impl Precomputed {
         }
     }
 
-    /// J = I + T_CC H over the contact vertices (only H's diagonal blocks
-    /// beyond [`DENSE_LIMIT`] vertices), H the springs' whole Hessian
-    /// (`whole`) or their slopes k n n^T alone.
+    /// Beyond [`DENSE_LIMIT`] contact vertices: `cs.rhs` (f - G) turned into
+    /// each vertex's own Newton step, (I + H_vv T_vv)^-1 (f - G)_v (left as
+    /// it is where that block is singular).
+    fn block_direction(&self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
+        let c = cs.vertices.len();
+        cs.blocks.clear();
+        cs.blocks.resize(c, Mat3::ZERO);
+        let hessians = if whole {
+            field.hessians()
+        } else {
+            field.spring_hessians()
+        };
+        for (i, p) in field.points().iter().enumerate() {
+            if field.penetrations_m()[i] <= 0.0 {
+                continue;
+            }
+            for (v, w) in p.vertices.iter().zip(p.weights) {
+                let s = cs.slot[*v as usize];
+                if s != u32::MAX {
+                    cs.blocks[s as usize] += hessians[i] * (w * w);
+                }
+            }
+        }
+        for (s, &v) in cs.vertices.iter().enumerate() {
+            let t = Mat3::from_cols_array_2d(
+                &[0, 1, 2].map(|q| self.response_of(v, q)[v as usize].to_array()),
+            );
+            let m = Mat3::IDENTITY + cs.blocks[s] * t;
+            if m.determinant().abs() > 1e-12 {
+                let r = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+                let d = m.inverse() * r;
+                cs.rhs[3 * s..3 * s + 3].copy_from_slice(&d.to_array());
+            }
+        }
+    }
+
+    /// J = I + T_CC H over the contact vertices (at most [`DENSE_LIMIT`]),
+    /// H the springs' whole Hessian (`whole`) or their slopes k n n^T
+    /// alone.
     fn assemble_jacobian(&mut self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
         let c = cs.vertices.len();
         let m = 3 * c;
-        let dense = c <= DENSE_LIMIT;
         cs.hessian.clear();
         cs.hessian.resize(m * m, 0.0);
         let hessians = if whole {
@@ -405,7 +450,7 @@ impl Precomputed {
                 }
                 for b in 0..3 {
                     let sb = cs.slot[p.vertices[b] as usize];
-                    if sb == u32::MAX || (!dense && sa != sb) {
+                    if sb == u32::MAX {
                         continue;
                     }
                     let w = p.weights[a] * p.weights[b];
