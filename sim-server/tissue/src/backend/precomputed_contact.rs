@@ -52,6 +52,7 @@
 use super::Backend;
 use super::precomputed::Precomputed;
 use crate::contact::ContactField;
+use crate::contact::field::ContactPoint;
 use crate::math::{Mat3, Real, Vec3};
 
 /// Newton iterations at most per step.
@@ -132,6 +133,31 @@ fn gather_rows(field: &ContactField, cs: &mut ContactSolve) {
     for &v in &cs.rows {
         cs.slot[v as usize] = u32::MAX;
     }
+}
+
+/// Contact vertex `s`'s three entries of a 3c vector.
+fn step_at(x: &[Real], s: usize) -> Vec3 {
+    Vec3::new(x[3 * s], x[3 * s + 1], x[3 * s + 2])
+}
+
+/// The acting points (penetrating) with their springs' whole Hessian
+/// (`whole`) or their slopes k n n^T alone.
+fn acting_hessians(
+    field: &ContactField,
+    whole: bool,
+) -> impl Iterator<Item = (&ContactPoint, Mat3)> {
+    let hessians = if whole {
+        field.hessians()
+    } else {
+        field.spring_hessians()
+    };
+    (field
+        .points()
+        .iter()
+        .zip(field.penetrations_m())
+        .zip(hessians))
+    .filter(|((_, d), _)| **d > 0.0)
+    .map(|((p, _), h)| (p, *h))
 }
 
 /// The sum over the contact vertices of a . b (per-vertex arrays).
@@ -254,7 +280,7 @@ impl Precomputed {
             let g_du = dot(&cs.vertices, &cs.applied, &cs.du);
             let curvature: Real = (cs.vertices.iter().enumerate())
                 .map(|(s, &v)| {
-                    let dg = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+                    let dg = step_at(&cs.rhs, s);
                     dg.dot(cs.du[v as usize])
                 })
                 .sum();
@@ -329,7 +355,7 @@ impl Precomputed {
     fn try_direction(&mut self, cs: &mut ContactSolve) {
         for (s, &v) in cs.vertices.iter().enumerate() {
             let g = Vec3::from_array(cs.applied[v as usize]);
-            let dg = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+            let dg = step_at(&cs.rhs, s);
             cs.trial[v as usize] = (g + dg).to_array();
         }
         self.set_contact_forces(&cs.vertices, &cs.trial);
@@ -355,7 +381,7 @@ impl Precomputed {
     /// G += alpha dG and the rows' state with it (S is affine).
     fn take_step(&mut self, cs: &mut ContactSolve, alpha: Real) {
         for (s, &v) in cs.vertices.iter().enumerate() {
-            let dg = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+            let dg = step_at(&cs.rhs, s);
             let g = Vec3::from_array(cs.applied[v as usize]) + alpha * dg;
             cs.applied[v as usize] = g.to_array();
         }
@@ -396,19 +422,11 @@ impl Precomputed {
         let c = cs.vertices.len();
         cs.blocks.clear();
         cs.blocks.resize(c, Mat3::ZERO);
-        let hessians = if whole {
-            field.hessians()
-        } else {
-            field.spring_hessians()
-        };
-        for (i, p) in field.points().iter().enumerate() {
-            if field.penetrations_m()[i] <= 0.0 {
-                continue;
-            }
+        for (p, g) in acting_hessians(field, whole) {
             for (v, w) in p.vertices.iter().zip(p.weights) {
                 let s = cs.slot[*v as usize];
                 if s != u32::MAX {
-                    cs.blocks[s as usize] += hessians[i] * (w * w);
+                    cs.blocks[s as usize] += g * (w * w);
                 }
             }
         }
@@ -418,7 +436,7 @@ impl Precomputed {
             );
             let m = Mat3::IDENTITY + cs.blocks[s] * t;
             if m.determinant().abs() > 1e-12 {
-                let r = Vec3::new(cs.rhs[3 * s], cs.rhs[3 * s + 1], cs.rhs[3 * s + 2]);
+                let r = step_at(&cs.rhs, s);
                 let d = m.inverse() * r;
                 cs.rhs[3 * s..3 * s + 3].copy_from_slice(&d.to_array());
             }
@@ -433,16 +451,7 @@ impl Precomputed {
         let m = 3 * c;
         cs.hessian.clear();
         cs.hessian.resize(m * m, 0.0);
-        let hessians = if whole {
-            field.hessians()
-        } else {
-            field.spring_hessians()
-        };
-        for (i, p) in field.points().iter().enumerate() {
-            if field.penetrations_m()[i] <= 0.0 {
-                continue;
-            }
-            let g = hessians[i];
+        for (p, g) in acting_hessians(field, whole) {
             for a in 0..3 {
                 let sa = cs.slot[p.vertices[a] as usize];
                 if sa == u32::MAX {
