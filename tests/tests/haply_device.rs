@@ -10,7 +10,7 @@ use std::net::TcpListener;
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use system_tests::{binary, contact_sample, scratch_dir};
+use system_tests::{binary, contact_sample, run_err, scratch_dir};
 
 #[test]
 fn the_daemon_drives_an_inverse3_through_the_service_protocol() {
@@ -133,19 +133,14 @@ fn the_daemon_drives_an_inverse3_through_the_service_protocol() {
 
 #[test]
 fn a_missing_service_is_reported_clearly() {
-    let out = Command::new(binary("haptic-daemon"))
-        .args([
-            "run",
-            "--quiet",
-            "--duration-s",
-            "0.2",
-            "--device",
-            "haply:ws://127.0.0.1:9",
-        ])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(Command::new(binary("haptic-daemon")).args([
+        "run",
+        "--quiet",
+        "--duration-s",
+        "0.2",
+        "--device",
+        "haply:ws://127.0.0.1:9",
+    ]));
     assert!(
         err.contains("cannot reach the Haply Inverse Service"),
         "{err}"

@@ -71,12 +71,8 @@ fn bench_refuses_bad_arguments_clearly() {
         "0",
     ]));
     assert!(err.contains("--threads"), "{err}");
-    let out = Command::new(binary("sim-server"))
-        .args(["bench", "--generate", "sphere"])
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("sphere"));
+    let err = run_err(Command::new(binary("sim-server")).args(["bench", "--generate", "sphere"]));
+    assert!(err.contains("sphere"), "{err}");
 }
 
 #[test]
@@ -547,12 +543,7 @@ fn a_negative_number_gets_the_flags_own_message() {
         ("sim-server", "bridge"),
         ("haptic-daemon", "run"),
     ] {
-        let out = Command::new(binary(bin))
-            .args([sub, "--duration-s", "-1"])
-            .output()
-            .unwrap();
-        assert!(!out.status.success());
-        let err = String::from_utf8_lossy(&out.stderr);
+        let err = run_err(Command::new(binary(bin)).args([sub, "--duration-s", "-1"]));
         assert!(
             err.contains("--duration-s must be a positive number of seconds, got -1"),
             "{bin}: {err}"
@@ -762,23 +753,21 @@ rotate = { axis = [1.0, 0.0, 0.0], origin_m = [0.0, 0.01, 0.01], angle_deg = 30.
         "{v}"
     );
     // The implicit backend refuses, naming the model.
-    let out = Command::new(binary("sim-server"))
-        .args([
-            "run",
-            "--backend",
-            "implicit",
-            "--headless",
-            "--quiet",
-            "--steps",
-            "10",
-        ])
-        .args(["--session", &session])
-        .arg("--scene")
-        .arg(&scene)
-        .output()
-        .expect("run sim-server");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = run_err(
+        Command::new(binary("sim-server"))
+            .args([
+                "run",
+                "--backend",
+                "implicit",
+                "--headless",
+                "--quiet",
+                "--steps",
+                "10",
+            ])
+            .args(["--session", &session])
+            .arg("--scene")
+            .arg(&scene),
+    );
     assert!(
         err.contains("implicit backend runs the linear model only"),
         "{err}"
@@ -1003,20 +992,18 @@ tip_length_m = 0.01
         run_ok(&mut cmd);
         assert_eq!(read_json(&json)["contact_law"], expect, "{backend} {law:?}");
     }
-    let out = Command::new(binary("sim-server"))
-        .args(["run", "--headless", "--steps", "1", "--session", &session])
-        .args([
-            "--backend",
-            "implicit",
-            "--contact-law",
-            "penalty",
-            "--scene",
-        ])
-        .arg(&scene)
-        .output()
-        .expect("run sim-server");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err(
+        Command::new(binary("sim-server"))
+            .args(["run", "--headless", "--steps", "1", "--session", &session])
+            .args([
+                "--backend",
+                "implicit",
+                "--contact-law",
+                "penalty",
+                "--scene",
+            ])
+            .arg(&scene),
+    );
     assert!(
         err.contains("the implicit backend has only the projection law"),
         "{err}"
