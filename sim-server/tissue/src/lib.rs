@@ -37,6 +37,7 @@
 pub mod backend;
 pub mod background;
 pub mod contact;
+mod dense_lu;
 pub mod ids;
 pub mod material;
 pub mod material_map;

@@ -53,6 +53,7 @@ use super::Backend;
 use super::precomputed::Precomputed;
 use crate::contact::ContactField;
 use crate::contact::field::ContactPoint;
+use crate::dense_lu::DenseLu;
 use crate::math::{Mat3, Real, Vec3};
 
 /// Newton iterations at most per step.
@@ -102,12 +103,18 @@ pub(super) struct ContactSolve {
     /// The Newton system (row-major, 3c x 3c) and its right side.
     jacobian: Vec<Real>,
     rhs: Vec<Real>,
+    /// The Newton system's factorisation buffers.
+    lu: DenseLu,
     /// H per contact-vertex pair, summed over points (3c x 3c, row-major).
     hessian: Vec<Real>,
     /// Beyond [`DENSE_LIMIT`]: H's diagonal blocks, per contact vertex.
     blocks: Vec<Mat3>,
-    /// One column of T_CC (3c) and the holding forces of its unit force.
-    column: Vec<Real>,
+    /// T_CC (3c x 3c, row-major, [`Precomputed::gather_compliance`]) and
+    /// the contact vertices it is of (cleared at each step's start: the
+    /// holds may have changed).
+    compliance: Vec<Real>,
+    compliance_of: Vec<u32>,
+    /// The holding forces of one unit force.
     holding: Vec<(u32, Vec3)>,
     /// The vertices of the step's contact points and of the applied
     /// forces (each once).
@@ -227,6 +234,7 @@ impl Precomputed {
     }
 
     fn solve_contact(&mut self, field: &mut ContactField, cs: &mut ContactSolve) {
+        cs.compliance_of.clear();
         for &v in &cs.rows {
             cs.u_at[v as usize] = self.displacement_of(v);
         }
@@ -329,12 +337,7 @@ impl Precomputed {
         }
         self.assemble_jacobian(field, cs, whole);
         let m = cs.rhs.len();
-        for i in 0..m {
-            for j in i + 1..m {
-                cs.jacobian.swap(i * m + j, j * m + i);
-            }
-        }
-        if !crate::math::solve_in_place(&mut cs.jacobian, &mut cs.rhs, m, 1) {
+        if !(cs.lu).solve_row_major(&mut cs.jacobian, &mut cs.rhs, m) {
             self.newton_rhs(cs);
         }
         self.try_direction(cs);
@@ -443,10 +446,60 @@ impl Precomputed {
         }
     }
 
-    /// J = I + T_CC H over the contact vertices (at most [`DENSE_LIMIT`]),
-    /// H the springs' whole Hessian (`whole`) or their slopes k n n^T
-    /// alone.
+    /// T_CC over the contact vertices (row-major, 3c x 3c) into
+    /// `cs.compliance`, unless it already holds them: the contact vertices
+    /// rarely change between the iterations of a step, and the holds never
+    /// do, so a step reads the responses once where each direction read
+    /// them (two directions an iteration where the whole Hessian's did not
+    /// descend). Entry ((t, q), (s, r)): the displacement along r of vertex
+    /// s under a unit force along q on vertex t, with the holding forces
+    /// that force calls for where that is cheap enough; T is symmetric, so
+    /// row (t, q) is that column.
+    fn gather_compliance(&mut self, cs: &mut ContactSolve) {
+        if cs.compliance_of == cs.vertices {
+            return;
+        }
+        let c = cs.vertices.len();
+        let m = 3 * c;
+        cs.compliance.clear();
+        cs.compliance.resize(m * m, 0.0);
+        let h = self.hold_count();
+        let holds = h > 0 && 3 * c * (9 * h * h + 9 * c * h) <= HOLD_COUPLING_FLOPS;
+        for t in 0..c {
+            for q in 0..3 {
+                let row = &mut cs.compliance[(3 * t + q) * m..(3 * t + q + 1) * m];
+                let response = self.response_of(cs.vertices[t], q);
+                for (s, &v) in cs.vertices.iter().enumerate() {
+                    row[3 * s..3 * s + 3].copy_from_slice(&response[v as usize].to_array());
+                }
+                if holds {
+                    self.holding_response(cs.vertices[t], q, &mut cs.holding);
+                    let row = &mut cs.compliance[(3 * t + q) * m..(3 * t + q + 1) * m];
+                    for &(source, f) in &cs.holding {
+                        for b in 0..3 {
+                            let response = self.source_response(source, b);
+                            for (s, &v) in cs.vertices.iter().enumerate() {
+                                let d = f[b] * response[v as usize];
+                                for r in 0..3 {
+                                    row[3 * s + r] += d[r];
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        cs.compliance_of.clear();
+        cs.compliance_of.extend_from_slice(&cs.vertices);
+    }
+
+    /// J = I + H T_CC over the contact vertices (at most [`DENSE_LIMIT`]),
+    /// row-major, H the springs' whole Hessian (`whole`) or their slopes
+    /// k n n^T alone. H couples only vertices that share a point's
+    /// triangle, so each row of J adds the few rows of T its non-zero
+    /// entries pick (O(c^2) per row of H's entries, not O(c^3)).
     fn assemble_jacobian(&mut self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
+        self.gather_compliance(cs);
         let c = cs.vertices.len();
         let m = 3 * c;
         cs.hessian.clear();
@@ -475,52 +528,14 @@ impl Precomputed {
         cs.jacobian.clear();
         cs.jacobian.resize(m * m, 0.0);
         for i in 0..m {
-            cs.jacobian[i * m + i] = 1.0;
-        }
-        // J[(s, r), :] += sum over (t, q) of T[(s, r), (t, q)] H[(t, q), :],
-        // T[(s, r), (t, q)] the displacement along r of vertex s under a
-        // unit force along q on vertex t, with the holding forces that
-        // force calls for where that is cheap enough.
-        let h = self.hold_count();
-        let holds = h > 0 && 3 * c * (9 * h * h + 9 * c * h) <= HOLD_COUPLING_FLOPS;
-        for t in 0..c {
-            for q in 0..3 {
-                if cs.hessian[(3 * t + q) * m..(3 * t + q + 1) * m]
-                    .iter()
-                    .all(|x| *x == 0.0)
-                {
+            let row = &mut cs.jacobian[i * m..(i + 1) * m];
+            row[i] = 1.0;
+            for (j, &h) in cs.hessian[i * m..(i + 1) * m].iter().enumerate() {
+                if h == 0.0 {
                     continue;
                 }
-                cs.column.clear();
-                let response = self.response_of(cs.vertices[t], q);
-                cs.column.extend(
-                    cs.vertices
-                        .iter()
-                        .flat_map(|&v| response[v as usize].to_array()),
-                );
-                if holds {
-                    self.holding_response(cs.vertices[t], q, &mut cs.holding);
-                    for &(source, f) in &cs.holding {
-                        for b in 0..3 {
-                            let response = self.source_response(source, b);
-                            for (s, &v) in cs.vertices.iter().enumerate() {
-                                let d = f[b] * response[v as usize];
-                                for r in 0..3 {
-                                    cs.column[3 * s + r] += d[r];
-                                }
-                            }
-                        }
-                    }
-                }
-                let row_h = &cs.hessian[(3 * t + q) * m..(3 * t + q + 1) * m];
-                for (i, &coef) in cs.column.iter().enumerate() {
-                    if coef == 0.0 {
-                        continue;
-                    }
-                    let row = &mut cs.jacobian[i * m..(i + 1) * m];
-                    for (j, h) in row.iter_mut().zip(row_h) {
-                        *j += coef * h;
-                    }
+                for (x, t) in row.iter_mut().zip(&cs.compliance[j * m..(j + 1) * m]) {
+                    *x += h * t;
                 }
             }
         }
