@@ -1,7 +1,7 @@
 //! The penalty contact on the precomputed (static) backend: the same
 //! static forces as the explicit backend settled, a probe over a cell's
 //! centre feels the tissue (the projection law misses it), the law is the
-//! scene's choice there (projection by default), and friction is refused.
+//! scene's choice there (penalty by default), and friction is refused.
 
 use sim_server::backend::{Backend, Precomputed};
 use sim_server::contact::{ContactError, ContactLaw, ToolInput};
@@ -225,19 +225,23 @@ fn a_broad_tool_over_many_vertices_settles_where_the_explicit_one_does() {
 fn a_probe_over_a_cell_s_centre_feels_the_static_penalty_contact() {
     // 4.8 mm cells: (12, 12) mm is a cell's centre, 3.4 mm from every
     // vertex, beyond the probe's 2.5 mm: the projection law's hit test
-    // finds no vertex and the probe goes through.
+    // finds no vertex and the probe goes through. The penalty law is the
+    // backend's default (no `law` key).
     let projection = press(
-        &mut precomputed(block(0.005, 0.012, 0.012, "")).unwrap(),
+        &mut precomputed(block(
+            0.005,
+            0.012,
+            0.012,
+            "[contact]\nlaw = \"projection\"\n",
+        ))
+        .unwrap(),
         0.012,
         0.012,
         &[0.002],
     );
-    let penalty = press(
-        &mut precomputed(block(0.005, 0.012, 0.012, "[contact]\nlaw = \"penalty\"\n")).unwrap(),
-        0.012,
-        0.012,
-        &[0.002],
-    );
+    let mut p = precomputed(block(0.005, 0.012, 0.012, "")).unwrap();
+    assert_eq!(p.tools.law(), ContactLaw::Penalty);
+    let penalty = press(&mut p, 0.012, 0.012, &[0.002]);
     assert_eq!(
         projection[0],
         Vec3::ZERO,

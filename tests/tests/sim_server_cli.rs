@@ -975,8 +975,8 @@ tip_length_m = 0.01
     for (backend, law, expect) in [
         ("tensor-mass", None, "penalty"),
         ("tensor-mass", Some("projection"), "projection"),
-        ("precomputed", None, "projection"),
-        ("precomputed", Some("penalty"), "penalty"),
+        ("precomputed", None, "penalty"),
+        ("precomputed", Some("projection"), "projection"),
     ] {
         let json = dir.join(format!("{backend}-{expect}.json"));
         let mut cmd = Command::new(binary("sim-server"));

@@ -75,8 +75,8 @@ pub struct RunArgs {
     #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
     pub implicit_iterations: usize,
     /// The contact law instead of the scene's `[contact] law` (penalty:
-    /// tensor-mass and precomputed; projection: every backend). README,
-    /// Contact.
+    /// tensor-mass and precomputed, their default; projection: every
+    /// backend, the default of implicit and hybrid). README, Contact.
     #[arg(long, value_enum)]
     pub contact_law: Option<super::ContactLawArg>,
 }

@@ -389,8 +389,8 @@ pub enum ContactLawName {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ContactSpec {
-    /// The law (default: penalty on tensor-mass, else projection; the
-    /// precomputed backend solves the penalty law when asked).
+    /// The law (default: penalty on tensor-mass and precomputed, which
+    /// can run it; projection on implicit and hybrid).
     pub law: Option<Spanned<ContactLawName>>,
     /// Penalty springs relative to the tissue's own vertex stiffness (default 64).
     pub stiffness_factor: Option<Spanned<f64>>,

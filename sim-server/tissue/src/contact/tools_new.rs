@@ -84,12 +84,13 @@ impl Tools {
                 });
             }
             Some(law) => law,
-            // The static backend (precomputed) solves the penalty law when
-            // asked: a Newton solve a step, so the paper's cheap law stays
-            // its default (README, contact laws).
-            None if sim.integrates_contact() && sim.dynamic() && !decls.is_empty() => {
-                ContactLaw::Penalty
-            }
+            // Every backend that can integrate the penalty law takes it:
+            // on the static backend (precomputed) it is a Newton solve a
+            // step, several times the projection law's cost, but the
+            // projection law over-states the force on fine meshes and
+            // misses the organ between vertices on coarse ones (README,
+            // contact laws); `law = "projection"` keeps the cheap one.
+            None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
             None => ContactLaw::Projection,
         };
         // The penalty law's springs only (the projection law reads no factor).
