@@ -10,8 +10,9 @@
 use crate::math::Real;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::lu::partial_pivoting::{factor, solve};
+use faer::perm::PermRef;
 use faer::reborrow::{IntoConst, ReborrowMut};
-use faer::{MatMut, Par};
+use faer::{MatMut, MatRef, Par};
 
 /// Reused buffers of [`DenseLu::solve_row_major`].
 #[derive(Default)]
@@ -70,6 +71,26 @@ impl DenseLu {
     }
 }
 
+impl DenseLu {
+    /// Solves M x = b again (x written into b) with the factors that the
+    /// last successful [`DenseLu::solve_row_major`] of the same size left
+    /// in `factors`: a new right side for the same matrix at O(n^2).
+    /// False where the sizes do not match that solve.
+    pub(crate) fn resolve(&mut self, factors: &[Real], b: &mut [Real], n: usize) -> bool {
+        if self.perm.len() != n || factors.len() != n * n || b.len() != n || n == 0 {
+            return false;
+        }
+        let Some(scratch) = self.scratch.as_mut() else {
+            return false;
+        };
+        let lu = MatRef::from_column_major_slice(factors, n, n);
+        let perm = PermRef::new_checked(&self.perm, &self.perm_inv, n);
+        let rhs = MatMut::from_column_major_slice_mut(b, n, 1);
+        solve::solve_transpose_in_place(lu, lu, perm, rhs, Par::Seq, MemStack::new(scratch));
+        true
+    }
+}
+
 /// M x for M n x n row-major.
 #[cfg(test)]
 fn apply(m: &[Real], x: &[Real], n: usize) -> Vec<Real> {
@@ -109,6 +130,16 @@ mod tests {
             assert!(lu.solve_row_major(&mut factors, &mut b, n), "n = {n}");
             let err = (b.iter().zip(&x)).fold(0.0 as Real, |e, (a, b)| e.max((a - b).abs()));
             assert!(err < 1e-8, "n = {n}: error {err}");
+            // The factors serve another right side.
+            let y: Vec<Real> = (0..n).map(|i| (i as Real * 0.11).cos()).collect();
+            let mut c = apply(&m, &y, n);
+            assert!(lu.resolve(&factors, &mut c, n));
+            let err = (c.iter().zip(&y)).fold(0.0 as Real, |e, (a, b)| e.max((a - b).abs()));
+            assert!(err < 1e-8, "n = {n}: error {err} on the second right side");
+            assert!(
+                !lu.resolve(&factors, &mut c[..n - 1], n - 1),
+                "another size"
+            );
             // The same answer as the hand-written elimination.
             let (mut m2, mut b2) = (m.clone(), apply(&m, &x, n));
             assert!(crate::math::solve_in_place(&mut m2, &mut b2, n, 1));

@@ -23,7 +23,7 @@
 //! and the turning of the normal round the tool), T_CC the responses of
 //! the contact vertices to each other (read from the precomputed responses,
 //! no solve; with the holding forces each response calls for when that is
-//! cheap, [`HOLD_COUPLING_FLOPS`]): the contact problem on the compliance
+//! cheap, [`newton::HOLD_COUPLING_FLOPS`]): the contact problem on the compliance
 //! W = T_CC that SOFA's constraint solvers and LCPForceFeedback pose
 //! (Duriez et al. 2006, Saupin et al. 2008), here with the penalty law's
 //! springs instead of complementarity. Each iterate is a consistent state
@@ -52,28 +52,17 @@
 use super::Backend;
 use super::precomputed::Precomputed;
 use crate::contact::ContactField;
-use crate::contact::field::ContactPoint;
 use crate::dense_lu::DenseLu;
 use crate::math::{Mat3, Real, Vec3};
+
+#[path = "precomputed_newton.rs"]
+mod newton;
 
 /// Newton iterations at most per step.
 const MAX_ITERATIONS: usize = 12;
 /// Converged when the Newton step moves no contact vertex more than this
 /// (m): 10 nm, a force error of about 1e-5 N at the contact's stiffness.
 const TOLERANCE_M: Real = 1e-8;
-/// Contact vertices beyond which the Newton direction takes each vertex's
-/// own block of the system alone, (I + H_vv T_vv) dG_v = (f - G)_v: the
-/// whole system costs O(c^2) memory and O(c^3) time (on this VM about
-/// 0.3 ms an iteration at this many vertices, 3-5 ms at 140), which a broad
-/// tool on a fine mesh would make unbounded; the line search keeps the
-/// cheaper direction safe (where it does not descend, f - G).
-const DENSE_LIMIT: usize = 64;
-/// The Jacobian includes the holds' coupling (each contact vertex's
-/// response with the holding forces it calls for) when that costs at most
-/// about this many operations a Newton iteration: always for a grip on a
-/// few vertices, not for a grasp of fifty beside a deep press, where the
-/// line search covers the slower convergence.
-const HOLD_COUPLING_FLOPS: usize = 2_000_000;
 /// Armijo's sufficient decrease: a step must lower E by at least this
 /// fraction of what its slope promises.
 const ARMIJO: Real = 1e-4;
@@ -89,6 +78,11 @@ pub(super) struct ContactSolve {
     applied: Vec<[Real; 3]>,
     /// Per vertex: the trial G + alpha dG (N).
     trial: Vec<[Real; 3]>,
+    /// Per vertex: the contact force of the step before the last, G_n-1
+    /// (for the predictor of [`Precomputed::warm_start`]), and the vertices
+    /// where it is set.
+    previous: Vec<Option<Vec3>>,
+    previous_vertices: Vec<u32>,
     /// The vertices where `applied` may be non-zero.
     applied_vertices: Vec<u32>,
     /// Per vertex: its slot among the contact vertices, `u32::MAX` if none.
@@ -105,9 +99,15 @@ pub(super) struct ContactSolve {
     rhs: Vec<Real>,
     /// The Newton system's factorisation buffers.
     lu: DenseLu,
+    /// Whether `jacobian` holds the factors of the last Newton matrix and
+    /// `rhs` nothing else since a whole step along its direction: then the
+    /// acting points' signature ([`newton::field_signature`]) it was built at, and
+    /// its contact vertices.
+    chord: Option<(usize, usize)>,
+    chord_of: Vec<u32>,
     /// H per contact-vertex pair, summed over points (3c x 3c, row-major).
     hessian: Vec<Real>,
-    /// Beyond [`DENSE_LIMIT`]: H's diagonal blocks, per contact vertex.
+    /// Beyond [`newton::DENSE_LIMIT`]: H's diagonal blocks, per contact vertex.
     blocks: Vec<Mat3>,
     /// T_CC (3c x 3c, row-major, [`Precomputed::gather_compliance`]) and
     /// the contact vertices it is of (cleared at each step's start: the
@@ -142,29 +142,25 @@ fn gather_rows(field: &ContactField, cs: &mut ContactSolve) {
     }
 }
 
+/// The largest change of a row's displacement component under the
+/// direction in `cs.du` (m).
+fn largest_change(cs: &ContactSolve) -> Real {
+    (cs.rows.iter()).fold(0.0 as Real, |w, &v| {
+        w.max(cs.du[v as usize].abs().max_element())
+    })
+}
+
+/// No contact forces of an earlier step to predict from.
+fn forget_previous(cs: &mut ContactSolve) {
+    for &v in &cs.previous_vertices {
+        cs.previous[v as usize] = None;
+    }
+    cs.previous_vertices.clear();
+}
+
 /// Contact vertex `s`'s three entries of a 3c vector.
 fn step_at(x: &[Real], s: usize) -> Vec3 {
     Vec3::new(x[3 * s], x[3 * s + 1], x[3 * s + 2])
-}
-
-/// The acting points (penetrating) with their springs' whole Hessian
-/// (`whole`) or their slopes k n n^T alone.
-fn acting_hessians(
-    field: &ContactField,
-    whole: bool,
-) -> impl Iterator<Item = (&ContactPoint, Mat3)> {
-    let hessians = if whole {
-        field.hessians()
-    } else {
-        field.spring_hessians()
-    };
-    (field
-        .points()
-        .iter()
-        .zip(field.penetrations_m())
-        .zip(hessians))
-    .filter(|((_, d), _)| **d > 0.0)
-    .map(|((p, _), h)| (p, *h))
 }
 
 /// The sum over the contact vertices of a . b (per-vertex arrays).
@@ -186,42 +182,98 @@ impl Precomputed {
             cs.slot = vec![u32::MAX; n];
             cs.u_at = vec![Vec3::ZERO; n];
             cs.du = vec![Vec3::ZERO; n];
+            cs.previous = vec![None; n];
+            cs.previous_vertices.clear();
         }
         cs.iterations = 0;
         cs.capped = false;
         if field.is_idle() {
             self.clear_contact_forces();
+            forget_previous(&mut cs);
             self.step_static();
         } else {
             // Warm: from the last step's contact forces (its equilibrium,
-            // with this step's loads, holds and tool pose), where the free
-            // solution would start the press's whole depth away. The
-            // iterations need the springs' vertices only; the whole body
-            // once, at the end.
+            // with this step's loads, holds and tool pose) carried on by
+            // their change over that step, where the free solution would
+            // start the press's whole depth away. The iterations need the
+            // springs' vertices only; the whole body once, at the end.
             self.prepare_rows();
-            self.warm_start(&mut cs);
+            let predicted = self.warm_start(&mut cs);
             gather_rows(field, &mut cs);
             self.set_contact_forces(&cs.applied_vertices, &cs.applied);
             self.step_rows(&cs.rows);
-            self.solve_contact(field, &mut cs);
+            self.solve_contact(field, &mut cs, predicted);
             self.set_contact_forces(&cs.applied_vertices, &cs.applied);
             self.step_static();
         }
         self.contact = cs;
     }
 
-    /// G from the last step's contact forces, on vertices still loadable.
-    fn warm_start(&self, cs: &mut ContactSolve) {
+    /// G from the last step's contact forces G_n, on vertices still
+    /// loadable, each carried on by its change over that step where it had
+    /// one (2 G_n - G_n-1: a linear predictor, so that a tool moving
+    /// steadily starts the iterations a second-order distance from the
+    /// solution instead of a first-order one; measured on the liver poke
+    /// and sway: README). A vertex that only now carries a force starts at
+    /// it. The line search makes any start safe: the iterates are
+    /// consistent states and only descend. Returns whether any vertex was
+    /// carried on (see [`Precomputed::restart_unpredicted`]).
+    fn warm_start(&self, cs: &mut ContactSolve) -> bool {
+        let mut predicted = false;
         for &v in &cs.applied_vertices {
             cs.applied[v as usize] = [0.0; 3];
         }
         cs.applied_vertices.clear();
         for (v, f) in self.contact_forces() {
             if self.loadable(v as usize) {
+                let start = match cs.previous[v as usize] {
+                    Some(before) if before != f => {
+                        predicted = true;
+                        2.0 * f - before
+                    }
+                    _ => f,
+                };
+                cs.applied[v as usize] = start.to_array();
+                cs.applied_vertices.push(v);
+            }
+        }
+        forget_previous(cs);
+        for (v, f) in self.contact_forces() {
+            cs.previous[v as usize] = Some(f);
+            cs.previous_vertices.push(v);
+        }
+        predicted
+    }
+
+    /// Back to the last step's contact forces G_n (kept in `cs.previous`
+    /// by [`Precomputed::warm_start`]) unpredicted, their state at the
+    /// rows and the springs there; returns E there. Where the Newton
+    /// direction with the whole Hessian does not descend from the
+    /// predicted start, that start left the region where Newton converges
+    /// quadratically: on the liver demo's grasp, falling back to the slopes
+    /// alone from there ended 273 steps a run at the iteration limit
+    /// (stagnating, or walking off towards another equilibrium) where the
+    /// plain warm start ended 15-19.
+    fn restart_unpredicted(&mut self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
+        for &v in &cs.applied_vertices {
+            cs.applied[v as usize] = [0.0; 3];
+        }
+        cs.applied_vertices.clear();
+        for &v in &cs.previous_vertices {
+            if let Some(f) = cs.previous[v as usize]
+                && self.loadable(v as usize)
+            {
                 cs.applied[v as usize] = f.to_array();
                 cs.applied_vertices.push(v);
             }
         }
+        self.set_contact_forces(&cs.applied_vertices, &cs.applied);
+        self.step_rows(&cs.rows);
+        for &v in &cs.rows {
+            cs.u_at[v as usize] = self.displacement_of(v);
+        }
+        cs.chord = None;
+        self.evaluate_springs(field, cs)
     }
 
     /// The springs at the current state: their forces into `cs.force`, the
@@ -233,8 +285,10 @@ impl Precomputed {
         field.spring_energy_j()
     }
 
-    fn solve_contact(&mut self, field: &mut ContactField, cs: &mut ContactSolve) {
+    fn solve_contact(&mut self, field: &mut ContactField, cs: &mut ContactSolve, predicted: bool) {
+        let mut predicted = predicted;
         cs.compliance_of.clear();
+        cs.chord = None;
         for &v in &cs.rows {
             cs.u_at[v as usize] = self.displacement_of(v);
         }
@@ -249,21 +303,26 @@ impl Precomputed {
             if c == 0 {
                 break;
             }
+            if self.chord_converged(field, cs) {
+                break;
+            }
             // The Newton direction with the springs' whole Hessian, the
             // normal's turning round the tool included (quadratic where it
             // descends); where it does not (that turning makes it
             // indefinite), with their slopes alone for the rest of the step.
             self.newton_direction(field, cs, whole_hessian);
             let mut slope = self.slope(cs);
+            if slope >= 0.0 && whole_hessian && predicted {
+                predicted = false;
+                energy = self.restart_unpredicted(field, cs);
+                continue;
+            }
             if slope >= 0.0 && whole_hessian {
                 whole_hessian = false;
                 self.newton_direction(field, cs, false);
                 slope = self.slope(cs);
             }
-            let worst = (cs.rows.iter()).fold(0.0 as Real, |w, &v| {
-                w.max(cs.du[v as usize].abs().max_element())
-            });
-            if worst <= TOLERANCE_M {
+            if largest_change(cs) <= TOLERANCE_M {
                 // Converged: the state is within the tolerance of the
                 // solution (the step left is that small), and the springs
                 // were evaluated at it (no evaluation for a step that would
@@ -276,6 +335,7 @@ impl Precomputed {
             }
             if slope >= 0.0 {
                 // Not a descent direction either: dG = f - G, which is one.
+                cs.chord = None;
                 self.newton_rhs(cs);
                 self.try_direction(cs);
                 slope = self.slope(cs);
@@ -315,6 +375,11 @@ impl Precomputed {
                 break;
             }
             self.take_step(cs, alpha);
+            if alpha != 1.0 {
+                // Not the whole Newton step: the rest of it is no small
+                // quantity for the chord test to confirm.
+                cs.chord = None;
+            }
         }
         if !current {
             self.evaluate_springs(field, cs);
@@ -322,25 +387,6 @@ impl Precomputed {
         for &v in &cs.vertices {
             cs.slot[v as usize] = u32::MAX;
         }
-    }
-
-    /// The Newton direction dG into `cs.rhs` and its change of the rows'
-    /// state into `cs.du`: (I + H T) dG = f - G (the transpose of
-    /// J = I + T H), H the springs' whole Hessian or their slopes alone; the
-    /// direction f - G where that matrix is singular.
-    fn newton_direction(&mut self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
-        self.newton_rhs(cs);
-        if cs.vertices.len() > DENSE_LIMIT {
-            self.block_direction(field, cs, whole);
-            self.try_direction(cs);
-            return;
-        }
-        self.assemble_jacobian(field, cs, whole);
-        let m = cs.rhs.len();
-        if !(cs.lu).solve_row_major(&mut cs.jacobian, &mut cs.rhs, m) {
-            self.newton_rhs(cs);
-        }
-        self.try_direction(cs);
     }
 
     /// `cs.rhs` = f - G over the contact vertices.
@@ -414,129 +460,6 @@ impl Precomputed {
             if cs.slot[vi] == u32::MAX && self.loadable(vi) {
                 cs.slot[vi] = cs.vertices.len() as u32;
                 cs.vertices.push(v);
-            }
-        }
-    }
-
-    /// Beyond [`DENSE_LIMIT`] contact vertices: `cs.rhs` (f - G) turned into
-    /// each vertex's own Newton step, (I + H_vv T_vv)^-1 (f - G)_v (left as
-    /// it is where that block is singular).
-    fn block_direction(&self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
-        let c = cs.vertices.len();
-        cs.blocks.clear();
-        cs.blocks.resize(c, Mat3::ZERO);
-        for (p, g) in acting_hessians(field, whole) {
-            for (v, w) in p.vertices.iter().zip(p.weights) {
-                let s = cs.slot[*v as usize];
-                if s != u32::MAX {
-                    cs.blocks[s as usize] += g * (w * w);
-                }
-            }
-        }
-        for (s, &v) in cs.vertices.iter().enumerate() {
-            let t = Mat3::from_cols_array_2d(
-                &[0, 1, 2].map(|q| self.response_of(v, q)[v as usize].to_array()),
-            );
-            let m = Mat3::IDENTITY + cs.blocks[s] * t;
-            if m.determinant().abs() > 1e-12 {
-                let r = step_at(&cs.rhs, s);
-                let d = m.inverse() * r;
-                cs.rhs[3 * s..3 * s + 3].copy_from_slice(&d.to_array());
-            }
-        }
-    }
-
-    /// T_CC over the contact vertices (row-major, 3c x 3c) into
-    /// `cs.compliance`, unless it already holds them: the contact vertices
-    /// rarely change between the iterations of a step, and the holds never
-    /// do, so a step reads the responses once where each direction read
-    /// them (two directions an iteration where the whole Hessian's did not
-    /// descend). Entry ((t, q), (s, r)): the displacement along r of vertex
-    /// s under a unit force along q on vertex t, with the holding forces
-    /// that force calls for where that is cheap enough; T is symmetric, so
-    /// row (t, q) is that column.
-    fn gather_compliance(&mut self, cs: &mut ContactSolve) {
-        if cs.compliance_of == cs.vertices {
-            return;
-        }
-        let c = cs.vertices.len();
-        let m = 3 * c;
-        cs.compliance.clear();
-        cs.compliance.resize(m * m, 0.0);
-        let h = self.hold_count();
-        let holds = h > 0 && 3 * c * (9 * h * h + 9 * c * h) <= HOLD_COUPLING_FLOPS;
-        for t in 0..c {
-            for q in 0..3 {
-                let row = &mut cs.compliance[(3 * t + q) * m..(3 * t + q + 1) * m];
-                let response = self.response_of(cs.vertices[t], q);
-                for (s, &v) in cs.vertices.iter().enumerate() {
-                    row[3 * s..3 * s + 3].copy_from_slice(&response[v as usize].to_array());
-                }
-                if holds {
-                    self.holding_response(cs.vertices[t], q, &mut cs.holding);
-                    let row = &mut cs.compliance[(3 * t + q) * m..(3 * t + q + 1) * m];
-                    for &(source, f) in &cs.holding {
-                        for b in 0..3 {
-                            let response = self.source_response(source, b);
-                            for (s, &v) in cs.vertices.iter().enumerate() {
-                                let d = f[b] * response[v as usize];
-                                for r in 0..3 {
-                                    row[3 * s + r] += d[r];
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        cs.compliance_of.clear();
-        cs.compliance_of.extend_from_slice(&cs.vertices);
-    }
-
-    /// J = I + H T_CC over the contact vertices (at most [`DENSE_LIMIT`]),
-    /// row-major, H the springs' whole Hessian (`whole`) or their slopes
-    /// k n n^T alone. H couples only vertices that share a point's
-    /// triangle, so each row of J adds the few rows of T its non-zero
-    /// entries pick (O(c^2) per row of H's entries, not O(c^3)).
-    fn assemble_jacobian(&mut self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
-        self.gather_compliance(cs);
-        let c = cs.vertices.len();
-        let m = 3 * c;
-        cs.hessian.clear();
-        cs.hessian.resize(m * m, 0.0);
-        for (p, g) in acting_hessians(field, whole) {
-            for a in 0..3 {
-                let sa = cs.slot[p.vertices[a] as usize];
-                if sa == u32::MAX {
-                    continue;
-                }
-                for b in 0..3 {
-                    let sb = cs.slot[p.vertices[b] as usize];
-                    if sb == u32::MAX {
-                        continue;
-                    }
-                    let w = p.weights[a] * p.weights[b];
-                    for r in 0..3 {
-                        for q in 0..3 {
-                            cs.hessian[(3 * sa as usize + r) * m + 3 * sb as usize + q] +=
-                                w * g.col(q)[r];
-                        }
-                    }
-                }
-            }
-        }
-        cs.jacobian.clear();
-        cs.jacobian.resize(m * m, 0.0);
-        for i in 0..m {
-            let row = &mut cs.jacobian[i * m..(i + 1) * m];
-            row[i] = 1.0;
-            for (j, &h) in cs.hessian[i * m..(i + 1) * m].iter().enumerate() {
-                if h == 0.0 {
-                    continue;
-                }
-                for (x, t) in row.iter_mut().zip(&cs.compliance[j * m..(j + 1) * m]) {
-                    *x += h * t;
-                }
             }
         }
     }
