@@ -312,7 +312,9 @@ impl Precomputed {
             // indefinite), with their slopes alone for the rest of the step.
             self.newton_direction(field, cs, whole_hessian);
             let mut slope = self.slope(cs);
-            if slope >= 0.0 && whole_hessian && predicted {
+            if slope >= 0.0 && whole_hessian && predicted && k + 1 < MAX_ITERATIONS {
+                // Once, and not in the last iteration (which would then
+                // end the step unconverged without marking it capped).
                 predicted = false;
                 energy = self.restart_unpredicted(field, cs);
                 continue;
