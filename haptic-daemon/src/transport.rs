@@ -110,7 +110,7 @@ impl Transport {
     /// there (nobody publishes the stream; remotely: no bridge with a
     /// simulation behind it). On shared memory a simulation opens its
     /// force stream just before its scene stream: with only the former
-    /// there, the scene stream is waited for [`SCENE_STREAM_WAIT`] (a
+    /// there, the scene stream is waited for `SCENE_STREAM_WAIT` (a
     /// client publishing forces without a scene, as the tests' stand-ins
     /// do, costs the daemon no more).
     pub fn scene_now(

@@ -109,7 +109,7 @@ impl Proxy {
     }
 
     /// The hand's speed (m/s): how far the target is from where it was
-    /// about [`HAND_WINDOW_S`] ago, over that time. Not its speed over a
+    /// about `HAND_WINDOW_S` ago, over that time. Not its speed over a
     /// step: a pose published slower than the simulation steps moves in
     /// jumps, and one that jumps away and back is not a hand that moved.
     pub fn hand_speed_m_s(&self) -> Real {
@@ -138,7 +138,7 @@ impl Proxy {
     /// Whether the proxy is further from its target than it would be
     /// following it: a proxy following a hand, or braking onto a target
     /// that stopped, is at most v^2 / (2 a) behind at its speed v (plus
-    /// [`TRACKING_SLACK_M`]); further, it is catching up (after a let-go or
+    /// `TRACKING_SLACK_M`); further, it is catching up (after a let-go or
     /// a jump) or was stopped short.
     pub fn catching_up(&self) -> bool {
         let v = self.speed_m_s();
