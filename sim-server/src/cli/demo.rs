@@ -127,13 +127,18 @@ struct DemoJson {
     sim_predicted_steps: u64,
     /// The simulation's steps.
     sim_steps: u64,
-    /// The implicit backend's CG iterations a step, mean and most, and
-    /// the steps its budget stopped short (the run summary's `solve_*`).
+    /// The implicit backend's CG iterations a step, or the precomputed
+    /// backend's Newton iterations of the penalty contact, mean and most,
+    /// and the steps its budget stopped short (the run summary's
+    /// `solve_*`).
     sim_solve_iterations_mean: f64,
     /// See `sim_solve_iterations_mean`.
     sim_solve_iterations_max: usize,
     /// See `sim_solve_iterations_mean`.
     sim_solve_capped_steps: u64,
+    /// The tools' contact law, `penalty` or `projection` (the run
+    /// summary's `contact_law`).
+    sim_contact_law: &'static str,
 }
 
 /// A pipe (both ends close on exec).
@@ -366,6 +371,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         sim_solve_iterations_mean: summary.solve_iterations_mean,
         sim_solve_iterations_max: summary.solve_iterations_max,
         sim_solve_capped_steps: summary.solve_capped_steps,
+        sim_contact_law: summary.contact_law,
     };
     println!(
         "demo on {}: sim {:.0} steps/s, haptic {:.0} Hz | {} contact steps, {} tetrahedra removed, tools {:.1}% of the step | max rendered force {:.3} N (device limit {} N)",
