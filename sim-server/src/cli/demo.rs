@@ -292,11 +292,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
             json_write.as_raw_fd(),
         );
     }
-    let mut daemon = daemon_cmd
-        .spawn()
-        .with_context(|| format!("cannot start {}", daemon_bin.display()))?;
-    // Only the daemon holds these ends now: its exit closes the summary.
-    drop((traj_read, json_write));
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, stop.clone())?;
@@ -316,7 +311,18 @@ pub fn run(args: DemoArgs) -> Result<()> {
         rt_priority: args.rt_priority,
         implicit_step_iterations: super::implicit_step_iterations(args.implicit_iterations),
     };
-    let result = super::run_scene(scene, backend, &cfg, stop.clone());
+    // The daemon starts once the backend is prepared (its scripted hand
+    // runs on its own clock from then).
+    let mut daemon = None;
+    let result = super::run_scene(scene, backend, &cfg, stop.clone(), || {
+        let child = daemon_cmd
+            .spawn()
+            .with_context(|| format!("cannot start {}", daemon_bin.display()))?;
+        daemon = Some(child);
+        // Only the daemon holds these ends now: its exit closes the summary.
+        drop((traj_read, json_write));
+        Ok(())
+    });
     if let Some(v) = &mut viewer {
         // SIGTERM: the window closes; nothing of the viewer's needs saving.
         // SAFETY: kill(2) on our own child's pid.
@@ -326,10 +332,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let summary = match result {
         Ok(s) => s,
         Err(e) => {
-            let _ = daemon.kill();
-            let _ = daemon.wait();
+            if let Some(d) = &mut daemon {
+                let _ = d.kill();
+                let _ = d.wait();
+            }
             return Err(e);
         }
+    };
+    let Some(mut daemon) = daemon else {
+        bail!("the simulation ran without starting the haptic daemon");
     };
     if stop.load(Ordering::Relaxed) {
         // Interrupted: the daemon ramps its force down and ends now rather

@@ -68,12 +68,18 @@ pub fn implicit_step_iterations(n: usize) -> Option<usize> {
     (n > 0).then_some(n)
 }
 
-/// Runs `scene` on `backend` (the scene's when `None`).
+/// Runs `scene` on `backend` (the scene's when `None`), calling `ready`
+/// once the backend is prepared and before the first step: the demo starts
+/// its haptic daemon there, so that the daemon's scripted hand does not run
+/// ahead of a simulation that spends seconds preparing (the precomputed
+/// responses on a machine without them in the cache: the grasp of the
+/// liver demo was over before the first step, and the hand felt nothing).
 pub fn run_scene(
     scene: BuiltScene,
     backend: Option<BackendName>,
     cfg: &RunConfig,
     stop: Arc<AtomicBool>,
+    ready: impl FnOnce() -> Result<()>,
 ) -> Result<RunSummary> {
     Ok(match backend.unwrap_or(scene.settings.backend) {
         BackendName::Implicit => {
@@ -84,6 +90,7 @@ pub fn run_scene(
                 config.step_iterations = cfg.implicit_step_iterations;
                 Implicit::new(model, config)
             })?;
+            ready()?;
             run(prepared, cfg, stop)?
         }
         BackendName::Precomputed => {
@@ -122,6 +129,7 @@ pub fn run_scene(
             if prepared.sim.from_cache {
                 eprintln!("precomputed responses read from the cache");
             }
+            ready()?;
             run(prepared, cfg, stop)?
         }
         BackendName::Hybrid => {
@@ -177,10 +185,19 @@ pub fn run_scene(
                     ""
                 }
             );
+            ready()?;
             run(prepared, cfg, stop)?
         }
-        _ if scene.settings.single_precision => run(prepare::<f32>(scene, None)?, cfg, stop)?,
-        _ => run(prepare::<f64>(scene, None)?, cfg, stop)?,
+        _ if scene.settings.single_precision => {
+            let prepared = prepare::<f32>(scene, None)?;
+            ready()?;
+            run(prepared, cfg, stop)?
+        }
+        _ => {
+            let prepared = prepare::<f64>(scene, None)?;
+            ready()?;
+            run(prepared, cfg, stop)?
+        }
     })
 }
 
