@@ -27,6 +27,7 @@ mod hybrid;
 mod implicit;
 mod precomputed;
 mod precomputed_contact;
+mod precomputed_rows;
 
 pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
 pub use hybrid::{Hybrid, HybridConfig, HybridError};

@@ -61,6 +61,8 @@ pub struct Precomputed {
     u_ext: Vec<Vec3>,
     /// The contact solve's scratch.
     pub(super) contact: super::precomputed_contact::ContactSolve,
+    /// The responses at the contact step's rows ([`Precomputed::step_rows`]).
+    row_responses: super::precomputed_rows::RowResponses,
     /// Whether the last load came from the disk cache.
     pub from_cache: bool,
 }
@@ -151,6 +153,7 @@ impl Precomputed {
             contact_loaded: Vec::new(),
             u_ext: Vec::new(),
             contact: Default::default(),
+            row_responses: Default::default(),
             from_cache,
         })
     }
@@ -277,11 +280,19 @@ impl Precomputed {
         };
         let held = &self.held;
         solve_holds(&mut self.holds, held, surface, &mut self.applied, free);
-        for &v in rows {
+        // free(v) at the rows, from the responses gathered at them.
+        let sums = self.row_responses.superpose(
+            n,
+            rows,
+            u_ext,
+            loaded.iter().map(|&c| (c, contact_n[c as usize])),
+            |v, a| response(responses, n, slot[v as usize], a),
+        );
+        for (&v, &free_v) in rows.iter().zip(sums) {
             let v = v as usize;
             let u = match held[v] {
                 Some(d) => d,
-                None => (self.applied.iter()).fold(free(v), |u, &(s, f)| {
+                None => (self.applied.iter()).fold(free_v, |u, &(s, f)| {
                     (0..3).fold(u, |u, b| u + f[b] * response(responses, n, s, b)[v])
                 }),
             };
