@@ -150,6 +150,14 @@ fn largest_change(cs: &ContactSolve) -> Real {
     })
 }
 
+/// G = 0 on every vertex (`cs.applied` and its list cleared).
+fn clear_applied(cs: &mut ContactSolve) {
+    for &v in &cs.applied_vertices {
+        cs.applied[v as usize] = [0.0; 3];
+    }
+    cs.applied_vertices.clear();
+}
+
 /// No contact forces of an earlier step to predict from.
 fn forget_previous(cs: &mut ContactSolve) {
     for &v in &cs.previous_vertices {
@@ -200,8 +208,6 @@ impl Precomputed {
             self.prepare_rows();
             let predicted = self.warm_start(&mut cs);
             gather_rows(field, &mut cs);
-            self.set_contact_forces(&cs.applied_vertices, &cs.applied);
-            self.step_rows(&cs.rows);
             self.solve_contact(field, &mut cs, predicted);
             self.set_contact_forces(&cs.applied_vertices, &cs.applied);
             self.step_static();
@@ -220,10 +226,7 @@ impl Precomputed {
     /// carried on (see [`Precomputed::restart_unpredicted`]).
     fn warm_start(&self, cs: &mut ContactSolve) -> bool {
         let mut predicted = false;
-        for &v in &cs.applied_vertices {
-            cs.applied[v as usize] = [0.0; 3];
-        }
-        cs.applied_vertices.clear();
+        clear_applied(cs);
         for (v, f) in self.contact_forces() {
             if self.loadable(v as usize) {
                 let start = match cs.previous[v as usize] {
@@ -245,9 +248,9 @@ impl Precomputed {
         predicted
     }
 
-    /// Back to the last step's contact forces G_n (kept in `cs.previous`
-    /// by [`Precomputed::warm_start`]) unpredicted, their state at the
-    /// rows and the springs there; returns E there. Where the Newton
+    /// G back at the last step's contact forces G_n (kept in `cs.previous`
+    /// by [`Precomputed::warm_start`]) unpredicted; returns E there
+    /// ([`Precomputed::start_at`]). Where the Newton
     /// direction with the whole Hessian does not descend from the
     /// predicted start, that start left the region where Newton converges
     /// quadratically: on the liver demo's grasp, falling back to the slopes
@@ -255,10 +258,7 @@ impl Precomputed {
     /// (stagnating, or walking off towards another equilibrium) where the
     /// plain warm start ended 15-19.
     fn restart_unpredicted(&mut self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
-        for &v in &cs.applied_vertices {
-            cs.applied[v as usize] = [0.0; 3];
-        }
-        cs.applied_vertices.clear();
+        clear_applied(cs);
         for &v in &cs.previous_vertices {
             if let Some(f) = cs.previous[v as usize]
                 && self.loadable(v as usize)
@@ -267,6 +267,13 @@ impl Precomputed {
                 cs.applied_vertices.push(v);
             }
         }
+        self.start_at(field, cs)
+    }
+
+    /// The iterations' starting state for G = `cs.applied`: S applied at
+    /// the rows (kept in `cs.u_at`), no chord yet, and the springs there;
+    /// returns E there.
+    fn start_at(&mut self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
         self.set_contact_forces(&cs.applied_vertices, &cs.applied);
         self.step_rows(&cs.rows);
         for &v in &cs.rows {
@@ -285,14 +292,14 @@ impl Precomputed {
         field.spring_energy_j()
     }
 
-    fn solve_contact(&mut self, field: &mut ContactField, cs: &mut ContactSolve, predicted: bool) {
-        let mut predicted = predicted;
+    fn solve_contact(
+        &mut self,
+        field: &mut ContactField,
+        cs: &mut ContactSolve,
+        mut predicted: bool,
+    ) {
         cs.compliance_of.clear();
-        cs.chord = None;
-        for &v in &cs.rows {
-            cs.u_at[v as usize] = self.displacement_of(v);
-        }
-        let mut energy = self.evaluate_springs(field, cs);
+        let mut energy = self.start_at(field, cs);
         // Whether the field's last evaluation is of the current state.
         let mut current = true;
         let mut whole_hessian = true;
