@@ -122,9 +122,8 @@ mod tests {
     use crate::static_solve::Dirichlet;
     use crate::tensor_mass::{Explicit, ExplicitConfig, Storage};
 
-    /// A 2 x 1 x 1 cm StVK block, with a linear capsule of zero stiffness
-    /// if `capsule` (the step then keeps the linear tensors and the pass
-    /// gives corrections; without it, whole forces).
+    /// A 2 x 1 x 1 cm StVK block, with a linear capsule membrane if
+    /// `capsule`.
     fn block(capsule: bool) -> ElasticModel {
         let mesh = BoxSpec::new(Vec3::new(0.02, 0.01, 0.01), CellSize::EdgeM(0.005))
             .generate()
@@ -140,7 +139,7 @@ mod tests {
         .unwrap();
         if capsule {
             model
-                .with_membrane(0.0, crate::membrane::MembraneModel::Linear)
+                .with_membrane(5000.0, crate::membrane::MembraneModel::Linear)
                 .unwrap()
         } else {
             model
@@ -151,11 +150,13 @@ mod tests {
     /// of its length (one end fixed, the other held where a tool holds it):
     /// at the static StVK equilibrium, the sum of [`vertex_force_n`] over
     /// the held end is minus the support force the nonlinear static solver
-    /// reports there, with the step's whole forces and with its
-    /// corrections, in f64 and f32; the linear force alone is far off.
+    /// reports there, with the step's whole forces (beside a kernel with
+    /// no tensors, or the capsule's alone) and with its corrections (beside
+    /// the linear tensors), with and without a linear capsule membrane, in
+    /// f64 and f32; the linear force alone is far off.
     #[test]
     fn a_held_end_feels_the_nonlinear_force() {
-        fn check<S: Storage>(capsule: bool, tol: Real) {
+        fn check<S: Storage>(capsule: bool, whole: bool, tol: Real) {
             let model = block(capsule);
             let n = model.vertex_count();
             let p = model.mesh().positions_m().to_vec();
@@ -179,7 +180,13 @@ mod tests {
                     .solution;
             let support: Vec3 = held.iter().map(|v| statics.force_n[v.idx()]).sum();
             let adj = Adjacency::new(&model);
-            let mut sim = Explicit::<S>::new(model, ExplicitConfig::new(1e-5)).unwrap();
+            let config = ExplicitConfig::new(1e-5);
+            let mut sim = if whole {
+                Explicit::<S>::new(model, config).unwrap()
+            } else {
+                Explicit::<S>::with_linear_tensors(model, config).unwrap()
+            };
+            assert_eq!(sim.kernel().is_elastic(), !whole);
             for (v, x) in p.iter().enumerate() {
                 if x.x < 1e-9 {
                     sim.fix(VertexId(v as u32));
@@ -204,16 +211,18 @@ mod tests {
             let scale = support.length();
             assert!(
                 (felt + support).length() <= tol * scale,
-                "capsule {capsule}: felt {felt} against support {support}"
+                "capsule {capsule}, whole {whole}: felt {felt} against support {support}"
             );
             assert!(
                 (linear + support).length() > 0.05 * scale,
                 "the stretch is nonlinear enough to tell: linear {linear}, support {support}"
             );
         }
-        check::<f64>(false, 1e-6);
-        check::<f64>(true, 1e-6);
-        check::<f32>(false, 1e-4);
-        check::<f32>(true, 1e-4);
+        for capsule in [false, true] {
+            for whole in [false, true] {
+                check::<f64>(capsule, whole, 1e-6);
+                check::<f32>(capsule, whole, 1e-4);
+            }
+        }
     }
 }

@@ -16,6 +16,25 @@ use crate::tensor_mass::stability::{BoundMethod, element_bound, power_iteration}
 impl<S: Storage> Explicit<S> {
     /// Sets up the integrator at rest (U = 0).
     pub fn new(model: ElasticModel, config: ExplicitConfig) -> Result<Self, ExplicitError> {
+        Self::build(model, config, true)
+    }
+
+    /// The same, keeping every element's linear tensors in the kernel and
+    /// the nonlinear pass's differences from them even where every element
+    /// is nonlinear (the two forms are tested equal).
+    #[cfg(test)]
+    pub(crate) fn with_linear_tensors(
+        model: ElasticModel,
+        config: ExplicitConfig,
+    ) -> Result<Self, ExplicitError> {
+        Self::build(model, config, false)
+    }
+
+    fn build(
+        model: ElasticModel,
+        config: ExplicitConfig,
+        whole_forces: bool,
+    ) -> Result<Self, ExplicitError> {
         let dt_s = config.dt_s;
         if !(dt_s.is_finite() && dt_s > 0.0) {
             return Err(ExplicitError::BadDt(dt_s));
@@ -48,15 +67,15 @@ impl<S: Storage> Explicit<S> {
         };
         // The nonlinear lanes in the kernel's precision: with f32 tensors,
         // eight f32 elements to a register. When every element is
-        // nonlinear and the tensors hold nothing else (as a linear capsule
-        // membrane would), the pass computes the whole elastic
-        // force and the kernel carries no tensors (it only integrates);
-        // otherwise the kernel keeps the linear tensors and the pass adds
-        // the nonlinear elements' differences.
+        // nonlinear the pass computes the whole elastic force and the
+        // kernel carries only a linear capsule membrane's springs, or no
+        // tensors (it only integrates); otherwise the kernel keeps the
+        // linear tensors and the pass adds the nonlinear elements'
+        // differences.
         let large = LargeStrain::with_precision(&model, S::LANES);
         let (kernel, large) = match large {
-            Some(l) if l.covers_every_tetrahedron() && model.tensors_are_elements_only() => (
-                Kernel::without_elastic(model.vertex_count()),
+            Some(l) if l.covers_every_tetrahedron() && whole_forces => (
+                Kernel::beside_whole_forces(&model),
                 Some(l.computing_whole_forces()),
             ),
             other => (Kernel::new(&model), other),

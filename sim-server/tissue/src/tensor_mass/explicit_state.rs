@@ -114,18 +114,21 @@ impl<S: Storage> Explicit<S> {
 
     /// The nonlinear elements' force at vertex `v` from the last pass (the
     /// state at the start of the last sub-step), `None` in a linear model.
+    /// A whole force includes a linear capsule's springs there, which the
+    /// kernel then holds alone (at the current state).
     pub fn nonlinear_force_n(&self, v: VertexId) -> Option<VertexForce> {
         let large = self.large.as_ref()?;
         let f = Vec3::from_array(self.fnl[v.idx()]);
         Some(if large.computes_whole_forces() {
-            VertexForce::Whole(f)
+            let capsule = self.kernel.capsule_force_n(v, &self.u).unwrap_or([0.0; 3]);
+            VertexForce::Whole(f + Vec3::from_array(capsule))
         } else {
             VertexForce::Correction(f)
         })
     }
 
-    /// The hot kernel (without elastic tensors when every element is
-    /// nonlinear: see [`Kernel::without_elastic`]).
+    /// The hot kernel (without the elements' tensors when every element is
+    /// nonlinear: see [`Kernel::beside_whole_forces`]).
     pub fn kernel(&self) -> &Kernel<S> {
         &self.kernel
     }

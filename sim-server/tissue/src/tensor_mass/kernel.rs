@@ -73,9 +73,22 @@ pub struct Kernel<S: Storage> {
     edges: Vec<EdgeBlock<S>>,
     /// Largest j - i over the edges: how far ahead a row scatters.
     span: usize,
-    /// False: no elastic tensors at all (every element is nonlinear and
-    /// computes its whole force in the nonlinear pass); cuts change nothing.
-    elastic: bool,
+    /// What the tensors hold.
+    holds: Holds,
+}
+
+/// What a kernel's tensors hold.
+#[derive(Clone, Debug)]
+enum Holds {
+    /// The model's tensors: every element's, and a linear capsule's.
+    Elastic,
+    /// Only a linear capsule membrane's springs, and where they sit (every
+    /// element is nonlinear and computes its whole force in the nonlinear
+    /// pass): see [`Kernel::beside_whole_forces`].
+    Membrane(membrane::MembraneRows),
+    /// Nothing (every element nonlinear, no linear capsule): K u = 0, and
+    /// cuts change nothing.
+    Nothing,
 }
 
 impl<S: Storage> Kernel<S> {
@@ -109,7 +122,7 @@ impl<S: Storage> Kernel<S> {
                 .map(|[a, b]| (b.0 - a.0) as usize)
                 .max()
                 .unwrap_or(0),
-            elastic: true,
+            holds: Holds::Elastic,
         }
     }
 
@@ -124,18 +137,20 @@ impl<S: Storage> Kernel<S> {
             row_start: vec![0; n + 1],
             edges: Vec::new(),
             span: 0,
-            elastic: false,
+            holds: Holds::Nothing,
         }
     }
 
     /// Whether it holds the elastic tensors.
     pub fn is_elastic(&self) -> bool {
-        self.elastic
+        matches!(self.holds, Holds::Elastic)
     }
 
-    /// Copies the 4 vertex and 6 edge tensors a cut changed.
+    /// Copies the 4 vertex and 6 edge tensors a cut changed (the capsule's
+    /// springs alone in a kernel that holds only those).
     pub fn update(&mut self, model: &ElasticModel, change: &CutChange) {
-        if !self.elastic {
+        if !self.is_elastic() {
+            self.update_capsule(model, change);
             return;
         }
         for v in change.vertices {
@@ -416,6 +431,9 @@ impl<S: Storage> Kernel<S> {
 
 #[path = "kernel_storage.rs"]
 mod storage;
+
+#[path = "kernel_membrane.rs"]
+mod membrane;
 
 #[cfg(test)]
 #[path = "kernel_tests.rs"]

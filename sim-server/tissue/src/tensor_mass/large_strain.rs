@@ -2,13 +2,14 @@
 //! per-element rest data packed once, a force pass every sub-step, and the
 //! bound of the current tangent for the stable step.
 //!
-//! In a model with linear elements (or a linear capsule folded into the
-//! tensors) the hot kernel keeps the linear tensors of *every* element (so
-//! contact stiffness, the rest bound and cutting stay as they are) and for
-//! each nonlinear element this pass adds the difference between its
-//! nonlinear force and its linear one, -V (P - sigma_lin) m_k. When every
-//! element is nonlinear and the tensors hold nothing else, the kernel
-//! carries no tensors and the pass computes the whole force, -V P m_k
+//! In a model with linear elements the hot kernel keeps the linear
+//! tensors of *every* element (so contact stiffness, the rest bound and
+//! cutting stay as they are) and for each nonlinear element this pass adds
+//! the difference between its nonlinear force and its linear one,
+//! -V (P - sigma_lin) m_k. When every element is nonlinear the kernel
+//! carries no element tensors (only a linear capsule membrane's springs,
+//! if the model has one: [`super::Kernel::beside_whole_forces`]) and the
+//! pass computes the whole force, -V P m_k
 //! ([`LargeStrain::computing_whole_forces`]). On several threads the pass
 //! writes each element's four forces to its own slots (threads own element
 //! ranges, no atomics), then one sequential sweep adds the slots to their
@@ -189,9 +190,9 @@ impl LargeStrain {
 
     /// The same pass computing each element's whole elastic force, P
     /// instead of P - sigma_lin: for a model whose every tetrahedron is
-    /// nonlinear, run beside a kernel without elastic tensors
-    /// ([`super::Kernel::without_elastic`]), which then no longer streams
-    /// the linear tensors only for the pass to cancel them.
+    /// nonlinear, run beside a kernel without the elements' tensors
+    /// ([`super::Kernel::beside_whole_forces`]), which then no longer
+    /// streams the linear tensors only for the pass to cancel them.
     pub fn computing_whole_forces(mut self) -> Self {
         self.whole = true;
         self

@@ -1,5 +1,6 @@
 //! The nonlinear pass's lanes (four f64, eight f32) against the scalar path.
 
+use super::super::kernel::Kernel;
 use super::super::lanes::LaneBlock;
 use super::lane_set::block;
 use super::*;
@@ -485,32 +486,41 @@ fn whole_forces_are_the_corrections_plus_the_linear_forces() {
     let all =
         super::super::Explicit::<f32>::new(mixed_block(MaterialModel::Stvk), config()).unwrap();
     assert!(!all.kernel().is_elastic());
-    // A linear capsule membrane lives in the tensors: they stay.
+    // With a linear capsule membrane the kernel holds its springs alone.
     let capsule = mixed_block(MaterialModel::Stvk)
         .with_membrane(5000.0, crate::membrane::MembraneModel::Linear)
         .unwrap();
     let with_capsule = super::super::Explicit::<f32>::new(capsule, config()).unwrap();
-    assert!(with_capsule.kernel().is_elastic());
+    assert!(!with_capsule.kernel().is_elastic());
+    assert!(with_capsule.kernel().blocks() > 0);
+    assert!(with_capsule.kernel().blocks() < mixed.kernel().blocks());
 }
 
-/// An all-StVK block stepped with the kernel without tensors and whole
-/// forces follows the same trajectory as with the linear copy and
-/// corrections (forced here by a linear capsule of zero stiffness, which
-/// leaves the tensors as they are), through a cut and a restoration of a
-/// deformed element, on two threads, in f64 and f32.
+/// An all-StVK block stepped with whole forces beside a kernel without the
+/// elements' tensors follows the same trajectory as with the linear copy
+/// and corrections, through a cut of a capsule element and its
+/// restoration, on two threads, in f64 and f32; with a linear capsule
+/// membrane (whose springs the kernel then holds alone) and without. The
+/// capsule's force the kernel reports at each vertex (part of a held
+/// tool's reaction) is -(K U) of the model's tensors with the capsule less
+/// those without it.
 #[test]
 fn whole_forces_step_as_the_corrections_do() {
-    fn run<S: super::super::Storage>(capsule: bool) -> Vec<V3> {
+    fn run<S: super::super::Storage>(capsule: bool, whole: bool) -> Vec<V3> {
         let mut model = mixed_block(MaterialModel::Stvk);
         if capsule {
             model = model
-                .with_membrane(0.0, crate::membrane::MembraneModel::Linear)
+                .with_membrane(5000.0, crate::membrane::MembraneModel::Linear)
                 .unwrap();
         }
         let mut config = super::super::ExplicitConfig::new(2e-4);
         config.threads = 2;
-        let mut sim = super::super::Explicit::<S>::new(model, config).unwrap();
-        assert_eq!(sim.kernel().is_elastic(), capsule);
+        let mut sim = if whole {
+            super::super::Explicit::<S>::new(model, config).unwrap()
+        } else {
+            super::super::Explicit::<S>::with_linear_tensors(model, config).unwrap()
+        };
+        assert_eq!(sim.kernel().is_elastic(), !whole);
         let p = sim.model().mesh().positions_m().to_vec();
         for (v, x) in p.iter().enumerate() {
             let id = crate::ids::VertexId(v as u32);
@@ -520,28 +530,71 @@ fn whole_forces_step_as_the_corrections_do() {
                 sim.prescribe(id, Vec3::new(0.004, -0.003, 0.002));
             }
         }
+        let faces = |sim: &super::super::Explicit<S>| {
+            let m = sim.model();
+            m.membrane().map_or(0, |c| c.face_count(m.topology()))
+        };
         for step in 0..120 {
             if step == 40 {
+                let before = faces(&sim);
                 sim.remove_tet(TetId(20)).unwrap();
+                assert!(
+                    !capsule || faces(&sim) < before,
+                    "the cut takes capsule faces"
+                );
             }
             if step == 80 {
                 sim.restore_tet(TetId(20)).unwrap();
+            }
+            if step == 100 && capsule && whole {
+                check_capsule_force(&sim, S::LANES == LanePrecision::F32);
             }
             sim.step();
         }
         sim.displacements().to_vec()
     }
-    for (a, b, tol) in [
-        (run::<f64>(false), run::<f64>(true), 1e-9),
-        (run::<f32>(false), run::<f32>(true), 1e-4),
-    ] {
-        let scale = b.iter().flatten().fold(0.0 as Real, |m, x| m.max(x.abs()));
-        assert!(scale > 1e-3, "the block deforms: {scale}");
-        for (x, y) in a.iter().zip(&b) {
-            for d in 0..3 {
-                assert!((x[d] - y[d]).abs() <= tol * scale, "{x:?} vs {y:?}");
+    for capsule in [false, true] {
+        for (a, b, tol) in [
+            (run::<f64>(capsule, false), run::<f64>(capsule, true), 1e-9),
+            (run::<f32>(capsule, false), run::<f32>(capsule, true), 1e-4),
+        ] {
+            let scale = b.iter().flatten().fold(0.0 as Real, |m, x| m.max(x.abs()));
+            assert!(scale > 1e-3, "the block deforms: {scale}");
+            for (x, y) in a.iter().zip(&b) {
+                for d in 0..3 {
+                    assert!((x[d] - y[d]).abs() <= tol * scale, "{x:?} vs {y:?}");
+                }
             }
         }
+    }
+}
+
+/// The capsule's force at every vertex as the whole-force kernel reports
+/// it against -(K U) with the capsule less without it (the block restored
+/// after its cut, so a fresh block's tensors are the elements' own).
+fn check_capsule_force<S: super::super::Storage>(sim: &super::super::Explicit<S>, f32: bool) {
+    let u = sim.displacements();
+    let mut with = vec![[0.0; 3]; u.len()];
+    Kernel::<f64>::new(sim.model()).apply(u, &mut with);
+    let mut without = vec![[0.0; 3]; u.len()];
+    Kernel::<f64>::new(&mixed_block(MaterialModel::Stvk)).apply(u, &mut without);
+    let expected: Vec<Vec3> = (with.iter().zip(&without))
+        .map(|(a, b)| Vec3::from_array(*b) - Vec3::from_array(*a))
+        .collect();
+    let scale = expected
+        .iter()
+        .fold(0.0 as Real, |m, f| m.max(f.abs().max_element()));
+    assert!(scale > 1e-4, "the capsule pulls: {scale} N");
+    let tol = if f32 { 1e-6 } else { 1e-12 };
+    for (v, e) in expected.iter().enumerate() {
+        let got = sim
+            .kernel()
+            .capsule_force_n(crate::ids::VertexId(v as u32), u);
+        let got = Vec3::from_array(got.expect("the kernel holds the capsule alone"));
+        assert!(
+            (got - *e).abs().max_element() <= tol * scale,
+            "vertex {v}: {got} vs {e}"
+        );
     }
 }
 
