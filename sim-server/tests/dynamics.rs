@@ -457,3 +457,25 @@ fn bad_dt_is_refused() {
         ));
     }
 }
+
+/// The step's worker threads are reachable (for the run loop to give them
+/// its real-time priority: a step waits for them): each of a two-thread
+/// integrator's pool runs the callback once, on its own named thread; a
+/// one-thread integrator steps on the caller's and has none.
+#[test]
+fn the_step_workers_are_each_reached_once() {
+    use sim_server::backend::Backend;
+    let names = std::sync::Mutex::new(Vec::new());
+    let record = || {
+        let name = std::thread::current().name().unwrap_or("").to_string();
+        names.lock().unwrap().push(name);
+    };
+    let two = Explicit::<f32>::new(model([4, 2, 2], 0.0), config(1e-5, 2)).unwrap();
+    assert_eq!(Backend::on_step_workers(&two, &record), 2);
+    let mut seen = names.lock().unwrap().clone();
+    seen.sort();
+    assert_eq!(seen, ["tensor-mass-0", "tensor-mass-1"]);
+    let one = Explicit::<f32>::new(model([4, 2, 2], 0.0), config(1e-5, 1)).unwrap();
+    assert_eq!(Backend::on_step_workers(&one, &record), 0);
+    assert_eq!(names.lock().unwrap().len(), 2);
+}

@@ -203,6 +203,10 @@ pub struct RunSummary {
     /// The stepping loop's SCHED_FIFO priority (`--rt-priority`; 0: normal
     /// priority, as asked or because it was refused).
     pub rt_priority: i32,
+    /// The step's worker threads (`threads` above 1 on the tensor-mass
+    /// backend) put at the stepping loop's SCHED_FIFO priority with it: a
+    /// step waits for them, so at normal priority they made it theirs.
+    pub rt_step_workers: usize,
     /// Steps finished from the prediction made while the loop waited for
     /// the pose (the tensor-mass backend, one thread; the rest ran whole),
     /// and the rows they recomputed in all.
@@ -276,7 +280,10 @@ pub fn run<B: Backend>(
         // After the worker threads started (and, reset on fork, not
         // passed to any started later).
         match shared::rt::set_fifo(cfg.rt_priority) {
-            Ok(p) => l.summary_mut().rt_priority = p,
+            Ok(p) => {
+                l.summary_mut().rt_priority = p;
+                l.summary_mut().rt_step_workers = l.raise_step_workers(p);
+            }
             Err(e) => eprintln!("sim-server: {}", shared::rt::fifo_refused_hint(&e)),
         }
     }

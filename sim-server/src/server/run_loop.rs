@@ -465,6 +465,32 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         }
     }
 
+    /// Puts the step's worker threads (see [`Backend::on_step_workers`])
+    /// under SCHED_FIFO at `priority`, as the stepping thread is; returns
+    /// how many took it (a refusal is reported once).
+    pub fn raise_step_workers(&self, priority: i32) -> usize {
+        let raised = std::sync::atomic::AtomicUsize::new(0);
+        let refused = std::sync::Mutex::new(None);
+        self.sim
+            .on_step_workers(&|| match shared::rt::set_fifo(priority) {
+                Ok(_) => {
+                    raised.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(e) => {
+                    if let Ok(mut r) = refused.lock() {
+                        r.get_or_insert(e);
+                    }
+                }
+            });
+        if let Ok(Some(e)) = refused.into_inner() {
+            eprintln!(
+                "sim-server: a step worker thread stays at normal priority: {}",
+                shared::rt::fifo_refused_hint(&e)
+            );
+        }
+        raised.into_inner()
+    }
+
     /// The summary so far, for what the loop's caller records in it.
     pub fn summary_mut(&mut self) -> &mut RunSummary {
         &mut self.summary

@@ -57,6 +57,9 @@ impl<S: Storage> Backend for Explicit<S> {
     ) -> Option<crate::tensor_mass::large_strain::VertexForce> {
         Explicit::nonlinear_force_n(self, v)
     }
+    fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
+        Explicit::on_step_workers(self, f)
+    }
     fn integrates_contact(&self) -> bool {
         true
     }

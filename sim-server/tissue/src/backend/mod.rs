@@ -112,6 +112,16 @@ pub trait Backend {
     fn dynamic(&self) -> bool {
         true
     }
+    /// Runs `f` once on each worker thread a step waits for (the explicit
+    /// integrator's pool with `threads` above 1), and returns how many;
+    /// none for a backend that steps on the calling thread alone. For the
+    /// caller to give them its real-time priority: a step that hands its
+    /// work to lower-priority threads and waits for them runs at their
+    /// priority, preempted by anything above it. Cold: called at start.
+    fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
+        let _ = f;
+        0
+    }
     /// Whether [`Backend::step_with_contact`] evaluates the penalty contact
     /// (the penalty law needs it): at every sub-step of a dynamic backend,
     /// or as each step's equilibrium on a static one.

@@ -127,6 +127,17 @@ impl<S: Storage> Explicit<S> {
         })
     }
 
+    /// Runs `f` once on each of the step's worker threads (the pool of a
+    /// configuration with `threads` above 1; the step hands its passes to
+    /// them and waits) and returns how many: none on one thread, where
+    /// the caller's thread steps.
+    pub fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
+        match &self.pool {
+            Some(pool) => pool.broadcast(|_| f()).len(),
+            None => 0,
+        }
+    }
+
     /// The hot kernel (without the elements' tensors when every element is
     /// nonlinear: see [`Kernel::beside_whole_forces`]).
     pub fn kernel(&self) -> &Kernel<S> {

@@ -345,6 +345,9 @@ impl Backend for Hybrid {
     fn name(&self) -> &'static str {
         "hybrid"
     }
+    fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
+        self.tm.on_step_workers(f)
+    }
     fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
         self.tm.large_strain().map(|l| l.last())
     }
