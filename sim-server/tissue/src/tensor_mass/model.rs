@@ -228,15 +228,6 @@ impl ElasticModel {
         self.topology_changes
     }
 
-    /// Whether the tensors hold only the elements' contributions (no linear
-    /// capsule springs folded into them).
-    pub fn tensors_are_elements_only(&self) -> bool {
-        !self
-            .membrane
-            .as_ref()
-            .is_some_and(|m| m.model() == MembraneModel::Linear)
-    }
-
     /// The membrane, if the model has one.
     pub fn membrane(&self) -> Option<&Membrane> {
         self.membrane.as_ref()
