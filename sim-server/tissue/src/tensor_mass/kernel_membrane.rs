@@ -4,8 +4,9 @@
 //! (paper 3.7, folded into the model's tensors as k d d^T per capsule
 //! edge). Before this the capsule kept the elements' linear tensors in the
 //! kernel, and the pass computed each element's difference from its linear
-//! force: on the embedded liver with `model = "corotational"` a step cost
-//! 15-25% more that way (README). A part of [`super`], which owns the
+//! force: on the embedded liver a step cost 17% more that way with
+//! `model = "corotational"` and 32% more with `"stvk"` (medians of five
+//! interleaved rounds, README). A part of [`super`], which owns the
 //! kernel's storage.
 
 use super::storage::pack;
