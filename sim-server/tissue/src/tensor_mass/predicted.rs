@@ -74,7 +74,8 @@ impl LowerRows {
         Self { start, entries }
     }
 
-    fn of(&self, i: usize) -> &[[u32; 2]] {
+    /// Row `i`'s entries: (lower row j, edge slot), ascending j.
+    pub(in crate::tensor_mass) fn of(&self, i: usize) -> &[[u32; 2]] {
         &self.entries[self.start[i] as usize..self.start[i + 1] as usize]
     }
 
