@@ -6,8 +6,13 @@
 //! ```sh
 //! cargo run --release -p sim-server --example indentation -- \
 //!     --cell-m 0.00125 --law penalty [--width-m 0.024] [--at-m 0.012,0.012] \
-//!     [--depths-mm 1,2,4] [--stiffness-factor 64] [--backend tensor-mass|precomputed]
+//!     [--depths-mm 1,2,4] [--stiffness-factor 64] [--backend tensor-mass|precomputed] \
+//!     [--refine-cell-m 0.000625 --refine-radius-m 0.006]
 //! ```
+//!
+//! With `--refine-cell-m`, a `[[refine]]` sphere of `--refine-radius-m`
+//! round the probe's contact point bisects the cells there down to that
+//! size (the rest keeps `--cell-m`).
 //!
 //! The block is `width x width x 20 mm` (E 5 kPa, nu 0.45, damping 40 /s),
 //! its bottom fixed, meshed with cubes of `--cell-m`; the probe is a hook of
@@ -40,6 +45,8 @@ struct Args {
     depths_mm: Vec<f64>,
     stiffness_factor: f64,
     backend: String,
+    refine_cell_m: Option<f64>,
+    refine_radius_m: f64,
 }
 
 fn numbers(flag: &str, text: &str) -> Result<Vec<f64>> {
@@ -63,6 +70,8 @@ fn parse() -> Result<Args> {
         depths_mm: vec![1.0, 2.0, 4.0],
         stiffness_factor: 64.0,
         backend: "tensor-mass".into(),
+        refine_cell_m: None,
+        refine_radius_m: 0.006,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -78,8 +87,10 @@ fn parse() -> Result<Args> {
             "--depths-mm" => a.depths_mm = numbers(&flag, &value)?,
             "--stiffness-factor" => a.stiffness_factor = numbers(&flag, &value)?[0],
             "--backend" => a.backend = value,
+            "--refine-cell-m" => a.refine_cell_m = Some(numbers(&flag, &value)?[0]),
+            "--refine-radius-m" => a.refine_radius_m = numbers(&flag, &value)?[0],
             _ => bail!(
-                "unknown flag {flag}: --cell-m, --law, --width-m, --at-m, --depths-mm, --stiffness-factor, --backend"
+                "unknown flag {flag}: --cell-m, --law, --width-m, --at-m, --depths-mm, --stiffness-factor, --backend, --refine-cell-m, --refine-radius-m"
             ),
         }
     }
@@ -101,6 +112,15 @@ fn parse() -> Result<Args> {
 fn main() -> Result<()> {
     let a = parse()?;
     let (w, edge) = (a.width_m, a.width_m + 0.001);
+    let refine = match a.refine_cell_m {
+        Some(h) => format!(
+            "[[refine]]\nname = \"under the probe\"\nselect = {{ sphere_m = [{x}, {y}, {HEIGHT_M}, {r}] }}\ncell_m = {h}\nmax_tets = 2000000\n",
+            x = a.at_m[0],
+            y = a.at_m[1],
+            r = a.refine_radius_m,
+        ),
+        None => String::new(),
+    };
     let text = format!(
         r#"
 [mesh]
@@ -123,6 +143,7 @@ tip_length_m = 0.01
 [contact]
 law = "{law}"
 stiffness_factor = {factor}
+{refine}
 "#,
         cell = a.cell_m,
         x = a.at_m[0],
@@ -152,8 +173,9 @@ stiffness_factor = {factor}
 /// The press and the forces at each depth, printed.
 fn press_all<B: Backend>(a: &Args, p: &mut Prepared<B>) -> Result<()> {
     println!(
-        "cell {} mm, {} tetrahedra, law {}, {}: depth (mm), force (N)",
+        "cell {} mm (refined to {:?} mm), {} tetrahedra, law {}, {}: depth (mm), force (N)",
         a.cell_m * 1e3,
+        a.refine_cell_m.map(|h| h * 1e3),
         p.sim.model().mesh().tet_count(),
         a.law,
         p.sim.name()

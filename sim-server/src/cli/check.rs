@@ -39,6 +39,8 @@ struct CheckJson {
     /// Per physical tag of the surface triangles, how many carry it (mesh
     /// files; `select = { surface_physical = N }` takes their vertices).
     surface_physical_tags: Vec<(i32, usize)>,
+    /// What each `[[refine]]` of the scene did (none for a mesh file).
+    refined: Vec<sim_server::scene::refine::RefineReport>,
 }
 
 /// Prints where the mesh is, its typical edge and a warning when that is
@@ -152,6 +154,7 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
                     median_edge_m: extent.median_edge_m,
                     physical_tags: tags,
                     surface_physical_tags: surface_tags,
+                    refined: Vec::new(),
                 },
             )?;
         }
@@ -178,6 +181,20 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     );
     for w in &r.warnings {
         println!("warning: {w}");
+    }
+    for f in &r.refined {
+        println!(
+            "refine {}: cells up to {:.3} mm, {} -> {} tetrahedra{}",
+            f.name,
+            f.cell_m * 1e3,
+            f.tets_before,
+            f.tets_after,
+            if f.stopped_at_budget {
+                " (stopped at its max_tets)"
+            } else {
+                ""
+            }
+        );
     }
     let (extent, units) = print_extent(mesh);
     print_quality(&q);
@@ -315,6 +332,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 median_edge_m: extent.median_edge_m,
                 physical_tags: Vec::new(),
                 surface_physical_tags: Vec::new(),
+                refined: r.refined.clone(),
             },
         )?;
     }

@@ -63,6 +63,8 @@ pub struct SceneReport {
     pub loaded_vertices: usize,
     /// Tetrahedra of the hybrid's tensor-mass part, when `[hybrid]` is given.
     pub hybrid_tets: Option<usize>,
+    /// What each `[[refine]]` did, in order.
+    pub refined: Vec<super::refine::RefineReport>,
 }
 
 /// A built scene.

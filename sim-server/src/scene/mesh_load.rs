@@ -187,6 +187,7 @@ pub(super) fn load_mesh(
             mesh.reoriented()
         ));
     }
+    let (mesh, physical) = super::refine::refine_mesh(src, spec, mesh, physical, report)?;
     if !m.reorder.unwrap_or(true) {
         return Ok(LoadedMesh {
             mesh,

@@ -9,6 +9,7 @@ mod build;
 mod loads;
 mod materials;
 mod mesh_load;
+pub mod refine;
 mod select;
 mod settings;
 pub mod spec;

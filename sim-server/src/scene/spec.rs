@@ -16,6 +16,10 @@ pub struct SceneSpec {
     pub mesh: Spanned<MeshSpec>,
     /// `[material]`: the default material.
     pub material: Spanned<MaterialSpec>,
+    /// `[[refine]]`: finer cells where tools work, applied in order to the
+    /// mesh as loaded (before materials, constraints and tools).
+    #[serde(default)]
+    pub refine: Vec<Spanned<RefineSpec>>,
     /// `[[region]]`: material overrides on selections, applied in order.
     #[serde(default)]
     pub region: Vec<Spanned<RegionSpec>>,
@@ -39,6 +43,24 @@ pub struct SceneSpec {
     pub contact: Option<Spanned<ContactSpec>>,
     /// `[hybrid]`: the split of the hybrid backend.
     pub hybrid: Option<Spanned<HybridSpec>>,
+}
+
+/// `[[refine]]`: the tetrahedra touching `select` bisected (longest edge
+/// first, conforming) until their cells are no larger than `cell_m` (the
+/// generators' measure: (6 V)^(1/3), the cube six such tetrahedra fill).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RefineSpec {
+    /// A name for reports.
+    pub name: Option<String>,
+    /// Where: a box, a sphere (tetrahedra touching it) or a physical tag.
+    pub select: Spanned<Selection>,
+    /// The cell size wanted there (m), as a generator's `cell_m`: for a
+    /// tool, no more than its radius.
+    pub cell_m: Spanned<f64>,
+    /// The most tetrahedra the whole mesh may have after this refinement
+    /// (default 300,000): past it the refinement stops, conforming, and says so.
+    pub max_tets: Option<Spanned<usize>>,
 }
 
 /// `[hybrid]`: the tetrahedra (by centroid, or by physical tag) that form the

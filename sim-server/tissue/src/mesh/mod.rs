@@ -7,6 +7,7 @@
 pub mod extent;
 mod generate;
 pub mod quality;
+pub mod refine;
 mod reorder;
 pub mod shapes;
 
