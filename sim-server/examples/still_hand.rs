@@ -40,6 +40,8 @@ struct Args {
     refine_cell_m: Option<f64>,
     refine_radius_m: f64,
     corotational_radius_m: Option<f64>,
+    follow_radius_m: Option<f64>,
+    slide_m: f64,
 }
 
 fn numbers(flag: &str, text: &str) -> Result<Vec<f64>> {
@@ -67,6 +69,8 @@ fn parse() -> Result<Args> {
         refine_cell_m: None,
         refine_radius_m: 0.0125,
         corotational_radius_m: None,
+        follow_radius_m: None,
+        slide_m: 0.0,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -89,9 +93,13 @@ fn parse() -> Result<Args> {
             "--hold-s" => a.hold_s = one()?,
             "--refine-cell-m" => a.refine_cell_m = Some(one()?),
             "--refine-radius-m" => a.refine_radius_m = one()?,
-            "--corotational-radius-m" => a.corotational_radius_m = Some(one()?),
+            "--corotational-radius-m, --follow-radius-m, --slide-m" => {
+                a.corotational_radius_m = Some(one()?)
+            }
+            "--follow-radius-m" => a.follow_radius_m = Some(one()?),
+            "--slide-m" => a.slide_m = one()?,
             _ => bail!(
-                "unknown flag {flag}: --size-m, --cell-m, --young-pa, --radius-m, --depth-m, --at-m, --model, --hold-s, --refine-cell-m, --refine-radius-m, --corotational-radius-m"
+                "unknown flag {flag}: --size-m, --cell-m, --young-pa, --radius-m, --depth-m, --at-m, --model, --hold-s, --refine-cell-m, --refine-radius-m, --corotational-radius-m, --follow-radius-m, --slide-m"
             ),
         }
     }
@@ -125,6 +133,10 @@ fn main() -> Result<()> {
         ),
         None => String::new(),
     };
+    let follow = match a.follow_radius_m {
+        Some(r) => format!("[contact]\ncorotational_radius_m = {r}\n"),
+        None => String::new(),
+    };
     let text = format!(
         r#"
 [mesh]
@@ -147,6 +159,7 @@ radius_m = {radius}
 tip_length_m = 0.01
 {refine}
 {corotational}
+{follow}
 "#,
         cell = a.cell_m,
         young = a.young_pa,
@@ -166,26 +179,40 @@ tip_length_m = 0.01
     let top = sz + a.radius_m;
     let started = Instant::now();
     let mut steps = 0usize;
-    let mut press = |depth_m: f64| {
+    let y = a.at_m[1];
+    let press_at = |p: &mut sim_server::prepare::Prepared<Explicit<f64>>, x: f64, depth_m: f64| {
         let input = [Some(ToolInput {
-            tip_m: Vec3::new(a.at_m[0], a.at_m[1], top - depth_m),
+            tip_m: Vec3::new(x, y, top - depth_m),
             jaw_opening: 1.0,
         })];
         p.tools.update(&mut p.sim, &input);
         p.tools.step(&mut p.sim);
-        steps += 1;
         p.tools.reaction(0, &p.sim).force_n.z
     };
     for _ in 0..300 {
-        press(-0.002);
+        press_at(&mut p, a.at_m[0], -0.002);
+        steps += 1;
     }
     let mut depth = 0.0;
     while depth < a.depth_m {
         depth = (depth + 1e-5).min(a.depth_m);
-        press(depth);
+        press_at(&mut p, a.at_m[0], depth);
+        steps += 1;
     }
+    let mut x = a.at_m[0];
+    let mut forces = Vec::new();
+    // A slide: along x at 20 mm/s, then the hold where it ends.
+    while (x - a.at_m[0]).abs() < a.slide_m.abs() {
+        x += 2e-5 * a.slide_m.signum();
+        forces.push(press_at(&mut p, x, depth));
+    }
+    let slide_forces = forces.clone();
+    forces.clear();
     let hold = (a.hold_s * 1e3) as usize;
-    let forces: Vec<f64> = (0..hold).map(|_| press(depth)).collect();
+    for _ in 0..hold {
+        forces.push(press_at(&mut p, x, depth));
+    }
+    steps += slide_forces.len() + hold;
     let wall_s = started.elapsed().as_secs_f64();
     let last = &forces[hold - 500..];
     let n = last.len() as f64;
@@ -208,6 +235,32 @@ tip_length_m = 0.01
         a.radius_m * 1e3,
         a.depth_m * 1e3
     );
+    if let Some((region, rebuilds)) = p.tools.corotational_region() {
+        let tets = region.iter().filter(|r| **r).count();
+        println!(
+            "corotational region round the tip: {tets} tetrahedra now, changed {rebuilds} times"
+        );
+    }
+    if !slide_forces.is_empty() {
+        let jumps: Vec<f64> = slide_forces
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .collect();
+        let mut sorted = jumps.clone();
+        sorted.sort_by(f64::total_cmp);
+        let zeros = slide_forces.iter().filter(|f| f.abs() < 1e-9).count();
+        println!(
+            "slide of {} mm: force {:.4}..{:.4} N, per-step change p99 {:.4} N, max {:.4} N, zero steps {zeros}",
+            a.slide_m * 1e3,
+            slide_forces.iter().copied().fold(f64::INFINITY, f64::min),
+            slide_forces
+                .iter()
+                .copied()
+                .fold(f64::NEG_INFINITY, f64::max),
+            sorted[(sorted.len() * 99 / 100).min(sorted.len() - 1)],
+            sorted.last().unwrap()
+        );
+    }
     println!(
         "held force over the last 0.5 s: mean {mean:.4} N, sd {sd:.4} N ({:.2}% of the mean), min {lo:.4} N, max {hi:.4} N ({:.3}x the mean), zero steps {zeros}; {:.1} us of wall time a step",
         100.0 * sd / mean.abs().max(1e-12),

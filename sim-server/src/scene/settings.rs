@@ -67,6 +67,9 @@ pub(super) fn contact_config(
         c.max_tool_accel_m_s2,
     )?;
     c.entry_speed_m_s = pos(&s.entry_speed_m_s, "entry_speed_m_s", c.entry_speed_m_s)?;
+    if let Some(r) = &s.corotational_radius_m {
+        c.corotational_radius_m = Some(positive(src, r, "[contact] corotational_radius_m")?);
+    }
     if let Some(springs) = &s.springs {
         c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
     }
@@ -77,6 +80,17 @@ pub(super) fn contact_config(
         .as_ref()
         .and_then(|sim| sim.get_ref().backend.as_ref().map(|b| *b.get_ref()))
         .unwrap_or(BackendName::TensorMass);
+    if let Some(r) = &s.corotational_radius_m
+        && backend != BackendName::TensorMass
+    {
+        let backend = format!("{backend:?}").to_lowercase();
+        return Err(src.error(
+            r.span(),
+            format!(
+                "[contact] corotational_radius_m needs the tensor-mass backend, which changes its elements' model while it runs; the {backend} backend fixes its model when it starts: make the region static with a [[region]] of model = \"corotational\""
+            ),
+        ));
+    }
     let penalty = match c.law {
         Some(law) => law == ContactLaw::Penalty,
         None => backend == BackendName::TensorMass,

@@ -427,6 +427,9 @@ pub struct ContactSpec {
     /// Near the tissue, how much faster than the hand the simulated tool
     /// may move when it catches up (m/s, default 0.02).
     pub entry_speed_m_s: Option<Spanned<f64>>,
+    /// The linear tetrahedra within this distance of a tool's tip are
+    /// corotational, the region following the tools (m; tensor-mass only).
+    pub corotational_radius_m: Option<Spanned<f64>>,
     /// How the penalty springs are integrated (default: implicit).
     pub springs: Option<Spanned<SpringsName>>,
 }

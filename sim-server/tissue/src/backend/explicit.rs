@@ -48,6 +48,10 @@ impl<S: Storage> Backend for Explicit<S> {
     fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         Explicit::remove_tet(self, t)
     }
+    fn set_corotational_region(&mut self, corotational: &[bool]) -> bool {
+        Explicit::set_corotational_region(self, corotational);
+        true
+    }
     fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
         Explicit::large_strain(self).map(|l| l.last())
     }

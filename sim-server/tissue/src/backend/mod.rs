@@ -141,6 +141,16 @@ pub trait Backend {
     fn predicted(&self) -> Option<(u64, u64)> {
         None
     }
+    /// Makes the linear tetrahedra flagged in `corotational` corotational
+    /// (and the others linear) from the next step on: the region that
+    /// follows the tools ([`crate::contact::ContactConfig::corotational_radius_m`]).
+    /// Returns false for a backend that cannot (its model is fixed when it
+    /// starts: implicit, precomputed, hybrid), which the contact set-up
+    /// refuses with the reason. Cold: called when the region changes.
+    fn set_corotational_region(&mut self, corotational: &[bool]) -> bool {
+        let _ = corotational;
+        false
+    }
     /// Makes the coming steps stable with contact springs adding up to
     /// `omega2` (rad^2/s^2) to omega_max^2 (sub-stepping as needed).
     /// Backends that do not integrate contact ignore it.

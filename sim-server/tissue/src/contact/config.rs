@@ -68,6 +68,12 @@ pub struct ContactConfig {
     /// of each sub-step ([`super::implicit`]) instead of explicitly with
     /// the tissue's forces (which makes them size the sub-steps).
     pub implicit_springs: bool,
+    /// The linear tetrahedra within this distance of a tool's tip (at
+    /// their current positions) are corotational, the region following
+    /// the tools (`follow_region.rs`); `None`: the model as the scene
+    /// gives it. Needs a backend that can change its model while it runs
+    /// (tensor-mass).
+    pub corotational_radius_m: Option<Real>,
 }
 
 impl Default for ContactConfig {
@@ -81,6 +87,7 @@ impl Default for ContactConfig {
             max_tool_accel_m_s2: 100.0,
             entry_speed_m_s: 0.02,
             implicit_springs: true,
+            corotational_radius_m: None,
         }
     }
 }

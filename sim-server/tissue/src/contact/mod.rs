@@ -87,6 +87,7 @@ mod claims;
 mod config;
 mod decl;
 pub mod field;
+mod follow_region;
 pub mod friction;
 mod geometry;
 pub mod implicit;

@@ -101,11 +101,22 @@ pub struct Tools {
     deferred_hand_over: bool,
     /// Simulated time since the last hand-over (s), while deferred.
     hand_over_due_s: Real,
+    /// The corotational region round the tips, when the scene asks.
+    follow: Option<super::follow_region::FollowRegion>,
 }
 
 /// Why contact cannot run as the scene asks.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ContactError {
+    /// The scene asks for a corotational region round the tools on a
+    /// backend whose model is fixed when it starts.
+    #[error(
+        "[contact] corotational_radius_m needs a backend that can change its elements' model while it runs (tensor-mass); the {backend} backend fixes its model when it starts: make the region static with a [[region]] of model = \"corotational\""
+    )]
+    CorotationalRegionUnsupported {
+        /// The backend's name.
+        backend: &'static str,
+    },
     /// The scene asks for the penalty law on a backend that cannot
     /// integrate it.
     #[error(
@@ -376,6 +387,10 @@ impl Tools {
                 input(i).map(|p| (p.tip_m, p.jaw_opening)),
             );
         }
+        if let Some(follow) = &mut self.follow {
+            let tools = &self.tools;
+            follow.follow(sim, tools.iter().map(|t| t.pose().map(|p| p.end_m)));
+        }
         // After the cuts: the index follows them, and the new positions
         // where a query comes (the projection law's detection; the
         // penalty law refits only to select its points afresh, which most
@@ -442,6 +457,12 @@ impl Tools {
             self.reports[i] = t.commit(sim, &self.claims, jaw);
         }
         &self.reports
+    }
+
+    /// The corotational region round the tips: per tetrahedron whether it
+    /// is in it now, and times it changed (`None`: the scene asks for none).
+    pub fn corotational_region(&self) -> Option<(&[bool], u64)> {
+        self.follow.as_ref().map(|f| f.state())
     }
 
     /// The force on tool `i` and its contact stiffness after the step.

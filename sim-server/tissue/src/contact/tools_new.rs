@@ -129,6 +129,25 @@ impl Tools {
             tools.sampler = Some(sampler);
             tools.stiffness = Some(ContactStiffness::new(sim.model(), held));
         }
+        if let Some(r) = config.corotational_radius_m {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(ContactError::BadConstant {
+                    key: "corotational_radius_m",
+                    value: r,
+                    range: "positive",
+                });
+            }
+            if !sim.set_corotational_region(&[]) {
+                return Err(ContactError::CorotationalRegionUnsupported {
+                    backend: sim.name(),
+                });
+            }
+            tools.follow = Some(crate::contact::follow_region::FollowRegion::new(
+                r,
+                decls.len(),
+                sim.model(),
+            ));
+        }
         for v in held {
             tools.reserve(*v);
         }
@@ -186,6 +205,7 @@ impl Tools {
             steps: 0,
             deferred_hand_over: false,
             hand_over_due_s: 0.0,
+            follow: None,
         }
     }
 }

@@ -60,6 +60,42 @@ impl<S: Storage> Explicit<S> {
         }
     }
 
+    /// Makes the linear tetrahedra flagged in `corotational` (per
+    /// tetrahedron) corotational from the next step on, and every other
+    /// linear one linear again: the region round the tools that the contact
+    /// moves with them ([`crate::contact::ContactConfig::corotational_radius_m`]).
+    /// The kernel keeps every element's linear tensors; the nonlinear pass
+    /// adds the region's corrections (rebuilt here, with fresh rotations).
+    /// A scene whose every element is already nonlinear has nothing to
+    /// change. Allocates (the region's rest data): call when the region
+    /// changes, not every step.
+    pub fn set_corotational_region(&mut self, corotational: &[bool]) {
+        if self
+            .large
+            .as_ref()
+            .is_some_and(|l| l.computes_whole_forces())
+        {
+            return;
+        }
+        self.large = crate::tensor_mass::large_strain::LargeStrain::with_region(
+            &self.model,
+            S::LANES,
+            corotational,
+        );
+        let n = self.u.len();
+        if self.large.is_some() {
+            if self.fnl.len() != n {
+                self.fnl = huge_vec(n, [0.0; 3]);
+            } else {
+                self.fnl.fill([0.0; 3]);
+            }
+        } else {
+            self.fnl = Vec::new();
+        }
+        // A step computed ahead used the old elements.
+        self.forget_prepared();
+    }
+
     /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
     pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         let change = self.model.remove_tet(t)?;

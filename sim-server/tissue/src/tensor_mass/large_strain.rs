@@ -113,7 +113,26 @@ impl LargeStrain {
     /// The same in lanes of `precision` (f32: eight to a 256-bit register,
     /// half the rest data; the explicit step with f32 storage).
     pub fn with_precision(model: &ElasticModel, precision: LanePrecision) -> Option<Self> {
+        Self::with_region(model, precision, &[])
+    }
+
+    /// [`LargeStrain::with_precision`] with the linear tetrahedra flagged
+    /// in `corotational` (per tetrahedron; missing: false) made
+    /// corotational too: the region round a tool that follows it (a
+    /// linear surface wrapped round a narrow tip slips off it; the
+    /// corotational one holds).
+    pub fn with_region(
+        model: &ElasticModel,
+        precision: LanePrecision,
+        corotational: &[bool],
+    ) -> Option<Self> {
         let mesh = model.mesh();
+        let model_of = |t: TetId| match model.materials().material(t).model() {
+            MaterialModel::Linear if corotational.get(t.idx()) == Some(&true) => {
+                MaterialModel::Corotational
+            }
+            m => m,
+        };
         let mut element_of = vec![u32::MAX; mesh.tet_count()];
         let mut elements = Vec::new();
         let mut alive = Vec::new();
@@ -125,7 +144,7 @@ impl LargeStrain {
         let of_model = |m: MaterialModel| {
             let mut ts: Vec<TetId> = (0..mesh.tet_count())
                 .map(TetId::from)
-                .filter(|t| model.materials().material(*t).model() == m)
+                .filter(|t| model_of(*t) == m)
                 .collect();
             ts.sort_by_key(|t| mesh.tets()[t.idx()].iter().map(|v| v.0).min());
             ts
@@ -143,7 +162,7 @@ impl LargeStrain {
                 vertices: mesh.tets()[t.idx()].map(|v| v.0),
                 geom,
                 elastic,
-                model: material.model(),
+                model: model_of(t),
                 rest_lambda: model.element_lambdas()[t.idx()],
                 geometric_per_pa: geom.volume_m3 * shape2 / quarter_mass,
             });
