@@ -128,6 +128,14 @@ impl FrameRecorder {
         })
     }
 
+    /// Writes no `force` arrays: for a run whose elements turn
+    /// corotational while it runs (`[contact] corotational_radius_m`),
+    /// where -K u is not the elastic force.
+    pub fn without_forces(mut self) -> Self {
+        self.forces = false;
+        self
+    }
+
     /// Offers the state at simulated time `t_s`: copied and queued, or
     /// dropped (counted) if the writer is behind. Allocates nothing once
     /// the buffers have grown to the mesh's size.

@@ -85,3 +85,33 @@ fn recorded_frames_hold_the_state_its_elastic_force_and_the_cuts() {
         }
     }
 }
+
+/// A run whose elements turn corotational while it runs (`[contact]
+/// corotational_radius_m`) records no `elastic_force`: -K u is not the
+/// force there. The same recorder without the switch writes it.
+#[test]
+fn a_recorder_without_forces_writes_no_elastic_force() {
+    let mesh = BoxSpec::new(Vec3::new(0.01, 0.01, 0.01), CellSize::EdgeM(0.005))
+        .generate()
+        .unwrap();
+    let tissue = Material::isotropic(4500.0, 0.45, 1060.0, 5.0).unwrap();
+    let materials = TetMaterials::uniform(tissue, mesh.tet_count());
+    let model = ElasticModel::new(mesh, materials).unwrap();
+    let u = vec![[1e-4, 0.0, 0.0]; model.vertex_count()];
+    for (name, without) in [("frames-forces", false), ("frames-no-forces", true)] {
+        let dir = scratch_dir(name);
+        let recorder = FrameRecorder::start(&dir, &model, None).unwrap();
+        let mut recorder = if without {
+            recorder.without_forces()
+        } else {
+            recorder
+        };
+        recorder.offer(0.001, &model, &u);
+        let (counts, error) = recorder.finish();
+        assert!(error.is_none() && counts.saved == 1, "{error:?}");
+        let vtu = std::fs::read(dir.join("frame_000000.vtu")).unwrap();
+        let text = String::from_utf8_lossy(&vtu);
+        assert_eq!(text.contains("elastic_force"), !without, "{name}");
+        assert!(text.contains("displacement"), "{name}");
+    }
+}

@@ -118,7 +118,14 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let n = sim.model().vertex_count();
         let max_tris = 4 * sim.model().mesh().tet_count();
         let recorder = match &cfg.save_frames {
-            Some(dir) => Some(FrameRecorder::start(dir, sim.model(), original_vertex_ids)?),
+            Some(dir) => {
+                let r = FrameRecorder::start(dir, sim.model(), original_vertex_ids)?;
+                // A region that turns corotational: -K u is not the force there.
+                Some(match contacts.corotational_region() {
+                    Some(_) => r.without_forces(),
+                    None => r,
+                })
+            }
             None => None,
         };
         let mesh_out = MeshOut::new(
