@@ -28,6 +28,9 @@ use sim_server::prepare::{Prepared, prepare, prepare_with};
 use sim_server::scene::{SceneSource, build_scene};
 use std::path::PathBuf;
 
+mod common;
+use common::numbers;
+
 /// The block's height (m).
 const HEIGHT_M: f64 = 0.02;
 /// The probe's radius (m).
@@ -47,18 +50,6 @@ struct Args {
     backend: String,
     refine_cell_m: Option<f64>,
     refine_radius_m: f64,
-}
-
-fn numbers(flag: &str, text: &str) -> Result<Vec<f64>> {
-    text.split(',')
-        .map(|x| {
-            x.trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .with_context(|| format!("{flag}: {x:?} is not a number"))
-        })
-        .collect()
 }
 
 fn parse() -> Result<Args> {

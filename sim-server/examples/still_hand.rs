@@ -26,6 +26,9 @@ use sim_server::prelude::*;
 use sim_server::prepare::prepare;
 use sim_server::scene::{SceneSource, build_scene};
 use std::path::PathBuf;
+
+mod common;
+use common::numbers;
 use std::time::Instant;
 
 struct Args {
@@ -42,18 +45,6 @@ struct Args {
     corotational_radius_m: Option<f64>,
     follow_radius_m: Option<f64>,
     slide_m: f64,
-}
-
-fn numbers(flag: &str, text: &str) -> Result<Vec<f64>> {
-    text.split(',')
-        .map(|x| {
-            x.trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .with_context(|| format!("{flag}: {x:?} is not a number"))
-        })
-        .collect()
 }
 
 fn parse() -> Result<Args> {
