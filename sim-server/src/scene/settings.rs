@@ -83,13 +83,11 @@ pub(super) fn contact_config(
     if let Some(r) = &s.corotational_radius_m
         && backend != BackendName::TensorMass
     {
-        let backend = format!("{backend:?}").to_lowercase();
-        return Err(src.error(
-            r.span(),
-            format!(
-                "[contact] corotational_radius_m needs the tensor-mass backend, which changes its elements' model while it runs; the {backend} backend fixes its model when it starts: make the region static with a [[region]] of model = \"corotational\""
-            ),
-        ));
+        // The library's refusal, at the key's line.
+        let refusal = crate::contact::ContactError::CorotationalRegionUnsupported {
+            backend: backend.as_str(),
+        };
+        return Err(src.error(r.span(), refusal.to_string()));
     }
     let penalty = match c.law {
         Some(law) => law == ContactLaw::Penalty,

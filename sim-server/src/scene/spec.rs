@@ -458,6 +458,19 @@ pub enum BackendName {
     Implicit,
 }
 
+impl BackendName {
+    /// The name as scenes and `--backend` spell it (and the backend's own
+    /// `Backend::name`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            BackendName::TensorMass => "tensor-mass",
+            BackendName::Precomputed => "precomputed",
+            BackendName::Hybrid => "hybrid",
+            BackendName::Implicit => "implicit",
+        }
+    }
+}
+
 /// Kernel precision names.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]

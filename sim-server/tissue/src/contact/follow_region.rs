@@ -44,7 +44,6 @@ pub(crate) struct FollowRegion {
     region: Vec<bool>,
     next: Vec<bool>,
     rebuilds: u64,
-    built: bool,
 }
 
 impl FollowRegion {
@@ -56,7 +55,6 @@ impl FollowRegion {
             region: vec![false; model.mesh().tet_count()],
             next: vec![false; model.mesh().tet_count()],
             rebuilds: 0,
-            built: false,
         }
     }
 
@@ -81,10 +79,11 @@ impl FollowRegion {
                 (None, None) => false,
                 _ => true,
             });
-        if self.built && !moved {
+        // Before the first pose every tip is `None` and the region rightly
+        // empty, as it starts.
+        if !moved {
             return;
         }
-        self.built = true;
         for (at, tip) in self.built_at.iter_mut().zip(tips.clone()) {
             *at = tip;
         }

@@ -111,7 +111,7 @@ pub enum ContactError {
     /// The scene asks for a corotational region round the tools on a
     /// backend whose model is fixed when it starts.
     #[error(
-        "[contact] corotational_radius_m needs a backend that can change its elements' model while it runs (tensor-mass); the {backend} backend fixes its model when it starts: make the region static with a [[region]] of model = \"corotational\""
+        "[contact] corotational_radius_m needs the tensor-mass backend, which changes its elements' model while it runs; the {backend} backend fixes its model when it starts: make the region static with a [[region]] of model = \"corotational\""
     )]
     CorotationalRegionUnsupported {
         /// The backend's name.
