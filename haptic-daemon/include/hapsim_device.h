@@ -13,8 +13,11 @@
  * thread; enable, read, write_force and disable are called from the real-time
  * thread at the haptic rate (1-10 kHz). read and write_force MUST NOT block,
  * allocate unboundedly or sleep: hand the work to the SDK's own servo thread
- * if it has one. Return 0 on success, any other value on failure; a failing or
- * non-finite read makes the daemon ramp the force to zero.
+ * if it has one. Return 0 on success, any other value on failure. A failing
+ * read, or one with a NaN or infinite field, is a bad read: the daemon holds
+ * the last good pose and the force (one bad read, or a few ms of them, are
+ * not felt) and counts it (device_bad_reads); bad reads for longer than
+ * --max-reject-run-ms (20 ms) ramp the force to zero until reads are good.
  *
  * The daemon clamps, slew-limits and NaN-guards every force before
  * write_force; the plugin should still keep the SDK's own safety features on

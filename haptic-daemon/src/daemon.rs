@@ -14,8 +14,10 @@
 //!   is rejected and the last good pose held for the simulation, the
 //!   extrapolator and the safety filter; after a run longer than its bound
 //!   the new pose becomes the reference and the force ramps in from what it
-//!   was ([`Safety::ramp_in_from_output`]). A non-finite run that long, or a
-//!   failed read, stops the force (as a non-finite request).
+//!   was ([`Safety::ramp_in_from_output`]). A failed read or a reading
+//!   with any non-finite field is a bad read, rejected the same way (the
+//!   last good pose held, the force kept); a run of bad reads as long as
+//!   that bound stops the force (as a non-finite request).
 //! - [`crate::live`]: a force sample whose simulated time runs faster than
 //!   wall time (a simulation fast-forwarding after a stall) is not rendered;
 //!   the extrapolator keeps the last live sample (so the safety filter's age
@@ -65,6 +67,9 @@ pub struct Shared {
     pub samples: AtomicU64,
     /// Device samples rejected as implausible or non-finite.
     pub poses_rejected: AtomicU64,
+    /// Device reads that failed or carried a non-finite field (each also
+    /// counts in `poses_rejected` unless it ended a long run).
+    pub device_bad_reads: AtomicU64,
     /// Device poses taken as a new reference after a long rejection run.
     pub pose_rereferences: AtomicU64,
     /// Force samples not rendered because they ran faster than wall time.
@@ -94,6 +99,7 @@ impl Shared {
             telemetry_dropped: AtomicU64::new(0),
             samples: AtomicU64::new(0),
             poses_rejected: AtomicU64::new(0),
+            device_bad_reads: AtomicU64::new(0),
             pose_rereferences: AtomicU64::new(0),
             samples_not_live: AtomicU64::new(0),
             local_problems: AtomicU64::new(0),
@@ -177,6 +183,12 @@ pub fn state_code(s: SafetyState) -> u32 {
     }
 }
 
+/// Whether every field of a device reading is finite (the gripper is
+/// clamped by the device; a NaN one is still a bad read).
+fn state_is_finite(s: &DeviceState) -> bool {
+    is_finite(s.position_m) && is_finite(s.velocity_m_s) && s.gripper.is_finite()
+}
+
 /// Numeric code of a method in telemetry.
 pub fn method_code(m: Method) -> u32 {
     Method::ALL.iter().position(|x| *x == m).unwrap_or(0) as u32
@@ -196,6 +208,8 @@ pub struct RtLoop<D: Device> {
     last_sample_t_ns: Option<u64>,
     last_force_n: [f64; 3],
     tick: u64,
+    /// Reads that failed or carried a non-finite field.
+    bad_reads: u64,
     /// `local-problem`: the newest contact problem, set up off this thread.
     local: Option<triple_buffer::Output<LocalProblem>>,
     /// `local-problem`: the time each tick's render took (1 us buckets,
@@ -249,6 +263,7 @@ impl<D: Device> RtLoop<D> {
             last_sample_t_ns: None,
             last_force_n: [0.0; 3],
             tick: 0,
+            bad_reads: 0,
             local: None,
             render_times: None,
         }
@@ -311,28 +326,29 @@ impl<D: Device> RtLoop<D> {
             .flags
             .heartbeat_ns
             .store(now_ns, Ordering::Relaxed);
-        let read = self.device.read(now_ns);
-        let mut poisoned = false;
-        match read {
-            Ok(s) => {
-                // A non-finite velocity makes the whole sample non-finite.
-                let p = if is_finite(s.velocity_m_s) {
-                    s.position_m
-                } else {
-                    [f64::NAN; 3]
-                };
-                match self.plausible.check(now_ns, p) {
-                    Verdict::Accept => self.last = s,
-                    Verdict::Rereference => {
-                        self.last = s;
-                        self.safety.rebase_motion();
-                        self.safety.ramp_in_from_output(now_ns);
-                    }
-                    Verdict::Reject => {}
-                    Verdict::Lost => poisoned = true,
-                }
+        // A failed read and a sample with any non-finite field are one
+        // bad read: rejected like an implausible pose (the last good one
+        // held, counted), and only a run of them longer than the
+        // plausibility bound stops the force (`Verdict::Lost`). One glitch
+        // of a device driver must not drop a held force.
+        let read = match self.device.read(now_ns) {
+            Ok(s) if state_is_finite(&s) => Some(s),
+            _ => {
+                self.bad_reads += 1;
+                None
             }
-            Err(_) => poisoned = true,
+        };
+        let p = read.map_or([f64::NAN; 3], |s| s.position_m);
+        let mut poisoned = false;
+        match self.plausible.check(now_ns, p) {
+            Verdict::Accept => self.last = read.unwrap_or(self.last),
+            Verdict::Rereference => {
+                self.last = read.unwrap_or(self.last);
+                self.safety.rebase_motion();
+                self.safety.ramp_in_from_output(now_ns);
+            }
+            Verdict::Reject => {}
+            Verdict::Lost => poisoned = true,
         }
         // 2. Pose for the simulation (published by the I/O thread, woken
         // for it).
@@ -429,6 +445,7 @@ impl<D: Device> RtLoop<D> {
         let p = self.safety.passivity();
         s.poses_rejected
             .store(self.plausible.rejected(), Ordering::Relaxed);
+        s.device_bad_reads.store(self.bad_reads, Ordering::Relaxed);
         s.pose_rereferences
             .store(self.plausible.rereferences(), Ordering::Relaxed);
         s.samples_not_live

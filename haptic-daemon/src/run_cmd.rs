@@ -66,6 +66,8 @@ struct Summary {
     /// `local-problem`: each tick's render on the RT thread (us).
     local_problem_render_us: Option<Lateness>,
     poses_rejected: u64,
+    /// Device reads that failed or carried a non-finite field.
+    device_bad_reads: u64,
     pose_rereferences: u64,
     passivity: bool,
     passivity_active_ticks: u64,
@@ -225,6 +227,7 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
         local_problems_refused: shared.local_problems_refused.load(Ordering::Relaxed),
         local_problem_render_us: render_us,
         poses_rejected: shared.poses_rejected.load(Ordering::Relaxed),
+        device_bad_reads: shared.device_bad_reads.load(Ordering::Relaxed),
         pose_rereferences: shared.pose_rereferences.load(Ordering::Relaxed),
         passivity: chain.passivity.enabled,
         passivity_active_ticks: shared.passivity_ticks.load(Ordering::Relaxed),
@@ -446,7 +449,7 @@ fn status_line(stats: &Mutex<Stats>, shared: &Shared) -> String {
 /// The summary lines on stdout, warnings on stderr.
 fn print_summary(summary: &Summary, method: Method) {
     out!(
-        "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples ({} not live) | {} poses rejected ({} new references) | passivity damped {} ticks",
+        "{} ticks at {:.1} Hz (target {}) | lateness us p50 {:.0} p99 {:.0} p99.9 {:.0} max {:.0} | max force {:.3} N (limit {} N) | {} samples ({} not live) | {} poses rejected ({} new references, {} bad device reads) | passivity damped {} ticks",
         summary.ticks,
         summary.rate_hz,
         summary.target_rate_hz,
@@ -460,6 +463,7 @@ fn print_summary(summary: &Summary, method: Method) {
         summary.samples_not_live,
         summary.poses_rejected,
         summary.pose_rereferences,
+        summary.device_bad_reads,
         summary.passivity_active_ticks
     );
     if method == Method::LocalProblem {

@@ -257,3 +257,134 @@ fn a_fast_forward_burst_is_not_rendered() {
     let not_live = b.shared.samples_not_live.load(Ordering::Relaxed);
     assert!(not_live >= 57, "{not_live}");
 }
+
+/// What a faulty driver returns on a tick: a reading, or an error.
+type Reading = Result<DeviceState, DeviceError>;
+
+/// A device whose every reading (or error) is a function of the tick.
+struct Faulty<F: FnMut(u64) -> Reading>(F);
+
+impl<F: FnMut(u64) -> Reading> Device for Faulty<F> {
+    fn specs(&self) -> DeviceSpecs {
+        Scripted(|_| [0.0; 3]).specs()
+    }
+    fn enable(&mut self, _now_ns: u64) -> Result<(), DeviceError> {
+        Ok(())
+    }
+    fn disable(&mut self) {}
+    fn read(&mut self, now_ns: u64) -> Reading {
+        (self.0)((now_ns - T0) / MS)
+    }
+    fn write_force(&mut self, _force_n: [f64; 3], _now_ns: u64) -> Result<(), DeviceError> {
+        Ok(())
+    }
+}
+
+/// Held 15 mm deep (4.5 N against the wall), the device misbehaving on the
+/// ticks `bad` with `fault`: the forces over 1 s, and the counters.
+fn held_through(bad: std::ops::Range<u64>, fault: fn() -> Reading) -> (Vec<f64>, Arc<Shared>) {
+    let mut b = bench(&format!("bad{}x{}", bad.start, bad.end));
+    let good = DeviceState {
+        position_m: [0.0, 0.0, -0.015],
+        gripper: 1.0,
+        ..DeviceState::default()
+    };
+    let device = Faulty(move |k| if bad.contains(&k) { fault() } else { Ok(good) });
+    let mut rt = RtLoop::new(
+        device,
+        Method::LocalModel,
+        SafetyConfig::new(8.0).unwrap(),
+        b.subscriber.take(),
+        b.shared.clone(),
+    );
+    rt.enable(T0).unwrap();
+    let mut forces = Vec::new();
+    for k in 0..1_000u64 {
+        let now = T0 + k * MS;
+        if let Some(p) = b.shared.pose.read() {
+            assert_eq!(
+                p.position_m, good.position_m,
+                "tick {k}: a bad pose went out"
+            );
+            b.publisher
+                .send_copy(wall_msg(k, now, now - T0, p.position_m))
+                .unwrap();
+        }
+        rt.tick(now, 0);
+        forces.push(rt.last_force_n()[2]);
+        while b.shared.telemetry.pop().is_some() {}
+    }
+    (forces, b.shared)
+}
+
+/// The faults a driver shows: an error code, NaN or infinite fields.
+fn faults() -> [(&'static str, fn() -> Reading); 5] {
+    /// The held reading with one field spoiled by `f`.
+    fn spoiled(f: fn(&mut DeviceState)) -> Reading {
+        let mut s = DeviceState {
+            position_m: [0.0, 0.0, -0.015],
+            ..DeviceState::default()
+        };
+        f(&mut s);
+        Ok(s)
+    }
+    [
+        ("error", || {
+            Err(DeviceError::Disconnected("read returned -42".into()))
+        }),
+        ("nan position", || spoiled(|s| s.position_m[0] = f64::NAN)),
+        ("inf position", || {
+            spoiled(|s| s.position_m[2] = f64::INFINITY)
+        }),
+        ("nan velocity", || spoiled(|s| s.velocity_m_s[1] = f64::NAN)),
+        ("nan gripper", || spoiled(|s| s.gripper = f64::NAN)),
+    ]
+}
+
+#[test]
+fn a_bad_read_or_a_short_run_of_them_keeps_the_held_force() {
+    for (name, fault) in faults() {
+        for bad in [500..501, 500..515] {
+            let n = bad.end - bad.start;
+            let (forces, shared) = held_through(bad, fault);
+            let before = forces[499];
+            assert!((before - 4.5).abs() < 1e-9, "{name}: {before}");
+            for (k, f) in forces.iter().enumerate().skip(300) {
+                assert_eq!(*f, before, "{name} x{n}: tick {k}");
+            }
+            assert_eq!(shared.device_bad_reads.load(Ordering::Relaxed), n, "{name}");
+            assert_eq!(shared.poses_rejected.load(Ordering::Relaxed), n, "{name}");
+            assert_eq!(shared.pose_rereferences.load(Ordering::Relaxed), 0);
+        }
+    }
+}
+
+#[test]
+fn bad_reads_that_persist_ramp_the_force_down_and_good_ones_ramp_it_in() {
+    for (name, fault) in faults() {
+        // 100 ms of bad reads: past the 20 ms bound the force ramps to
+        // zero (never a step), and good reads ramp it in again.
+        let (forces, shared) = held_through(500..600, fault);
+        let before = forces[499];
+        assert!(forces[525..600].contains(&0.0), "{name}: never stopped");
+        assert!(
+            forces[..520].iter().skip(300).all(|f| *f == before),
+            "{name}"
+        );
+        for w in forces.windows(2) {
+            // The safety filter ramps down over 10 ms: never a step.
+            assert!((w[1] - w[0]).abs() <= before / 10.0 + 1e-9, "{name}: {w:?}");
+        }
+        assert!(forces.iter().all(|f| *f <= before + 1e-9), "{name}");
+        assert!(
+            (forces[999] - before).abs() < 1e-9,
+            "{name}: {}",
+            forces[999]
+        );
+        assert_eq!(
+            shared.device_bad_reads.load(Ordering::Relaxed),
+            100,
+            "{name}"
+        );
+    }
+}

@@ -2,8 +2,9 @@
  * args: "" = a handle circling slowly in the xy plane; "nan" = the same, but
  * reads return NaN after the first 500; "garbage" = after 500 reads, every
  * other read fails with an error code and the rest return infinities and a
- * gripper of 1e300; "block" = the 500th read never returns; "fail-open" =
- * open fails. */
+ * gripper of 1e300; "glitch" = reads 501, 502 and 503 are bad once each (a
+ * NaN position, an error code, a NaN velocity), the rest good; "block" = the
+ * 500th read never returns; "fail-open" = open fails. */
 #include "../../haptic-daemon/include/hapsim_device.h"
 #include <math.h>
 #include <stdlib.h>
@@ -13,6 +14,7 @@
 typedef struct {
     int nan_mode;
     int garbage_mode;
+    int glitch_mode;
     int block_mode;
     long reads;
     int enabled;
@@ -27,6 +29,7 @@ int hapsim_device_open(void **handle, const char *args) {
     if (!f) return 1;
     f->nan_mode = strcmp(args, "nan") == 0;
     f->garbage_mode = strcmp(args, "garbage") == 0;
+    f->glitch_mode = strcmp(args, "glitch") == 0;
     f->block_mode = strcmp(args, "block") == 0;
     *handle = f;
     return 0;
@@ -55,6 +58,9 @@ int hapsim_device_read(void *handle, hapsim_state *out) {
     out->buttons = 0;
     if (f->nan_mode && f->reads > 500) out->position_m[0] = NAN;
     if (f->block_mode && f->reads > 500) for (;;) pause();
+    if (f->glitch_mode && f->reads == 501) out->position_m[2] = NAN;
+    if (f->glitch_mode && f->reads == 502) return -42;
+    if (f->glitch_mode && f->reads == 503) out->velocity_m_s[0] = NAN;
     if (f->garbage_mode && f->reads > 500) {
         if (f->reads % 2) return -42;
         out->position_m[1] = INFINITY;

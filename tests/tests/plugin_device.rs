@@ -1,6 +1,7 @@
 //! A C-ABI device plugin (include/hapsim_device.h) built here with the
 //! system C compiler drives the daemon: its specs set the force limit, a
-//! plugin that returns NaN never gets a NaN force, and a failing or missing
+//! plugin that returns NaN never gets a NaN force, single bad reads are
+//! rejected and counted, and a failing or missing
 //! plugin is refused with a clear message.
 
 use std::path::{Path, PathBuf};
@@ -79,6 +80,20 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
     let v: serde_json::Value = read_json(&json);
     let f = v["max_force_n"].as_f64().unwrap();
     assert!(f.is_finite() && f <= 3.3);
+
+    // One bad read each of three kinds: rejected and counted, the pose
+    // held, no new reference (the force, had there been one, kept).
+    let json = dir.join("glitch.json");
+    let out = run(&format!("plugin:{}:glitch", lib.display()), &json, &session);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = read_json(&json);
+    assert_eq!(v["device_bad_reads"].as_u64(), Some(3), "{v}");
+    assert_eq!(v["poses_rejected"].as_u64(), Some(3), "{v}");
+    assert_eq!(v["pose_rereferences"].as_u64(), Some(0), "{v}");
 
     let json = dir.join("garbage.json");
     let out = run(
