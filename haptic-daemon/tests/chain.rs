@@ -261,6 +261,9 @@ fn a_fast_forward_burst_is_not_rendered() {
 /// What a faulty driver returns on a tick: a reading, or an error.
 type Reading = Result<DeviceState, DeviceError>;
 
+/// A named way for a read to go wrong.
+type Fault = (&'static str, fn() -> Reading);
+
 /// A device whose every reading (or error) is a function of the tick.
 struct Faulty<F: FnMut(u64) -> Reading>(F);
 
@@ -318,7 +321,7 @@ fn held_through(bad: std::ops::Range<u64>, fault: fn() -> Reading) -> (Vec<f64>,
 }
 
 /// The faults a driver shows: an error code, NaN or infinite fields.
-fn faults() -> [(&'static str, fn() -> Reading); 5] {
+fn faults() -> [Fault; 5] {
     /// The held reading with one field spoiled by `f`.
     fn spoiled(f: fn(&mut DeviceState)) -> Reading {
         let mut s = DeviceState {

@@ -23,6 +23,7 @@ import iceoryx2 as iox2
 # itself written from docs/protocol.md), from the checkout.
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 from hapsim.protocol import CONTACT, PROTOCOL_VERSION, TOOL_PRESENT, ForceMsg, PoseMsg  # noqa: E402
+from hapsim import ipc  # noqa: E402
 from hapsim.session import open_stream  # noqa: E402
 
 
@@ -36,12 +37,7 @@ def main() -> int:
     args = parser.parse_args()
 
     iox2.set_log_level(iox2.LogLevel.Error)
-    node = (
-        iox2.NodeBuilder.new()
-        .name(iox2.NodeName.new("python-backend"))
-        .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
-        .create(iox2.ServiceType.Ipc)
-    )
+    node = ipc.node("python-backend")
     poses = open_stream(node, args.session, "pose", PoseMsg, 1).subscriber_builder().create()
     forces = open_stream(node, args.session, "force", ForceMsg, 1024).publisher_builder().create()
 

@@ -10,6 +10,7 @@ from typing import List, Optional, Sequence, Tuple
 import iceoryx2 as iox2
 import numpy as np
 
+from . import ipc
 from .protocol import (
     MAX_TOOLS,
     PROTOCOL_VERSION,
@@ -215,12 +216,7 @@ class Session:
     def __init__(self, name: str = "default", node_name: str = "hapsim-python") -> None:
         iox2.set_log_level(iox2.LogLevel.Error)
         self.name = name
-        self._node = (
-            iox2.NodeBuilder.new()
-            .name(iox2.NodeName.new(node_name))
-            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
-            .create(iox2.ServiceType.Ipc)
-        )
+        self._node = ipc.node(node_name)
         self._forces = (
             self._service("force", ForceMsg, 1024).subscriber_builder().buffer_size(1024).create()
         )

@@ -15,6 +15,7 @@
 
 pub mod alloc_count;
 mod clock;
+pub mod ipc_root;
 pub mod protocol;
 pub mod reaper;
 pub mod remote;

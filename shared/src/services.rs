@@ -3,6 +3,7 @@
 //! version is refused when it opens a service, with a message saying so.
 
 use crate::SessionName;
+use crate::ipc_root::{IpcRoot, IpcRootError, SHM_DIR, ipc_root, make_segments_private};
 use crate::protocol::{
     ForceMsg, LocalContactMsg, MeshHeader, PROTOCOL_VERSION, PoseMsg, RestHeader, SceneInfo,
     TelemetryBatch, TopologyHeader,
@@ -56,6 +57,9 @@ pub mod stream {
 /// Why a service could not be used.
 #[derive(Debug, Error)]
 pub enum ServiceError {
+    /// This user's private root is unusable.
+    #[error(transparent)]
+    Root(#[from] IpcRootError),
     /// The node could not be created.
     #[error("cannot create the iceoryx2 node {name:?}: {reason}")]
     Node {
@@ -123,8 +127,9 @@ pub type SceneSubscriber = Subscriber<Ipc, SceneInfo, ()>;
 /// Publisher of a slice stream (`mesh`, `topology`) with its user header.
 pub type SlicePublisher<T, H> = Publisher<Ipc, [T], H>;
 
-/// Creates a node named `name` (shows in iceoryx2's node listings).
-/// Signal handling stays with the program, which must zero forces itself.
+/// Creates a node named `name` (shows in iceoryx2's node listings), in this
+/// user's private root ([`crate::ipc_root`]). Signal handling stays with
+/// the program, which must zero forces itself.
 pub fn node(name: &str) -> Result<Node<Ipc>, ServiceError> {
     let err = |reason: String| ServiceError::Node {
         name: name.to_string(),
@@ -133,28 +138,43 @@ pub fn node(name: &str) -> Result<Node<Ipc>, ServiceError> {
     // iceoryx2 warns on stderr that it runs without a config file; that is
     // the intended set-up here, so only errors are shown.
     set_log_level(LogLevel::Error);
+    let (config, root) = private_config()?;
     let node_name = NodeName::new(name).map_err(|e| err(format!("{e:?}")))?;
-    NodeBuilder::new()
+    let node = NodeBuilder::new()
         .name(&node_name)
+        .config(config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Ipc>()
-        .map_err(|e| {
-            // iceoryx2 reports a directory another user owns as an internal
-            // error; say what it most likely is.
-            let private = std::fs::read_dir(ICEORYX2_NODES_DIR)
-                .is_err_and(|e| e.kind() == std::io::ErrorKind::PermissionDenied);
-            err(if private {
-                format!(
-                    "{e:?}: {ICEORYX2_NODES_DIR} belongs to another user; a session's shared memory is private to the user who started it, so run every process of a session as the same user"
-                )
-            } else {
-                format!("{e:?}")
-            })
-        })
+        .map_err(|e| err(format!("{e:?}")))?;
+    // The global management segment exists now, 0666 as iceoryx2 makes it.
+    make_segments_private(std::path::Path::new(SHM_DIR), &root.prefix, root.uid);
+    Ok(node)
 }
 
-/// Where iceoryx2 (default configuration) keeps its node records.
-const ICEORYX2_NODES_DIR: &str = "/tmp/iceoryx2/nodes";
+/// This user's iceoryx2 configuration (root and prefix of
+/// [`crate::ipc_root::ipc_root`]), checked once per process.
+pub fn private_config() -> Result<&'static (Config, IpcRoot), ServiceError> {
+    static CONFIG: std::sync::OnceLock<Result<(Config, IpcRoot), IpcRootError>> =
+        std::sync::OnceLock::new();
+    CONFIG
+        .get_or_init(|| {
+            let root = ipc_root()?;
+            let bad = |what: &str, e: String| IpcRootError::Io {
+                path: root.dir.clone(),
+                reason: format!("iceoryx2 refuses it as {what}: {e}"),
+            };
+            let mut config = Config::default();
+            let dir = root.dir.as_os_str().as_encoded_bytes();
+            let path =
+                iceoryx2::prelude::Path::new(dir).map_err(|e| bad("root", format!("{e:?}")))?;
+            config.global.set_root_path(&path);
+            config.global.prefix = FileName::new(root.prefix.as_bytes())
+                .map_err(|e| bad("prefix", format!("{e:?}")))?;
+            Ok((config, root))
+        })
+        .as_ref()
+        .map_err(|e| ServiceError::Root(e.clone()))
+}
 
 fn verifier(service: &str) -> Result<AttributeVerifier, ServiceError> {
     let open = |reason: String| ServiceError::Open {

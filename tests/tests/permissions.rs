@@ -1,9 +1,12 @@
 //! A session's shared memory belongs to the user who runs it: every segment
-//! of a running session is readable and writable by its owner only, and
-//! another Unix user can neither read a segment nor join the session. The
+//! of a running session (iceoryx2's global management segment included) is
+//! readable and writable by its owner only, its records live in a 0700
+//! directory of its own, and another Unix user can neither read nor spoil a
+//! segment, list or delete the records, nor join the session; a directory
+//! another user made for the records is refused with a clear error. The
 //! second-user part needs root (to switch to `nobody` with setpriv); where
 //! the tests do not run as root it is skipped with a message, and the mode
-//! check still runs.
+//! checks still run.
 
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::process::{Command, Stdio};
@@ -20,18 +23,29 @@ fn session_memory_is_private_to_its_user() {
         .expect("start sim-server");
     system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let uid = unsafe { libc::geteuid() };
-    // Segments of this user's sessions (the global management file is
-    // iceoryx2's own, shared by design, and holds no session data).
+    // Segments of this user's sessions, under this user's own prefix.
+    let prefix = format!("hapsim_{uid}_");
     let segments: Vec<std::path::PathBuf> = std::fs::read_dir("/dev/shm")
         .unwrap()
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
             let name = p.file_name().unwrap().to_string_lossy().to_string();
-            name.starts_with("iox2_") && !name.ends_with("global_mgmt")
+            name.starts_with(&prefix)
         })
-        .filter(|p| std::fs::metadata(p).is_ok_and(|m| m.uid() == uid))
         .collect();
     assert!(!segments.is_empty(), "no shared memory segments found");
+    assert!(
+        segments
+            .iter()
+            .any(|p| p.to_string_lossy().ends_with("global_mgmt")),
+        "{segments:?}"
+    );
+    for p in &segments {
+        assert_eq!(std::fs::metadata(p).unwrap().uid(), uid, "{}", p.display());
+    }
+    let records = std::path::PathBuf::from(format!("/tmp/hapsim-{uid}"));
+    let mode = std::fs::metadata(&records).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o700, "{}", records.display());
     for p in &segments {
         let mode = std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode & 0o077, 0, "{} has mode {mode:o}", p.display());
@@ -50,13 +64,33 @@ fn session_memory_is_private_to_its_user() {
                 .output()
                 .expect("setpriv")
         };
-        let seg = segments[0].to_str().unwrap();
-        let read = as_nobody(&["cat", seg]);
-        assert!(!read.status.success(), "nobody read {seg}");
-        let write = as_nobody(&["sh", "-c", &format!("echo x >> {seg}")]);
-        assert!(!write.status.success(), "nobody wrote {seg}");
-        // Joining the session as another user fails with a clear error.
-        // A copy nobody may execute, so the only obstacle is the session.
+        for seg in &segments {
+            let seg = seg.to_str().unwrap();
+            let read = as_nobody(&["cat", seg]);
+            assert!(!read.status.success(), "nobody read {seg}");
+            // 16 bytes of 0xff into the global management segment made every
+            // new node of every user fail before it was private.
+            let write = as_nobody(&[
+                "sh",
+                "-c",
+                &format!("printf '\\377%.0s' 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 > {seg}"),
+            ]);
+            assert!(!write.status.success(), "nobody wrote {seg}");
+        }
+        let list = as_nobody(&["ls", records.to_str().unwrap()]);
+        assert!(
+            !list.status.success(),
+            "nobody listed {}",
+            records.display()
+        );
+        let delete = as_nobody(&["rm", "-rf", &format!("{}/services", records.display())]);
+        assert!(
+            !delete.status.success() && records.join("services").exists(),
+            "nobody deleted the service records"
+        );
+        // Another user's copy of the daemon lives in its own namespace: it
+        // never sees this user's session. A copy nobody may execute, so the
+        // only obstacle is the session.
         let dir = system_tests::scratch_dir("perm-bin");
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
         let bin = dir.join("haptic-daemon");
@@ -74,12 +108,40 @@ fn session_memory_is_private_to_its_user() {
         ]);
         let err = String::from_utf8_lossy(&join.stderr);
         eprintln!("as nobody: {}", err.lines().next().unwrap_or(""));
-        assert!(!join.status.success(), "nobody joined the session");
-        assert!(err.contains("another user"), "{err}");
+        let said = format!("{err}{}", String::from_utf8_lossy(&join.stdout));
+        assert!(
+            said.contains("recorded 0 force samples"),
+            "nobody saw the session: {said}"
+        );
         assert!(
             !err.contains("setpriv:"),
             "the copy did not even start: {err}"
         );
+        // A records directory another user made first is refused, named.
+        let planted =
+            std::path::PathBuf::from(format!("/tmp/hapsim-planted-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&planted);
+        let mk = as_nobody(&["mkdir", "-m", "777", planted.to_str().unwrap()]);
+        assert!(mk.status.success());
+        let run = Command::new(binary("sim-server"))
+            .args([
+                "run",
+                "--quiet",
+                "--duration-s",
+                "0.5",
+                "--session",
+                &format!("{session}p"),
+            ])
+            .env("HAPSIM_IPC_DIR", &planted)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "ran in a directory nobody made");
+        assert!(
+            err.contains(planted.to_str().unwrap()) && err.contains("belongs to uid 65534"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&planted).unwrap();
     } else {
         eprintln!("not root or no setpriv: the second-user part is skipped (modes checked)");
     }
