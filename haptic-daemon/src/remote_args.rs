@@ -24,12 +24,22 @@ pub struct RemoteArgs {
     /// docs/remote.md); implies a remote session.
     #[arg(long, value_name = "FILE")]
     zenoh_config: Option<PathBuf>,
+    /// The bridge's token (default: bridge.token in this user's private
+    /// directory, where a bridge on this host writes it; on another host,
+    /// a copy of the bridge's; docs/security.md).
+    #[arg(long, value_name = "FILE")]
+    token_file: Option<PathBuf>,
 }
 
 impl RemoteArgs {
     /// Shared memory, or a link that a bridge answered within 5 s.
     pub fn transport(&self, session: &SessionName) -> Result<Transport> {
-        let Some(cfg) = RemoteConfig::client(&self.connect, self.zenoh_config.as_deref()) else {
+        let Some(cfg) = RemoteConfig::client(
+            &self.connect,
+            self.zenoh_config.as_deref(),
+            self.token_file.as_deref(),
+        )?
+        else {
             return Ok(Transport::Shm);
         };
         let link = Link::join(&cfg, session, BRIDGE_WAIT)?;

@@ -128,13 +128,18 @@ pub fn effective_uid() -> u32 {
 /// the directory is created 0700 when missing.
 pub fn ipc_root() -> Result<IpcRoot, IpcRootError> {
     let uid = effective_uid();
-    let dir = match std::env::var_os(ROOT_ENV) {
-        Some(d) if !d.is_empty() => PathBuf::from(d),
-        _ => PathBuf::from(format!("/tmp/hapsim-{uid}")),
-    };
-    let root = root_at(&dir, uid)?;
+    let root = root_at(&root_dir(), uid)?;
     check_segments(Path::new(SHM_DIR), &root.prefix, uid)?;
     Ok(root)
+}
+
+/// This user's directory ([`ROOT_ENV`], else `/tmp/hapsim-<uid>`), neither
+/// made nor checked.
+pub fn root_dir() -> PathBuf {
+    match std::env::var_os(ROOT_ENV) {
+        Some(d) if !d.is_empty() => PathBuf::from(d),
+        _ => PathBuf::from(format!("/tmp/hapsim-{}", effective_uid())),
+    }
 }
 
 /// The root at `dir` for `uid`: created 0700 when missing, then checked.

@@ -117,6 +117,63 @@ fn session_memory_is_private_to_its_user() {
             !err.contains("setpriv:"),
             "the copy did not even start: {err}"
         );
+        // The bridge does not open the session to another user on
+        // loopback: nobody has no token of root's, cannot read root's, and
+        // one of its own is not the bridge's.
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let mut bridge = Command::new(binary("sim-server"))
+            .args(["bridge", "--session", &session, "--listen", &endpoint])
+            .args(["--duration-s", "20"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let token = records.join("bridge.token");
+        system_tests::wait_until(
+            "the bridge's token",
+            std::time::Duration::from_secs(10),
+            || token.exists(),
+        );
+        let record = |extra: &[&str]| {
+            let mut args = vec![
+                bin.to_str().unwrap(),
+                "record",
+                "--session",
+                &session,
+                "--connect",
+                &endpoint,
+                "--duration-s",
+                "0.5",
+                "--json",
+                "/dev/null",
+            ];
+            args.extend_from_slice(extra);
+            let out = as_nobody(&args);
+            (
+                out.status.success(),
+                String::from_utf8_lossy(&out.stderr).to_string(),
+            )
+        };
+        let (ok, err) = record(&[]);
+        assert!(
+            !ok && err.contains("no bridge token at /tmp/hapsim-65534/"),
+            "{err}"
+        );
+        let (ok, err) = record(&["--token-file", token.to_str().unwrap()]);
+        assert!(!ok && err.contains("Permission denied"), "{err}");
+        let own = dir.join("own.token");
+        std::fs::write(&own, "hapsim:00ff00ff\n").unwrap();
+        std::os::unix::fs::chown(&own, Some(65534), Some(65534)).unwrap();
+        std::fs::set_permissions(&own, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let (ok, err) = record(&["--token-file", own.to_str().unwrap()]);
+        assert!(!ok && err.contains("no bridge answers"), "{err}");
+        let _ = bridge.kill();
+        let _ = bridge.wait();
         // A records directory another user made first is refused, named.
         let planted =
             std::path::PathBuf::from(format!("/tmp/hapsim-planted-{}", std::process::id()));

@@ -42,12 +42,19 @@ mount --bind "$BIN" /mnt/bin
 mount --bind "$WORK" /mnt/work
 mount -t tmpfs none /tmp
 mount -t tmpfs none /dev/shm
+# Without the bridge's token, or with another, a client is refused.
+if /mnt/bin/viewer --connect {endpoint} --session {session} --snapshot /mnt/work/x.png \
+  --wait-s 2 >/dev/null 2>/mnt/work/no-token.err; then echo "joined without a token"; exit 1; fi
+if /mnt/bin/viewer --connect {endpoint} --session {session} --snapshot /mnt/work/x.png \
+  --token-file /mnt/work/wrong.token --wait-s 2 >/dev/null 2>/mnt/work/wrong-token.err; then
+  echo "joined with a wrong token"; exit 1; fi
+T=/mnt/work/bridge.token
 /mnt/bin/viewer --connect {endpoint} --session {session} --snapshot /mnt/work/remote.png \
-  --json /mnt/work/snapshot.json --view top --wait-s 20 >/dev/null
+  --json /mnt/work/snapshot.json --view top --wait-s 20 --token-file $T >/dev/null
 /mnt/bin/haptic-daemon record --connect {endpoint} --session {session} --duration-s 5 \
-  --forces /mnt/work/recorded.csv --json /mnt/work/recorded.json 2>/dev/null &
+  --token-file $T --forces /mnt/work/recorded.csv --json /mnt/work/recorded.json 2>/dev/null &
 /mnt/bin/haptic-daemon run --quiet --rt-priority 0 --connect {endpoint} --session {session} \
-  --device replay:/mnt/work/press.csv --duration-s 7 --record /mnt/work/daemon.csv \
+  --token-file $T --device replay:/mnt/work/press.csv --duration-s 7 --record /mnt/work/daemon.csv \
   --json /mnt/work/daemon.json >/dev/null
 wait
 echo "shm=$(ls -A /dev/shm | wc -l) tmp=$(ls -A /tmp | wc -l)"
@@ -81,8 +88,16 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let mut sim = spawn_sim_server(&session, &[]);
     wait_for(&session, Peer::Simulation);
+    // The station is given a copy of the bridge's token (as another host
+    // would be); a wrong one is made beside it.
+    let token = dir.join("bridge.token");
+    let wrong = dir.join("wrong.token");
+    std::fs::write(&wrong, "hapsim:0123456789abcdef\n").unwrap();
+    std::fs::set_permissions(&wrong, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
     let mut bridge = Command::new(binary("sim-server"))
         .args(["bridge", "--session", &session, "--listen", &endpoint])
+        .arg("--token-file")
+        .arg(&token)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -137,6 +152,16 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
         out.status,
         stdout,
         String::from_utf8_lossy(&out.stderr)
+    );
+    let no_token = std::fs::read_to_string(dir.join("no-token.err")).unwrap();
+    assert!(
+        no_token.contains("no bridge token at /tmp/hapsim-") && no_token.contains("--token-file"),
+        "{no_token}"
+    );
+    let wrong_token = std::fs::read_to_string(dir.join("wrong-token.err")).unwrap();
+    assert!(
+        wrong_token.contains("no bridge answers") && wrong_token.contains("token"),
+        "{wrong_token}"
     );
     assert!(
         stdout.contains("shm=0 tmp=0"),

@@ -47,6 +47,10 @@ struct Args {
     /// docs/remote.md); implies a remote session.
     #[arg(long, value_name = "FILE")]
     zenoh_config: Option<PathBuf>,
+    /// The bridge's token (default: bridge.token in this user's private
+    /// directory; on another host, a copy of the bridge's; docs/security.md).
+    #[arg(long, value_name = "FILE")]
+    token_file: Option<PathBuf>,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -69,16 +73,19 @@ fn main() -> Result<()> {
         bail!("--wait-s must be a non-negative number of seconds");
     }
     let name = shared::SessionName::new(&args.session)?;
-    let mut session =
-        match shared::remote::RemoteConfig::client(&args.connect, args.zenoh_config.as_deref()) {
-            None => Session::join(&name)?,
-            Some(cfg) => {
-                let wait = std::time::Duration::from_secs_f64(args.wait_s.clamp(1.0, 86_400.0));
-                let link = shared::remote::Link::join(&cfg, &name, wait)?;
-                eprintln!("viewer: {}", link.summary());
-                Session::join_remote(std::sync::Arc::new(link))?
-            }
-        };
+    let mut session = match shared::remote::RemoteConfig::client(
+        &args.connect,
+        args.zenoh_config.as_deref(),
+        args.token_file.as_deref(),
+    )? {
+        None => Session::join(&name)?,
+        Some(cfg) => {
+            let wait = std::time::Duration::from_secs_f64(args.wait_s.clamp(1.0, 86_400.0));
+            let link = shared::remote::Link::join(&cfg, &name, wait)?;
+            eprintln!("viewer: {}", link.summary());
+            Session::join_remote(std::sync::Arc::new(link))?
+        }
+    };
     let layers = Layers {
         fibres: args.fibres,
         forces: !args.no_forces,

@@ -38,6 +38,7 @@ pub mod clock;
 pub mod codec;
 mod inbox;
 mod link;
+pub mod token;
 
 pub use clock::{ClockMap, Probe, Stamped};
 pub use codec::DecodeError;
@@ -78,6 +79,21 @@ pub struct RemoteConfig {
     /// A zenoh configuration file; `listen` and `connect` given here
     /// override its endpoints.
     pub config_file: Option<PathBuf>,
+    /// Who must know the bridge's token ([`token`]).
+    pub auth: Auth,
+}
+
+/// A link's authentication with the bridge's token ([`token`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum Auth {
+    /// None: zenoh links of one program to itself (tests, benchmarks), or a
+    /// zenoh configuration file that sets its own.
+    #[default]
+    None,
+    /// A bridge: every client must prove it knows this token.
+    Serve(token::Token),
+    /// A client: prove to the bridge that it knows this token.
+    Present(token::Token),
 }
 
 impl RemoteConfig {
@@ -89,14 +105,25 @@ impl RemoteConfig {
         }
     }
 
-    /// A client's configuration from its `--connect` endpoints and
-    /// `--zenoh-config` file: None when neither is given (shared memory).
-    pub fn client(connect: &[String], config_file: Option<&std::path::Path>) -> Option<Self> {
-        (!connect.is_empty() || config_file.is_some()).then(|| Self {
+    /// A client's configuration from its `--connect` endpoints,
+    /// `--zenoh-config` file and `--token-file` (default: this user's,
+    /// [`token::client_token_path`]): None when neither endpoints nor a
+    /// file are given (shared memory).
+    pub fn client(
+        connect: &[String],
+        config_file: Option<&std::path::Path>,
+        token_file: Option<&std::path::Path>,
+    ) -> Result<Option<Self>, token::TokenError> {
+        if connect.is_empty() && config_file.is_none() {
+            return Ok(None);
+        }
+        let path = token_file.map_or_else(token::client_token_path, std::path::Path::to_path_buf);
+        Ok(Some(Self {
             listen: Vec::new(),
             connect: connect.to_vec(),
             config_file: config_file.map(std::path::Path::to_path_buf),
-        })
+            auth: Auth::Present(token::load(&path)?),
+        }))
     }
 
     /// A server listening at `endpoint`.
@@ -152,6 +179,23 @@ impl RemoteConfig {
         if !self.connect.is_empty() {
             insert(&mut config, "connect/endpoints", &list(&self.connect))?;
         }
+        // After the file: the token is not the file's to drop.
+        match &self.auth {
+            Auth::None => {}
+            Auth::Serve(t) => {
+                let value = format!(
+                    "{{user:{:?},password:{:?},dictionary_file:{:?}}}",
+                    t.user,
+                    t.secret,
+                    t.path.display().to_string()
+                );
+                insert_secret(&mut config, "transport/auth/usrpwd", &value)?;
+            }
+            Auth::Present(t) => {
+                let value = format!("{{user:{:?},password:{:?}}}", t.user, t.secret);
+                insert_secret(&mut config, "transport/auth/usrpwd", &value)?;
+            }
+        }
         Ok(config)
     }
 
@@ -164,6 +208,16 @@ impl RemoteConfig {
             reason: e.to_string(),
         })
     }
+}
+
+/// [`insert`] of a value holding a secret: a refusal does not print it.
+fn insert_secret(c: &mut zenoh::Config, key: &str, value: &str) -> Result<(), RemoteError> {
+    c.insert_json5(key, value)
+        .map_err(|e| RemoteError::Setting {
+            key: key.to_string(),
+            value: "(the bridge token)".to_string(),
+            reason: e.to_string(),
+        })
 }
 
 fn insert(c: &mut zenoh::Config, key: &str, value: &str) -> Result<(), RemoteError> {
@@ -216,7 +270,7 @@ pub enum RemoteError {
     },
     /// No bridge answered for the session.
     #[error(
-        "no bridge answers for session {session} ({what}) within {waited_ms} ms: is `sim-server bridge --session {session}` running and reachable?"
+        "no bridge answers for session {session} ({what}) within {waited_ms} ms: is `sim-server bridge --session {session}` running and reachable, and is this client's --token-file a copy of its token (docs/security.md)?"
     )]
     NoBridge {
         /// The session.

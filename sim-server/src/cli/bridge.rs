@@ -4,7 +4,7 @@ use super::write_json;
 use crate::bridge::{BridgeConfig, run};
 use anyhow::{Result, bail};
 use shared::SessionName;
-use shared::remote::{DEFAULT_LISTEN, RemoteConfig};
+use shared::remote::{Auth, DEFAULT_LISTEN, RemoteConfig, token};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -31,6 +31,12 @@ pub struct BridgeArgs {
     /// its endpoints.
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
+    /// The token every client must know (mode 0600; written with a new
+    /// random token if missing, then kept). Default: bridge.token in this
+    /// user's private directory (/tmp/hapsim-<uid>/), where clients of the
+    /// same user and host find it; give a station a copy (docs/security.md).
+    #[arg(long, value_name = "FILE")]
+    pub token_file: Option<PathBuf>,
     /// The longest a force sample waits in the bridge (us): shared memory
     /// is polled this often (a remote pose wakes the loop at once).
     #[arg(long, default_value_t = 50)]
@@ -56,10 +62,15 @@ pub fn bridge(args: BridgeArgs) -> Result<()> {
             _ => bail!("--duration-s must be a positive number of seconds, got {d}"),
         },
     };
+    let token_path = match args.token_file {
+        Some(p) => p,
+        None => token::default_token_path()?,
+    };
     let mut remote = RemoteConfig {
         listen: args.listen,
         connect: args.connect,
         config_file: args.zenoh_config,
+        auth: Auth::Serve(token::load_or_create(&token_path)?),
     };
     if remote.listen.is_empty() && remote.connect.is_empty() && remote.config_file.is_none() {
         remote.listen.push(DEFAULT_LISTEN.to_string());

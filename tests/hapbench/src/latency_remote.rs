@@ -12,7 +12,7 @@
 
 use anyhow::{Context, Result};
 use shared::protocol::ForceMsg;
-use shared::remote::{RemoteConfig, codec};
+use shared::remote::{Auth, RemoteConfig, codec, token};
 use shared::{SessionName, monotonic_ns, services};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -37,9 +37,14 @@ pub struct Observer {
 }
 
 impl Observer {
-    /// Connects to `endpoint` and subscribes to `key`.
-    pub fn connect(endpoint: &str, key: &str) -> Result<Self> {
-        let session = RemoteConfig::connect_to(endpoint).open()?;
+    /// Connects to `endpoint` (with `auth`: a bridge wants its token, the
+    /// baseline's probe none) and subscribes to `key`.
+    pub fn connect(endpoint: &str, key: &str, auth: Auth) -> Result<Self> {
+        let session = RemoteConfig {
+            auth,
+            ..RemoteConfig::connect_to(endpoint)
+        }
+        .open()?;
         let got = Arc::new(Mutex::new(Vec::new()));
         let sink = got.clone();
         let k = key.to_string();
@@ -98,7 +103,13 @@ impl Bridged {
             sim_server.to_path_buf(),
         )?;
         std::thread::sleep(Duration::from_millis(300));
-        let observer = Observer::connect(&endpoint, &session.service(services::stream::FORCE))?;
+        // The bridge's token, where the bridge on this host wrote it.
+        let token = token::load(&token::client_token_path())?;
+        let observer = Observer::connect(
+            &endpoint,
+            &session.service(services::stream::FORCE),
+            Auth::Present(token),
+        )?;
         Ok(Self {
             bridge,
             endpoint,
@@ -151,7 +162,7 @@ pub fn bare(duration_s: f64) -> Result<Vec<f64>> {
         .context("cannot start the zenoh probe")?;
     // The child listens once started: retry the connection briefly.
     std::thread::sleep(Duration::from_millis(300));
-    let observer = Observer::connect(&endpoint, PROBE_KEY)?;
+    let observer = Observer::connect(&endpoint, PROBE_KEY, Auth::None)?;
     let mut out = Vec::new();
     let end = monotonic_ns() + ((duration_s + 0.5) * 1e9) as u64;
     while monotonic_ns() < end {
