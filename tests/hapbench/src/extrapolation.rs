@@ -93,6 +93,11 @@ pub struct MethodResult {
     pub rms_error_away_from_snaps_n: f64,
     /// The share of the squared error in the ticks near a snap (0 to 1).
     pub snap_error_share: f64,
+    /// Ticks rendered as exactly 0 N while the newest sample delivered said
+    /// contact with a force and the truth has one (above
+    /// [`CONTACT_FORCE_N`]): a dropout the simulation did not have (a hand
+    /// leaving the tissue faster than the samples is not one).
+    pub zero_in_contact_ticks: usize,
 }
 
 /// How far the ground truth can be trusted: the same simulation with each
@@ -237,7 +242,38 @@ fn figures(
         p99_jump_n: p99,
         net_energy_j: energy,
         rms_error_by_phase_n: rms_by_phase(&err, phases),
+        zero_in_contact_ticks: 0,
     }
+}
+
+/// A force the hand feels as contact (N): a tenth of a common device's
+/// force resolution above nothing.
+const CONTACT_FORCE_N: f64 = 0.02;
+
+/// [`MethodResult::zero_in_contact_ticks`] of `rendered`: sample `j` is
+/// delivered at `(j + 1) s + delay_s`, tick `k` is at `k h`.
+fn zero_in_contact(
+    rendered: &[[f64; 3]],
+    truth: &[[f64; 3]],
+    samples: &[ForceSample],
+    h: f64,
+    s: f64,
+    delay_s: f64,
+) -> usize {
+    rendered
+        .iter()
+        .enumerate()
+        .filter(|(k, f)| {
+            let t = *k as f64 * h;
+            let delivered = ((t - delay_s + 1e-12) / s).floor() as i64;
+            let newest = usize::try_from(delivered - 1)
+                .ok()
+                .and_then(|j| samples.get(j));
+            **f == [0.0; 3]
+                && truth.get(*k).is_some_and(|t| norm(*t) > CONTACT_FORCE_N)
+                && newest.is_some_and(|x| x.in_contact && norm(x.force_n) > 0.0)
+        })
+        .count()
 }
 
 /// The per-tick CSV of `--series`.
@@ -407,7 +443,12 @@ pub fn run(args: &Args) -> Result<()> {
         rendered.resize(ticks, [0.0; 3]);
         methods.insert(
             "local-problem-quasi-static",
-            figures(&rendered, &truth_f, &hand, &phases, &snaps),
+            MethodResult {
+                zero_in_contact_ticks: zero_in_contact(
+                    &rendered, &truth_f, &samples, h, s, delay_s,
+                ),
+                ..figures(&rendered, &truth_f, &hand, &phases, &snaps)
+            },
         );
         rendered_all.push(("local-problem-quasi-static", rendered));
     }
@@ -417,7 +458,12 @@ pub fn run(args: &Args) -> Result<()> {
         {
             methods.insert(
                 method.name(),
-                figures(&rendered, &truth_f, &hand, &phases, &snaps),
+                MethodResult {
+                    zero_in_contact_ticks: zero_in_contact(
+                        &rendered, &truth_f, &samples, h, s, delay_s,
+                    ),
+                    ..figures(&rendered, &truth_f, &hand, &phases, &snaps)
+                },
             );
             rendered_all.push((method.name(), rendered));
             continue;
@@ -441,7 +487,12 @@ pub fn run(args: &Args) -> Result<()> {
         }
         methods.insert(
             method.name(),
-            figures(&rendered, &truth_f, &hand, &phases, &snaps),
+            MethodResult {
+                zero_in_contact_ticks: zero_in_contact(
+                    &rendered, &truth_f, &samples, h, s, delay_s,
+                ),
+                ..figures(&rendered, &truth_f, &hand, &phases, &snaps)
+            },
         );
         rendered_all.push((method.name(), rendered));
     }
@@ -470,19 +521,26 @@ pub fn run(args: &Args) -> Result<()> {
         methods,
     };
     println!(
-        "{:<24} {:>12} {:>12} {:>12} {:>14} {:>16}",
-        "method", "rms err N", "max err N", "p99 jump N", "net energy mJ", "away snaps N"
+        "{:<24} {:>12} {:>12} {:>12} {:>14} {:>16} {:>10}",
+        "method",
+        "rms err N",
+        "max err N",
+        "p99 jump N",
+        "net energy mJ",
+        "away snaps N",
+        "0N in cont"
     );
     for (name, m) in std::iter::once(("truth (haptic rate)", &report.truth))
         .chain(report.methods.iter().map(|(k, v)| (*k, v)))
     {
         println!(
-            "{name:<24} {:>12.4} {:>12.4} {:>12.4} {:>14.3} {:>16.4}",
+            "{name:<24} {:>12.4} {:>12.4} {:>12.4} {:>14.3} {:>16.4} {:>10}",
             m.rms_error_n,
             m.max_error_n,
             m.p99_jump_n,
             m.net_energy_j * 1e3,
-            m.rms_error_away_from_snaps_n
+            m.rms_error_away_from_snaps_n,
+            m.zero_in_contact_ticks
         );
     }
     let names: Vec<&str> = report.phase_ticks.keys().copied().collect();

@@ -2,9 +2,29 @@
 //! and the problem solved (or stepped) for the tool's position, re-based
 //! on a sample newer than the problem, capped.
 
-use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS};
+use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS, RELEASE_SHARE};
 use crate::extrapolate::ForceSample;
-use crate::math::{V3, ZERO, add, norm, scale, spectral_norm, sub};
+use crate::math::{V3, ZERO, add, dot, mat_vec, norm, scale, spectral_norm, sub};
+
+/// Whether the tool at `tool_m` is still in the newest sample's contact:
+/// the sample touches with a force, and the tool has moved out along that
+/// force by less than [`RELEASE_SHARE`] of the distance at which the
+/// sample's linearisation lets go (`|F| / k_n`, `k_n = n^T K n`; without a
+/// stiffness, not out at all).
+fn hand_still_in_contact(latest: &ForceSample, tool_m: V3) -> bool {
+    let f = norm(latest.force_n);
+    if !latest.in_contact || f <= 0.0 || !f.is_finite() {
+        return false;
+    }
+    let n = scale(latest.force_n, 1.0 / f);
+    let out_m = dot(sub(tool_m, latest.position_m), n);
+    let k_n = dot(n, mat_vec(&latest.stiffness_n_per_m, n));
+    if k_n > 0.0 {
+        out_m < RELEASE_SHARE * f / k_n
+    } else {
+        out_m <= 0.0
+    }
+}
 
 impl LocalProblem {
     /// The force to render (N) at `now_ns` with the tool at `tool_m`,
@@ -70,6 +90,14 @@ impl LocalProblem {
             return None;
         }
         if !touching {
+            // A release the hand did not make is the problem's, not the
+            // tissue's: its few vertices, stepped with their condensed
+            // mass, bounce off the tool for ~10 ms while the tissue stays
+            // on it (0 N rendered against the simulation's 0.3-0.4 N).
+            // Then the sample's own linearisation renders instead.
+            if hand_still_in_contact(latest, tool_m) {
+                return None;
+            }
             return Some(ZERO);
         }
         let mut d = sub(change, base);
