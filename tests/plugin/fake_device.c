@@ -3,7 +3,10 @@
  * reads return NaN after the first 500; "garbage" = after 500 reads, every
  * other read fails with an error code and the rest return infinities and a
  * gripper of 1e300; "glitch" = reads 501, 502 and 503 are bad once each (a
- * NaN position, an error code, a NaN velocity), the rest good; "block" = the
+ * NaN position, an error code, a NaN velocity), the rest good; "press" = the
+ * tip waits 500 reads at (30, 20, 50) mm, moves down at 20 mm/s to z = 30 mm
+ * and holds there; reads 3001-3004 are bad once each (a NaN position, an
+ * error code, a NaN velocity, a NaN gripper); "block" = the
  * 500th read never returns; "fail-open" = open fails. */
 #include "../../haptic-daemon/include/hapsim_device.h"
 #include <math.h>
@@ -15,6 +18,7 @@ typedef struct {
     int nan_mode;
     int garbage_mode;
     int glitch_mode;
+    int press_mode;
     int block_mode;
     long reads;
     int enabled;
@@ -30,6 +34,7 @@ int hapsim_device_open(void **handle, const char *args) {
     f->nan_mode = strcmp(args, "nan") == 0;
     f->garbage_mode = strcmp(args, "garbage") == 0;
     f->glitch_mode = strcmp(args, "glitch") == 0;
+    f->press_mode = strcmp(args, "press") == 0;
     f->block_mode = strcmp(args, "block") == 0;
     *handle = f;
     return 0;
@@ -58,6 +63,20 @@ int hapsim_device_read(void *handle, hapsim_state *out) {
     out->buttons = 0;
     if (f->nan_mode && f->reads > 500) out->position_m[0] = NAN;
     if (f->block_mode && f->reads > 500) for (;;) pause();
+    if (f->press_mode) {
+        double z = 0.05 - 0.02 * (t - 0.5);
+        if (t < 0.5) z = 0.05;
+        if (z < 0.03) z = 0.03;
+        out->position_m[0] = 0.03;
+        out->position_m[1] = 0.02;
+        out->position_m[2] = z;
+        for (int i = 0; i < 3; i++) out->velocity_m_s[i] = 0.0;
+        if (t >= 0.5 && z > 0.03) out->velocity_m_s[2] = -0.02;
+        if (f->reads == 3001) out->position_m[2] = NAN;
+        if (f->reads == 3002) return -42;
+        if (f->reads == 3003) out->velocity_m_s[0] = NAN;
+        if (f->reads == 3004) out->gripper = NAN;
+    }
     if (f->glitch_mode && f->reads == 501) out->position_m[2] = NAN;
     if (f->glitch_mode && f->reads == 502) return -42;
     if (f->glitch_mode && f->reads == 503) out->velocity_m_s[0] = NAN;

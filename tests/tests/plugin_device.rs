@@ -170,3 +170,96 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
         "{err}"
     );
 }
+
+/// tests/tests/glitch.rs's stiff box: 60 x 40 x 40 mm on 5 mm cells, 20 kPa,
+/// bottom fixed, a 5 mm probe from above (top at z = 40 mm).
+const STIFF_BOX: &str = r#"
+[mesh]
+generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }
+
+[material]
+young_pa = 20000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 40.0
+
+[[fixed]]
+name = "bottom"
+select = { box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }
+
+[[tool]]
+name = "probe"
+kind = "hook"
+fulcrum_m = [0.03, 0.02, 0.15]
+length_m = 0.3
+radius_m = 0.005
+tip_length_m = 0.01
+
+[simulation]
+dt_s = 0.001
+"#;
+
+/// Issue 48: holding a force through a C plugin, one bad read each of four
+/// kinds (a NaN position, an error code, a NaN velocity, a NaN gripper)
+/// used to drop the force to 0 for ~210 ms. Through the real processes
+/// (the default extrapolator, the simulation in real time) the force now
+/// stays within 5% of the hold's.
+#[test]
+fn a_held_force_survives_single_bad_plugin_reads() {
+    let dir = scratch_dir("plugin-hold");
+    let lib = build_plugin(&dir);
+    let session = format!("plughold{}", std::process::id());
+    let scene = dir.join("box.toml");
+    std::fs::write(&scene, STIFF_BOX).unwrap();
+    let mut sim = system_tests::spawn_sim_server(
+        &session,
+        &["--scene", scene.to_str().unwrap(), "--duration-s", "30"],
+    );
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
+    let (json, record) = (dir.join("hold.json"), dir.join("hold.csv"));
+    let out = system_tests::daemon_run(&session)
+        .args(["--duration-s", "3.6", "--device"])
+        .arg(format!("plugin:{}:press", lib.display()))
+        .arg("--json")
+        .arg(&json)
+        .arg("--record")
+        .arg(&record)
+        .output()
+        .unwrap();
+    let _ = sim.kill();
+    let _ = sim.wait();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = read_json(&json);
+    assert_eq!(v["device_bad_reads"].as_u64(), Some(4), "{v}");
+    assert_eq!(v["poses_rejected"].as_u64(), Some(4), "{v}");
+    assert_eq!(v["pose_rereferences"].as_u64(), Some(0), "{v}");
+    // |F| per tick; the bad reads are reads 3001-3004, the daemon's ticks
+    // 3000-3003 (one read per tick from the first).
+    let text = std::fs::read_to_string(&record).unwrap();
+    let f: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let c: Vec<f64> = l
+                .split(',')
+                .skip(5)
+                .take(3)
+                .map(|x| x.parse().unwrap())
+                .collect();
+            (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+        })
+        .collect();
+    assert!(f.len() > 3_300, "{} ticks", f.len());
+    let before = f[2_900..3_000].iter().sum::<f64>() / 100.0;
+    assert!(before > 1.0, "the probe does not press: {before} N");
+    for (k, x) in f.iter().enumerate().take(3_300).skip(2_900) {
+        assert!(
+            (x - before).abs() <= 0.05 * before,
+            "tick {k}: {x:.3} N against {before:.3} N held before the bad reads"
+        );
+    }
+}
