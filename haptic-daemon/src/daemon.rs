@@ -183,6 +183,28 @@ pub fn state_code(s: SafetyState) -> u32 {
     }
 }
 
+/// The name of a safety-state code (the record CSV's `safety_state`):
+/// `waiting`, `ramping-in`, `active`, `ramping-down`, `stopped`; `unknown`
+/// for a code no daemon writes.
+pub fn state_name(code: u32) -> &'static str {
+    match code {
+        0 => "waiting",
+        1 => "ramping-in",
+        2 => "active",
+        3 => "ramping-down",
+        4 => "stopped",
+        _ => "unknown",
+    }
+}
+
+/// The name of a method code (the record CSV's `method`: the
+/// `--extrapolation` name); `unknown` for a code no daemon writes.
+pub fn method_name(code: u32) -> &'static str {
+    Method::ALL
+        .get(code as usize)
+        .map_or("unknown", |m| m.name())
+}
+
 /// Whether every field of a device reading is finite (the gripper is
 /// clamped by the device; a NaN one is still a bad read).
 fn state_is_finite(s: &DeviceState) -> bool {
@@ -489,5 +511,33 @@ impl<D: Device> RtLoop<D> {
     /// The last force written (N).
     pub fn last_force_n(&self) -> [f64; 3] {
         self.last_force_n
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::safety::StopReason;
+
+    #[test]
+    fn every_code_written_has_its_name() {
+        for m in Method::ALL {
+            assert_eq!(method_name(method_code(m)), m.name());
+        }
+        let states = [
+            (SafetyState::Waiting, "waiting"),
+            (SafetyState::RampingIn, "ramping-in"),
+            (SafetyState::Active, "active"),
+            (
+                SafetyState::RampingDown(StopReason::StaleSample),
+                "ramping-down",
+            ),
+            (SafetyState::Stopped(StopReason::Shutdown), "stopped"),
+        ];
+        for (s, name) in states {
+            assert_eq!(state_name(state_code(s)), name);
+        }
+        assert_eq!(state_name(99), "unknown");
+        assert_eq!(method_name(99), "unknown");
     }
 }

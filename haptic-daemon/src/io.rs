@@ -85,7 +85,10 @@ const STALL_IO_GAP_NS: u64 = 50_000_000;
 /// The exit status after a blocked device.
 pub const DEVICE_STALL_EXIT_CODE: i32 = 3;
 
-/// The record CSV's header (columns listed in the architecture page, then extras).
+/// The record CSV's header (columns listed in the architecture page, then
+/// extras). `method` and `safety_state` are names (`local-problem`,
+/// `active`: [`crate::daemon::method_name`], [`crate::daemon::state_name`]),
+/// not the telemetry's codes.
 pub const RECORD_HEADER: &str = "t_ns,seq,pos_x_m,pos_y_m,pos_z_m,force_x_n,force_y_n,force_z_n,sample_age_ns,lateness_ns,method,safety_state";
 
 pub(crate) fn write_row(w: &mut impl Write, t: &TelemetryTick) -> std::io::Result<()> {
@@ -107,8 +110,8 @@ pub(crate) fn write_row(w: &mut impl Write, t: &TelemetryTick) -> std::io::Resul
         t.force_n[2],
         age,
         t.lateness_ns,
-        t.method,
-        t.safety_state
+        crate::daemon::method_name(t.method),
+        crate::daemon::state_name(t.safety_state)
     )
 }
 

@@ -174,7 +174,14 @@ fn read_record(path: &Path) -> Vec<Tick> {
                 force_n: [f(5), f(6), f(7)],
                 // Empty before the first force sample.
                 sample_age_ns: c[8].parse().unwrap_or(u64::MAX),
-                safety_state: c[11].parse().unwrap(),
+                safety_state: match c[11] {
+                    "waiting" => 0,
+                    "ramping-in" => 1,
+                    "active" => 2,
+                    "ramping-down" => 3,
+                    "stopped" => 4,
+                    other => panic!("safety state {other:?}: {l}"),
+                },
             };
             assert!(tick.force_n.iter().all(|x| x.is_finite()), "{l}");
             tick
