@@ -263,8 +263,15 @@ fn aim_poke(
 ) -> (Option<haptic_daemon::device::Path>, Option<String>) {
     // No simulation there, no wait: a daemon started first pokes the axis.
     let scene = transport.scene_now(session, SCENE_WAIT).ok().flatten();
-    let path =
-        scene.and_then(|s| haptic_daemon::device::Path::poke_over(s.bounds_min_m, s.bounds_max_m));
+    // Tool 0 is the device's; its round end starts clear of the organ.
+    let path = scene.and_then(|s| {
+        let radius = if s.tool_count > 0 {
+            s.tools[0].radius_m
+        } else {
+            0.0
+        };
+        haptic_daemon::device::Path::poke_over(s.bounds_min_m, s.bounds_max_m, radius)
+    });
     match (&path, quiet) {
         (
             Some(haptic_daemon::device::Path::Poke {
@@ -272,7 +279,7 @@ fn aim_poke(
             }),
             false,
         ) => say!(
-            "simulated device: poking the scene's organ at x = {:.1} mm, y = {:.1} mm, from z = {:.1} mm down {:.1} mm and back every 4 s",
+            "simulated device: poking the scene's organ at x = {:.1} mm, y = {:.1} mm, from z = {:.1} mm (the tip 3 mm clear of it) down {:.1} mm and back every 4 s",
             start_m[0] * 1e3,
             start_m[1] * 1e3,
             start_m[2] * 1e3,

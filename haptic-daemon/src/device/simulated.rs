@@ -46,7 +46,8 @@ pub enum Path {
     },
 }
 
-/// The built-in poke's start above the organ's top (m).
+/// The built-in poke's start: its tip's lowest point this far above the
+/// organ's top (m).
 const POKE_ABOVE_M: f64 = 0.003;
 /// The built-in poke's depth below the organ's top: this fraction of the
 /// organ's height, at most [`POKE_MAX_BELOW_M`].
@@ -70,27 +71,37 @@ impl Path {
     }
 
     /// The built-in poke aimed at an organ whose rest bounding box is
-    /// `min_m`..`max_m` (the simulation's `SceneInfo`): straight down over
-    /// the box's centre, from 3 mm above its top to 30% of its height below
-    /// it (at most 27 mm), and back every 4 s. On the embedded liver this
-    /// is [`Path::default_poke`] within 0.2 mm. `None` for a box that is
-    /// not finite or not ordered.
-    pub fn poke_over(min_m: V3, max_m: V3) -> Option<Self> {
+    /// `min_m`..`max_m` (the simulation's `SceneInfo`) with a tool whose
+    /// tip has radius `tip_radius_m` (the pose is the centre of its round
+    /// end): straight down over the box's centre, from the tip's lowest
+    /// point 3 mm clear of the box's top (so the contact's onset is seen)
+    /// to the pose 30% of the box's height below the top (at most 27 mm),
+    /// and back every 4 s. On the embedded liver this is
+    /// [`Path::default_poke`] within 0.2 mm, started higher by the radius.
+    /// `None` for a box that is not finite or not ordered.
+    pub fn poke_over(min_m: V3, max_m: V3, tip_radius_m: f64) -> Option<Self> {
         let ordered =
             (0..3).all(|d| min_m[d].is_finite() && max_m[d].is_finite() && min_m[d] <= max_m[d]);
         if !ordered {
             return None;
         }
+        // A radius the simulation would not send (NaN, negative, absurd)
+        // is taken as a point tip.
+        let radius = if tip_radius_m.is_finite() && (0.0..=0.1).contains(&tip_radius_m) {
+            tip_radius_m
+        } else {
+            0.0
+        };
         let height = max_m[2] - min_m[2];
         let below = (POKE_BELOW_OF_HEIGHT * height).min(POKE_MAX_BELOW_M);
         Some(Path::Poke {
             start_m: [
                 0.5 * (min_m[0] + max_m[0]),
                 0.5 * (min_m[1] + max_m[1]),
-                max_m[2] + POKE_ABOVE_M,
+                max_m[2] + radius + POKE_ABOVE_M,
             ],
             direction: [0.0, 0.0, -1.0],
-            depth_m: POKE_ABOVE_M + below,
+            depth_m: radius + POKE_ABOVE_M + below,
             period_s: POKE_PERIOD_S,
         })
     }
@@ -230,7 +241,7 @@ mod tests {
     fn the_built_in_poke_aims_at_the_organ_it_is_given() {
         // The embedded liver's rest box (`sim-server check`): the poke of
         // an unknown scene, within 0.2 mm.
-        let liver = Path::poke_over([-0.1100, -0.0750, -0.0432], [0.1104, 0.0750, 0.0470]);
+        let liver = Path::poke_over([-0.1100, -0.0750, -0.0432], [0.1104, 0.0750, 0.0470], 0.0);
         let (
             Some(Path::Poke {
                 start_m, depth_m, ..
@@ -251,16 +262,28 @@ mod tests {
         // hapbench's 60 x 40 x 20 mm probe box: over its centre (which the
         // unknown-scene poke at x = y = 0 only grazed at a corner), from
         // 3 mm above its top to 6 mm into it.
-        let Some(b) = Path::poke_over([0.0; 3], [0.06, 0.04, 0.02]) else {
+        let Some(b) = Path::poke_over([0.0; 3], [0.06, 0.04, 0.02], 0.0) else {
             panic!("a box");
         };
         let (top, bottom) = (b.at(0.0).0, b.at(2.0).0);
         assert!((top[0] - 0.03).abs() < 1e-12 && (top[1] - 0.02).abs() < 1e-12);
         assert!((top[2] - 0.023).abs() < 1e-12, "{top:?}");
         assert!((bottom[2] - 0.014).abs() < 1e-12, "{bottom:?}");
-        // Not a box: no aim.
-        assert!(Path::poke_over([0.0; 3], [f64::NAN, 1.0, 1.0]).is_none());
-        assert!(Path::poke_over([0.0, 0.0, 1.0], [1.0, 1.0, 0.0]).is_none());
+        // With the box's 2.5 mm probe: its round end starts 3 mm clear of
+        // the top (it touched at once before) and presses as deep.
+        let Some(b) = Path::poke_over([0.0; 3], [0.06, 0.04, 0.02], 0.0025) else {
+            panic!("a box");
+        };
+        let (top, bottom) = (b.at(0.0).0, b.at(2.0).0);
+        assert!((top[2] - 0.0025 - 0.023).abs() < 1e-12, "{top:?}");
+        assert!((bottom[2] - 0.014).abs() < 1e-12, "{bottom:?}");
+        // Not a box: no aim; an absurd radius: a point tip.
+        assert!(Path::poke_over([0.0; 3], [f64::NAN, 1.0, 1.0], 0.0).is_none());
+        assert!(Path::poke_over([0.0, 0.0, 1.0], [1.0, 1.0, 0.0], 0.0).is_none());
+        let Some(b) = Path::poke_over([0.0; 3], [0.06, 0.04, 0.02], f64::NAN) else {
+            panic!("a box");
+        };
+        assert!((b.at(0.0).0[2] - 0.023).abs() < 1e-12);
     }
 
     #[test]
