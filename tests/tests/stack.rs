@@ -268,6 +268,11 @@ fn check_saved_frames(dir: &std::path::Path) {
         assert_eq!(s["point_data"]["original_id"]["permutation"], true, "{s}");
         assert_eq!(s["cell_data"]["tet_id"]["increasing"], true, "{s}");
         assert_eq!(s["point_data"]["elastic_force"]["shape"][1], 3, "{s}");
+        // One value per point or cell: 1-D arrays, not (n, 1).
+        for (kind, array) in [("point_data", "original_id"), ("cell_data", "tet_id")] {
+            let shape = s[kind][array]["shape"].as_array().unwrap();
+            assert_eq!(shape.len(), 1, "{array}: {s}");
+        }
     }
     // VTK's own reader takes the zlib-compressed frames as ParaView would,
     // with the same arrays and values.

@@ -119,9 +119,16 @@ fn data_array(
     payload: &[u8],
     zlib: bool,
 ) -> std::io::Result<()> {
+    // One component is VTK's default: saying it makes meshio read an (n, 1)
+    // array where the file holds one value per point or cell.
+    let components = if components == 1 {
+        String::new()
+    } else {
+        format!(" NumberOfComponents=\"{components}\"")
+    };
     writeln!(
         w,
-        "        <DataArray type=\"{ty}\" Name=\"{}\" NumberOfComponents=\"{components}\" format=\"binary\">",
+        "        <DataArray type=\"{ty}\" Name=\"{}\"{components} format=\"binary\">",
         escape(name)
     )?;
     if zlib {
