@@ -191,9 +191,10 @@ fn a_refinement_past_its_budget_stops_and_says_so_once() {
         .collect();
     assert_eq!(said.len(), 1, "{:?}", b.report.warnings);
     assert!(said[0].contains("everywhere"), "{}", said[0]);
-    // Without `max_tets` the default budget bounds a mistaken size.
+    // Without `max_tets` the default budget bounds a mistaken size (the
+    // smallest `cell_m` accepted, 1e-5 m; below it is refused).
     let b = build(&format!(
-        "{BOX}\n[[refine]]\nselect = {{ box_m = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]] }}\ncell_m = 1e-6\n"
+        "{BOX}\n[[refine]]\nselect = {{ box_m = [[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]] }}\ncell_m = 1e-5\n"
     ))
     .unwrap();
     assert!(b.model.mesh().tet_count() <= sim_server::scene::refine::DEFAULT_MAX_TETS);

@@ -743,6 +743,190 @@ fn a_surface_physical_tag_selects_that_surface_s_vertices() {
     );
 }
 
+/// Issue 48's scenes (and a few more): values no tissue has are refused at
+/// their line, the message naming the key and the accepted range. Each is
+/// (the scene, its line, what the message says).
+const IMPLAUSIBLE: [(&str, usize, &str); 12] = [
+    // A 6.4e144 s stable step.
+    (
+        "density_kg_m3 = 1e300",
+        8,
+        "[material] density_kg_m3 = 1e300 is outside its range 1 ..= 1e5 kg/m^3",
+    ),
+    // A stable step of 0 s: "dt_s must be a positive finite number, got 0" with no line.
+    (
+        "density_kg_m3 = 1e-300",
+        8,
+        "density_kg_m3 = 1e-300 is outside its range 1 ..= 1e5 kg/m^3",
+    ),
+    // Diverged at step 64.
+    (
+        "young_pa = 1e300",
+        6,
+        "[material] young_pa = 1e300 is outside its range 1 ..= 1e10 Pa",
+    ),
+    (
+        "young_pa = 0.5",
+        6,
+        "young_pa = 0.5 is outside its range 1 ..= 1e10 Pa",
+    ),
+    (
+        "damping_per_s = 1e9",
+        9,
+        "damping_per_s = 1e9 is outside its range 0 ..= 1e5 1/s",
+    ),
+    // 5.9e294 N published, "max force inf N" beside `finite: true`.
+    (
+        "[contact]\nstiffness_factor = 1e300\nsprings = \"explicit\"",
+        11,
+        "[contact] stiffness_factor = 1e300 is outside its range 1e-3 ..= 1e6",
+    ),
+    (
+        "[contact]\nmax_tool_speed_m_s = 1e4",
+        11,
+        "[contact] max_tool_speed_m_s = 1e4 is outside its range 1e-3 ..= 100 m/s",
+    ),
+    (
+        "[contact]\ndamping_s_per_m = 1e6",
+        11,
+        "damping_s_per_m = 1e6 is outside its range 0 ..= 1000 s/m",
+    ),
+    (
+        "[membrane]\nalpha = 1e300",
+        11,
+        "[membrane] alpha = 1e300 is outside its range 1e-3 ..= 1e10 N/m^2",
+    ),
+    // A tool a metre wide (here a kilometre).
+    (
+        "[[tool]]\nname = \"probe\"\nkind = \"hook\"\nfulcrum_m = [0.03, 0.01, 0.15]\nlength_m = 0.3\nradius_m = 1000\ntip_length_m = 0.01",
+        15,
+        "[[tool]] \"probe\" radius_m = 1000 is outside its range 1e-5 ..= 0.1 m",
+    ),
+    (
+        "[[tool]]\nname = \"probe\"\nkind = \"hook\"\nfulcrum_m = [0.03, 0.01, 0.15]\nlength_m = 0.3\nradius_m = 0.002\ntip_length_m = 0.01\nfriction_static = 50.0",
+        17,
+        "[[tool]] \"probe\" friction_static = 50 is outside its range 0 ..= 10",
+    ),
+    (
+        "[[load]]\nselect = { box_m = [[0.059, -1, -1], [1, 1, 1]] }\nforce_n = [0.0, 0.0, 1e6]",
+        12,
+        "[[load]] force_n (its length) = 1e6 is outside its range 0 ..= 1e4 N",
+    ),
+];
+
+/// `text` as one of [`IMPLAUSIBLE`]'s scenes: a material key replaces
+/// BASE's, anything else is appended.
+fn implausible_scene(change: &str) -> String {
+    let key = change.split(" = ").next().unwrap_or("");
+    match BASE.lines().find(|l| l.starts_with(&format!("{key} = "))) {
+        Some(line) => BASE.replace(line, change),
+        None if change.starts_with("damping_per_s") => format!("{BASE}{change}\n"),
+        None => format!("{BASE}\n{change}\n"),
+    }
+}
+
+#[test]
+fn implausible_values_are_refused_at_their_line_with_the_range() {
+    for (change, line, needle) in IMPLAUSIBLE {
+        fails_at(&implausible_scene(change), line, needle);
+    }
+    // Poisson's 0.5 and -1 stay refused (no stable solid), by the library.
+    fails_at(
+        &BASE.replace("poisson = 0.45", "poisson = 0.5"),
+        7,
+        "poisson",
+    );
+    fails_at(
+        &BASE.replace("poisson = 0.45", "poisson = -1.0"),
+        7,
+        "poisson",
+    );
+    // A vessel a metre and a half wide; a refinement to 1 um cells.
+    fails_at(
+        &format!(
+            "{BASE}\n[[vessel]]\npoints_m = [[0.0, 0.01, 0.01], [0.05, 0.01, 0.01]]\nradius_m = 1.5\ndelta_mu_pa = 100.0\n"
+        ),
+        12,
+        "[[vessel]] \"vessel 1\" radius_m = 1.5 is outside its range 1e-5 ..= 1 m",
+    );
+    fails_at(
+        &format!(
+            "{BASE}\n[[refine]]\nselect = {{ sphere_m = [0.03, 0.01, 0.01, 0.005] }}\ncell_m = 1e-6\n"
+        ),
+        12,
+        "[[refine]] cell_m = 1e-6 is outside its range 1e-5 ..= 1 m",
+    );
+}
+
+#[test]
+fn values_a_lab_may_mean_are_accepted_with_a_warning_at_their_line() {
+    let warned = |text: &str, needle: &str| {
+        let b = build(text).unwrap_or_else(|e| panic!("refused: {e}"));
+        assert!(
+            b.report.warnings.iter().any(|w| w.contains(needle)),
+            "no {needle:?} in {:?}",
+            b.report.warnings
+        );
+        b
+    };
+    // Issue 48: nearly incompressible, a 9.4e-9 s stable step, no word said.
+    let b = warned(
+        &BASE.replace("poisson = 0.45", "poisson = 0.4999999999"),
+        "test.toml:7:11: [material] poisson = 0.4999999999 is outside the usual 0 ..= 0.49",
+    );
+    assert!(
+        b.report.warnings[0].contains("shortens the explicit stable step 20,962x"),
+        "{:?}",
+        b.report.warnings
+    );
+    assert_eq!(b.report.step_notes, ["poisson 0.4999999999 at line 7"]);
+    // The real-time warning names the step, the sub-steps and the cause.
+    let bound = sim_server::tensor_mass::element_bound(&b.model).dt_max_s;
+    let w = sim_server::scene::real_time::RealTime::of(&b)
+        .warning(bound)
+        .expect("a real-time warning");
+    assert!(
+        w.contains("sub-steps per 1 ms step")
+            && w.contains("cannot keep real time")
+            && w.contains("(poisson 0.4999999999 at line 7)"),
+        "{w}"
+    );
+    // A plain scene warns of nothing.
+    let plain = build(BASE).unwrap();
+    assert!(
+        plain.report.warnings.is_empty(),
+        "{:?}",
+        plain.report.warnings
+    );
+    let bound = sim_server::tensor_mass::element_bound(&plain.model).dt_max_s;
+    assert_eq!(
+        sim_server::scene::real_time::RealTime::of(&plain).warning(bound),
+        None
+    );
+    // Stiff, light, a large factor with explicit springs: accepted, said.
+    warned(
+        &BASE.replace("young_pa = 4500.0", "young_pa = 1e9"),
+        "young_pa = 1e9 Pa is outside the usual 10 ..= 1e8",
+    );
+    warned(
+        &BASE.replace("density_kg_m3 = 1060.0", "density_kg_m3 = 100.0"),
+        "density_kg_m3 = 100 kg/m^3 is outside the usual 500 ..= 3000",
+    );
+    warned(
+        &format!("{BASE}\n[contact]\nstiffness_factor = 1e5\nsprings = \"explicit\"\n"),
+        "test.toml:11:20: [contact] stiffness_factor = 1e5 is outside the usual 1 ..= 1e4",
+    );
+    // A key a region inherits warns once, at its own line.
+    let b = warned(
+        &format!(
+            "{}\n[[region]]\nselect = {{ box_m = [[0.04, -1, -1], [1, 1, 1]] }}\nyoung_pa = 9000.0\n",
+            BASE.replace("poisson = 0.45", "poisson = 0.495")
+        ),
+        "poisson = 0.495 is outside the usual",
+    );
+    assert_eq!(b.report.warnings.len(), 1, "{:?}", b.report.warnings);
+}
+
 /// Deterministic xorshift64* (the fuzz cases must be the same every run).
 struct Rng(u64);
 
@@ -825,10 +1009,22 @@ fn five_thousand_mutated_scenes_are_errors_or_scenes_never_panics() {
     // each parses and builds to a scene or to an error naming the file,
     // never a panic (a panic names the case and its text). Sizes are kept
     // to extremes the generator refuses before allocating (1e9, 1e-300).
+    // The seeds: FULL for the first 5000 cases, then each of issue 48's
+    // implausible scenes and the warned ones for 100 cases each (values
+    // at the edges of their ranges).
+    let mut seeds: Vec<String> = IMPLAUSIBLE
+        .iter()
+        .map(|(change, ..)| implausible_scene(change))
+        .collect();
+    seeds.push(BASE.replace("poisson = 0.45", "poisson = 0.4999999999"));
+    seeds.push(format!(
+        "{BASE}\n[contact]\nstiffness_factor = 1e5\nsprings = \"explicit\"\n"
+    ));
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let (mut built, mut refused) = (0, 0);
-    for case in 0..5000 {
-        let mut text = FULL.to_string();
+    for case in 0..5000 + 100 * seeds.len() {
+        let seed = case.checked_sub(5000).map_or(FULL, |k| &seeds[k / 100]);
+        let mut text = seed.to_string();
         for _ in 0..=rng.below(3) {
             text = mutate(&text, &mut rng);
         }

@@ -8,6 +8,7 @@ use sim_server::mesh::extent::{Extent, tag_counts};
 use sim_server::mesh::io::read_mesh;
 use sim_server::mesh::quality::{QualityReport, quality_report};
 use sim_server::scene::BuiltScene;
+use sim_server::scene::real_time::RealTime;
 use sim_server::tensor_mass::{element_bound, power_iteration};
 use std::path::Path;
 
@@ -233,6 +234,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     }
     // What `run` would refuse, refused here too (the same check, on the
     // step the tensor-mass backend would take).
+    let mut real_time = None;
     if b.settings.backend == sim_server::scene::spec::BackendName::TensorMass {
         // The bound the scene asks the integrator to use; the default step
         // is 0.9 of the element bound either way (`prepare`).
@@ -244,6 +246,11 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
         sim_server::tensor_mass::explicit::substeps_for(dt, bound, b.settings.policy).map_err(
             |e| anyhow::anyhow!("{name}: the tensor-mass backend would refuse this scene: {e}"),
         )?;
+        // What `run` warns of too (after it prepares the backend).
+        if let Some(w) = RealTime::of(b).warning(bound.dt_max_s) {
+            println!("warning: {w}");
+            real_time = Some(w);
+        }
     }
     let cutting = b
         .tools
@@ -327,7 +334,10 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 membrane: r.membrane.as_ref().map(|(a, m)| format!("{m} {a}")),
                 tools: b.tools.iter().map(|t| t.name.clone()).collect(),
                 cutting,
-                warnings: r.warnings.iter().cloned().chain(units).collect(),
+                warnings: (r.warnings.iter().cloned())
+                    .chain(units)
+                    .chain(real_time)
+                    .collect(),
                 bounds_m: [extent.min_m.to_array(), extent.max_m.to_array()],
                 median_edge_m: extent.median_edge_m,
                 physical_tags: Vec::new(),

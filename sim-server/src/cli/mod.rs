@@ -11,6 +11,7 @@ use crate::server::{RunConfig, RunSummary, run};
 use anyhow::{Context, Result};
 use sim_server::backend::{Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
 use sim_server::prepare::{prepare, prepare_with};
+use sim_server::scene::real_time::RealTime;
 use sim_server::scene::spec::BackendName;
 use sim_server::scene::{BuiltScene, HYBRID_NEEDS_SPLIT, SceneSource, build_scene};
 use std::path::Path;
@@ -81,6 +82,10 @@ pub fn run_scene(
     stop: Arc<AtomicBool>,
     ready: impl FnOnce() -> Result<()>,
 ) -> Result<RunSummary> {
+    // What `check` prints, said before the run too.
+    for w in &scene.report.warnings {
+        eprintln!("warning: {w}");
+    }
     Ok(match backend.unwrap_or(scene.settings.backend) {
         BackendName::Implicit => {
             // Stable at any step: the real-time step, not the explicit bound.
@@ -189,16 +194,28 @@ pub fn run_scene(
             run(prepared, cfg, stop)?
         }
         _ if scene.settings.single_precision => {
+            let real_time = RealTime::of(&scene);
             let prepared = prepare::<f32>(scene, None)?;
+            warn_real_time(&real_time, prepared.sim.stable_step().dt_max_s);
             ready()?;
             run(prepared, cfg, stop)?
         }
         _ => {
+            let real_time = RealTime::of(&scene);
             let prepared = prepare::<f64>(scene, None)?;
+            warn_real_time(&real_time, prepared.sim.stable_step().dt_max_s);
             ready()?;
             run(prepared, cfg, stop)?
         }
     })
+}
+
+/// The warning (on stderr) that the explicit step `dt_max_s` cannot keep
+/// real time, if it cannot (as `check` says it).
+fn warn_real_time(real_time: &RealTime, dt_max_s: f64) {
+    if let Some(w) = real_time.warning(dt_max_s) {
+        eprintln!("warning: {w}");
+    }
 }
 
 /// The first vertex with a non-zero force that `accepts` refuses.

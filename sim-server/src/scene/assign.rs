@@ -4,6 +4,7 @@
 
 use super::build::{SceneReport, positive};
 use super::materials::resolve;
+use super::ranges;
 use super::select::{Region, Tags, distance_to_segment, segment_crosses_tet};
 use super::spec::{MaterialKeys, SceneSpec};
 use super::{SceneError, SceneSource};
@@ -37,6 +38,7 @@ pub(super) fn tet_materials(
         default_fiber.is_some(),
         spec.material.span(),
         "[material]",
+        report,
     )?;
     report.default_material = describe(&default);
     let mut mats = TetMaterials::uniform(default, n_tets);
@@ -89,7 +91,7 @@ fn regions(
             None => defaults.fiber,
         };
         let keys = r.material_keys().over(defaults.keys);
-        let material = resolve(src, &keys, fiber.is_some(), region.span(), &what)?;
+        let material = resolve(src, &keys, fiber.is_some(), region.span(), &what, report)?;
         let tets = Region::for_tets(src, &r.select)?.tets(mesh, physical);
         if tets.is_empty() {
             return Err(src.error(r.select.span(), format!("{what} selects no tetrahedron")));
@@ -151,8 +153,9 @@ fn vessels(
             ));
         }
         let radius = positive(src, &v.radius_m, &format!("{what} radius_m"))?;
+        ranges::VESSEL_RADIUS_M.check(src, &v.radius_m, &what, report)?;
         let keys = v.material_keys().over(defaults.keys);
-        let material = resolve(src, &keys, true, vessel.span(), &what)?;
+        let material = resolve(src, &keys, true, vessel.span(), &what, report)?;
         let id = mats
             .add(material)
             .map_err(|_| too_many(src, vessel.span()))?;

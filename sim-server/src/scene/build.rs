@@ -65,6 +65,11 @@ pub struct SceneReport {
     pub hybrid_tets: Option<usize>,
     /// What each `[[refine]]` did, in order.
     pub refined: Vec<super::refine::RefineReport>,
+    /// The values past their usual range that shorten the explicit stable
+    /// step (`poisson 0.4999 at line 8`), named by the real-time warning
+    /// ([`super::real_time::RealTime`]).
+    #[serde(skip)]
+    pub step_notes: Vec<String>,
 }
 
 /// A built scene.
@@ -145,6 +150,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
                 format!("[membrane] alpha must be a positive finite number (N/m^2), got {alpha}"),
             ));
         }
+        super::ranges::MEMBRANE_ALPHA.check(src, &m.get_ref().alpha, "[membrane]", &mut report)?;
         model = model.with_membrane(alpha, kind).expect("alpha checked");
         report.membrane = Some((alpha, format!("{kind:?}").to_lowercase()));
     }
@@ -179,7 +185,7 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
         }
         None => None,
     };
-    let (prescribed, loads_n) = loads(src, spec, &model, &physical)?;
+    let (prescribed, loads_n) = loads(src, spec, &model, &physical, &mut report)?;
     // A vertex both fixed and prescribed is an error in the scene.
     if let Some((v, _)) = prescribed
         .iter()
@@ -195,10 +201,10 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
     report.prescribed_vertices = prescribed.len();
     report.loaded_vertices = loads_n.iter().filter(|f| **f != Vec3::ZERO).count();
 
-    let tools = tool_decls(src, spec, &model)?;
+    let tools = tool_decls(src, spec, &model, &mut report)?;
     let settings = settings(src, spec)?;
     backend_runs_models(src, spec, &model, settings.backend, hybrid_tets.as_deref())?;
-    let contact = contact_config(src, spec)?;
+    let contact = contact_config(src, spec, &mut report)?;
     Ok(BuiltScene {
         contact,
         model,

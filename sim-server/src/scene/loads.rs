@@ -2,6 +2,8 @@
 //! rigid `rotate` of the selection) and forces (`force_n` shared by the
 //! selected vertices, `traction_pa` over the surface triangles they close).
 
+use super::build::SceneReport;
+use super::ranges::{self, KeyRange};
 use super::select::{Region, Tags};
 use super::spec::SceneSpec;
 use super::{SceneError, SceneSource};
@@ -20,6 +22,7 @@ pub(super) fn loads(
     spec: &SceneSpec,
     model: &ElasticModel,
     physical: &Tags,
+    report: &mut SceneReport,
 ) -> Result<Loads, SceneError> {
     let mesh = model.mesh();
     let n = mesh.vertex_count();
@@ -41,21 +44,31 @@ pub(super) fn loads(
         if vs.is_empty() {
             return Err(src.error(l.select.span(), "[[load]] selects no vertex"));
         }
-        let vector = |v: &toml::Spanned<[Real; 3]>| {
+        // Finite, and its length within the key's range.
+        let mut vector = |v: &toml::Spanned<[Real; 3]>, range: KeyRange| {
             let x = Vec3::from_array(*v.get_ref());
-            if x.is_finite() {
-                Ok(x)
-            } else {
-                Err(src.error(v.span(), "load values must be finite"))
+            if !x.is_finite() {
+                return Err(src.error(v.span(), "load values must be finite"));
             }
+            let range = KeyRange {
+                key: match range.key {
+                    "force_n" => "force_n (its length)",
+                    "traction_pa" => "traction_pa (its length)",
+                    _ => "displacement_m (its length)",
+                },
+                ..range
+            };
+            range.check_at(src, v.span(), x.length(), "[[load]]", report)?;
+            Ok(x)
         };
         if let Some(d) = &l.displacement_m {
-            let d = vector(d)?;
+            let d = vector(d, ranges::LOAD_DISPLACEMENT_M)?;
             prescribed.extend(vs.iter().map(|v| (*v, d)));
             continue;
         }
         if let Some(r) = &l.rotate {
             let (turn, origin) = rotation(src, r.get_ref())?;
+            ranges::LOAD_ANGLE_DEG.check(src, &r.get_ref().angle_deg, "[[load]] rotate", report)?;
             let p = mesh.positions_m();
             prescribed.extend(vs.iter().map(|v| {
                 let x = p[v.idx()];
@@ -67,12 +80,12 @@ pub(super) fn loads(
             loads_n = vec![Vec3::ZERO; n];
         }
         if let Some(f) = &l.force_n {
-            let each = vector(f)? / vs.len() as Real;
+            let each = vector(f, ranges::LOAD_FORCE_N)? / vs.len() as Real;
             for v in &vs {
                 loads_n[v.idx()] += each;
             }
         } else if let Some(t) = &l.traction_pa {
-            let t = vector(t)?;
+            let t = vector(t, ranges::LOAD_TRACTION_PA)?;
             let mut selected = vec![false; n];
             for v in &vs {
                 selected[v.idx()] = true;

@@ -1,6 +1,8 @@
 //! Turning a table's material keys into a validated [`Material`], with
 //! errors placed on the offending value.
 
+use super::build::SceneReport;
+use super::ranges::{self, KeyRange};
 use super::spec::{MaterialKeys, MaterialModelName, TermName};
 use super::{SceneError, SceneSource};
 use crate::material::{
@@ -13,15 +15,42 @@ fn value(key: Option<&Spanned<f64>>) -> Option<(f64, Range<usize>)> {
     key.map(|k| (*k.get_ref(), k.span()))
 }
 
+/// Each given key within its range ([`ranges`]), warnings in `report`.
+fn check_ranges(
+    src: &SceneSource,
+    keys: &MaterialKeys<'_>,
+    what: &str,
+    report: &mut SceneReport,
+) -> Result<(), SceneError> {
+    let checks: [(Option<&Spanned<f64>>, KeyRange); 8] = [
+        (keys.young_pa, ranges::YOUNG_PA),
+        (keys.poisson, ranges::POISSON),
+        (keys.density_kg_m3, ranges::DENSITY_KG_M3),
+        (keys.damping_per_s, ranges::DAMPING_PER_S),
+        (keys.delta_lambda_pa, ranges::DELTA_LAMBDA_PA),
+        (keys.delta_mu_pa, ranges::DELTA_MU_PA),
+        (keys.young_fiber_pa, ranges::YOUNG_FIBER_PA),
+        (keys.shear_fiber_pa, ranges::SHEAR_FIBER_PA),
+    ];
+    for (v, range) in checks {
+        if let Some(v) = v {
+            range.check(src, v, what, report)?;
+        }
+    }
+    Ok(())
+}
+
 /// Resolves `keys` into a material. `table` is the span of the table (used
 /// when a required key is missing); `anisotropic` says whether the tetrahedra
-/// have a fibre, `what` names the table in messages.
+/// have a fibre, `what` names the table in messages. Each key is within
+/// its range ([`ranges`]); values outside the usual one warn in `report`.
 pub fn resolve(
     src: &SceneSource,
     keys: &MaterialKeys<'_>,
     anisotropic: bool,
     table: Range<usize>,
     what: &str,
+    report: &mut SceneReport,
 ) -> Result<Material, SceneError> {
     let need = |key: Option<&Spanned<f64>>, name: &str| {
         value(key).ok_or_else(|| src.error(table.clone(), format!("{what}: missing `{name}`")))
@@ -30,6 +59,9 @@ pub fn resolve(
     let (poisson, poisson_span) = need(keys.poisson, "poisson")?;
     let (density, density_span) = need(keys.density_kg_m3, "density_kg_m3")?;
     let (damping, damping_span) = value(keys.damping_per_s).unwrap_or((0.0, table.clone()));
+    // The library's own refusals (a non-finite or non-positive value, an
+    // indefinite anisotropy) first, then the plausible ranges.
+    let checked = check_ranges(src, keys, what, report);
     let at =
         |span: &Range<usize>, e: MaterialError| src.error(span.clone(), format!("{what}: {e}"));
     let iso = Isotropic::from_young_poisson(young, poisson).map_err(|e| match e {
@@ -63,12 +95,13 @@ pub fn resolve(
         Some(MaterialModelName::Stvk) => MaterialModel::Stvk,
         Some(MaterialModelName::Corotational) => MaterialModel::Corotational,
     };
-    Material::new(elasticity, density, damping)
+    let material = Material::new(elasticity, density, damping)
         .map(|m| m.with_model(model))
         .map_err(|e| match e {
             MaterialError::Damping(_) => at(&damping_span, e),
             _ => at(&density_span, e),
-        })
+        })?;
+    checked.map(|()| material)
 }
 
 fn terms_of(keys: &MaterialKeys<'_>) -> Terms {

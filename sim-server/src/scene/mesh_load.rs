@@ -14,7 +14,14 @@ use crate::mesh::{BoxSpec, CellSize, TetMesh, io, rcm_order, shapes};
 fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Real>, SceneError> {
     match (&m.scale, &m.units) {
         (Some(_), Some(u)) => Err(src.error(u.span(), "give `scale` or `units`, not both")),
-        (Some(s), None) => positive(src, s, "scale").map(Some),
+        (Some(s), None) => {
+            positive(src, s, "scale")?;
+            // Its usual range is its accepted one: no warning to keep.
+            let mut none = SceneReport::default();
+            super::ranges::MESH_SCALE
+                .check(src, s, "[mesh]", &mut none)
+                .map(Some)
+        }
         (None, Some(u)) => match u.get_ref().as_str() {
             "m" => Ok(None),
             "cm" => Ok(Some(0.01)),

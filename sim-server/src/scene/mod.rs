@@ -9,6 +9,8 @@ mod build;
 mod loads;
 mod materials;
 mod mesh_load;
+pub mod ranges;
+pub mod real_time;
 pub mod refine;
 mod select;
 mod settings;

@@ -67,6 +67,7 @@ pub(super) fn refine_mesh(
             .unwrap_or_else(|| format!("refine {}", k + 1));
         let region = Region::for_tets(src, &r.select)?;
         let cell_m = positive(src, &r.cell_m, "[[refine]] cell_m")?;
+        super::ranges::REFINE_CELL_M.check(src, &r.cell_m, "[[refine]]", report)?;
         let max_tets = r
             .max_tets
             .as_ref()

@@ -2,7 +2,8 @@
 //! `[contact]` law and its limits, and whether the chosen backend can run
 //! the scene's material models.
 
-use super::build::{SimSettings, positive};
+use super::build::{SceneReport, SimSettings, positive};
+use super::ranges::{self, KeyRange};
 use super::spec::{
     BackendName, BoundName, DtPolicyName, MaterialModelName, PrecisionName, SceneSpec,
 };
@@ -37,6 +38,7 @@ pub const HYBRID_NEEDS_SPLIT: &str = "the hybrid backend needs a [hybrid] sectio
 pub(super) fn contact_config(
     src: &SceneSource,
     spec: &SceneSpec,
+    report: &mut SceneReport,
 ) -> Result<crate::contact::ContactConfig, SceneError> {
     use crate::contact::{ContactConfig, ContactLaw};
     use crate::scene::spec::ContactLawName;
@@ -49,26 +51,40 @@ pub(super) fn contact_config(
         ContactLawName::Penalty => ContactLaw::Penalty,
         ContactLawName::Projection => ContactLaw::Projection,
     });
-    let pos = |v: &Option<toml::Spanned<Real>>, key: &str, default: Real| {
+    // Positive, then within its range ([`ranges`]).
+    let mut pos = |v: &Option<toml::Spanned<Real>>, range: KeyRange, default: Real| {
         v.as_ref().map_or(Ok(default), |x| {
-            positive(src, x, &format!("[contact] {key}"))
+            positive(src, x, &format!("[contact] {}", range.key))?;
+            range.check(src, x, "[contact]", report)
         })
     };
-    c.stiffness_factor = pos(&s.stiffness_factor, "stiffness_factor", c.stiffness_factor)?;
-    c.point_spacing = pos(&s.point_spacing, "point_spacing", c.point_spacing)?;
+    c.stiffness_factor = pos(
+        &s.stiffness_factor,
+        ranges::STIFFNESS_FACTOR,
+        c.stiffness_factor,
+    )?;
+    c.point_spacing = pos(&s.point_spacing, ranges::POINT_SPACING, c.point_spacing)?;
     c.max_tool_speed_m_s = pos(
         &s.max_tool_speed_m_s,
-        "max_tool_speed_m_s",
+        ranges::MAX_TOOL_SPEED_M_S,
         c.max_tool_speed_m_s,
     )?;
     c.max_tool_accel_m_s2 = pos(
         &s.max_tool_accel_m_s2,
-        "max_tool_accel_m_s2",
+        ranges::MAX_TOOL_ACCEL_M_S2,
         c.max_tool_accel_m_s2,
     )?;
-    c.entry_speed_m_s = pos(&s.entry_speed_m_s, "entry_speed_m_s", c.entry_speed_m_s)?;
-    if let Some(r) = &s.corotational_radius_m {
-        c.corotational_radius_m = Some(positive(src, r, "[contact] corotational_radius_m")?);
+    c.entry_speed_m_s = pos(
+        &s.entry_speed_m_s,
+        ranges::ENTRY_SPEED_M_S,
+        c.entry_speed_m_s,
+    )?;
+    if s.corotational_radius_m.is_some() {
+        c.corotational_radius_m = Some(pos(
+            &s.corotational_radius_m,
+            ranges::COROTATIONAL_RADIUS_M,
+            0.0,
+        )?);
     }
     if let Some(springs) = &s.springs {
         c.implicit_springs = *springs.get_ref() == crate::scene::spec::SpringsName::Implicit;
@@ -116,20 +132,7 @@ pub(super) fn contact_config(
                 format!("[contact] damping_s_per_m must be a finite number >= 0, got {x}"),
             ));
         }
-        c.damping_s_per_m = x;
-    }
-    if c.point_spacing > 1.0 {
-        let span = s
-            .point_spacing
-            .as_ref()
-            .map_or(section.span(), |x| x.span());
-        return Err(src.error(
-            span,
-            format!(
-                "[contact] point_spacing is a fraction of the tool radius and must be at most 1 (points further apart than the radius miss the tool), got {}",
-                c.point_spacing
-            ),
-        ));
+        c.damping_s_per_m = ranges::CONTACT_DAMPING_S_PER_M.check(src, d, "[contact]", report)?;
     }
     Ok(c)
 }

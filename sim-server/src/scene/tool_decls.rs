@@ -1,7 +1,8 @@
 //! The scene's `[[tool]]`s: at most the protocol's four, unique names, a fulcrum outside the organ, a
 //! positive length, radius and tip no longer than the tool, friction.
 
-use super::build::positive;
+use super::build::{SceneReport, positive};
+use super::ranges;
 use super::spec::SceneSpec;
 use super::{SceneError, SceneSource};
 use crate::contact::{Friction, ToolDecl};
@@ -15,6 +16,7 @@ pub(super) fn tool_decls(
     src: &SceneSource,
     spec: &SceneSpec,
     model: &ElasticModel,
+    report: &mut SceneReport,
 ) -> Result<Vec<ToolDecl>, SceneError> {
     let mut tools: Vec<ToolDecl> = Vec::new();
     for (k, tool) in spec.tool.iter().enumerate() {
@@ -58,13 +60,16 @@ pub(super) fn tool_decls(
         let length = positive(src, &t.length_m, &format!("{what} length_m"))?;
         let radius = positive(src, &t.radius_m, &format!("{what} radius_m"))?;
         let tip = positive(src, &t.tip_length_m, &format!("{what} tip_length_m"))?;
+        ranges::TOOL_LENGTH_M.check(src, &t.length_m, &what, report)?;
+        ranges::TOOL_RADIUS_M.check(src, &t.radius_m, &what, report)?;
+        ranges::TOOL_TIP_LENGTH_M.check(src, &t.tip_length_m, &what, report)?;
         if tip > length {
             return Err(src.error(
                 t.tip_length_m.span(),
                 format!("{what}: tip_length_m ({tip}) exceeds length_m ({length})"),
             ));
         }
-        let friction = tool_friction(src, t, &what)?;
+        let friction = tool_friction(src, t, &what, report)?;
         tools.push(ToolDecl {
             name,
             kind: t.kind,
@@ -84,6 +89,7 @@ fn tool_friction(
     src: &SceneSource,
     t: &super::spec::ToolSpec,
     what: &str,
+    report: &mut SceneReport,
 ) -> Result<Friction, SceneError> {
     let coefficient = |v: Option<&Spanned<Real>>, key: &str| match v {
         None => Ok(None),
@@ -98,6 +104,18 @@ fn tool_friction(
     };
     let s = coefficient(t.friction_static.as_ref(), "friction_static")?;
     let d = coefficient(t.friction_dynamic.as_ref(), "friction_dynamic")?;
+    for (v, key) in [
+        (&t.friction_static, "friction_static"),
+        (&t.friction_dynamic, "friction_dynamic"),
+    ] {
+        if let Some(v) = v {
+            let range = ranges::KeyRange {
+                key,
+                ..ranges::FRICTION
+            };
+            range.check(src, v, what, report)?;
+        }
+    }
     let friction = Friction {
         static_coefficient: s.or(d).unwrap_or(0.0),
         dynamic_coefficient: d.or(s).unwrap_or(0.0),

@@ -236,9 +236,10 @@ pub enum RunError {
     /// A peer sent another protocol version.
     #[error(transparent)]
     Version(#[from] shared::protocol::VersionError),
-    /// The simulation diverged (non-finite displacements); forces were zeroed.
+    /// The simulation diverged (non-finite displacements, or a tool force
+    /// no hand can take); forces were zeroed.
     #[error(
-        "the simulation diverged at step {step} (non-finite displacements): the step is too large for this scene or a tool pushed too hard; forces were set to zero"
+        "the simulation diverged at step {step} (non-finite displacements or tool force): the step is too large for this scene or a tool pushed too hard; forces were set to zero"
     )]
     Diverged {
         /// The step.
@@ -294,6 +295,9 @@ pub fn run<B: Backend>(
             break;
         }
         l.publish(pose, &step)?;
+        if l.diverged() {
+            break;
+        }
         l.status(pose, &step);
         l.pace();
     }

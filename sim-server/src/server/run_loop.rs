@@ -293,6 +293,14 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         {
             return true;
         }
+        self.diverge();
+        false
+    }
+
+    /// The run ends as diverged: `finite` false, a zero force sample out
+    /// (the daemon lets go), [`RunError::Diverged`] at the end.
+    fn diverge(&mut self) {
+        let s = &mut self.summary;
         s.finite = false;
         let _ = self.force_pub.send_copy(ForceMsg {
             version: PROTOCOL_VERSION,
@@ -301,7 +309,11 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             ..ForceMsg::default()
         });
         self.diverged_at = Some(s.steps);
-        false
+    }
+
+    /// Whether the run diverged (its displacements or a tool's force).
+    pub fn diverged(&self) -> bool {
+        self.diverged_at.is_some()
     }
 
     /// The force sample (every step), a look for dead pose publishers once
@@ -327,7 +339,20 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             pose_seq,
             &step.flags,
         );
-        for t in &msg.tools[..self.contacts.len()] {
+        // A force no hand can take is never published: non-finite, or so
+        // large that its length overflows (a 1e300 stiffness factor sent
+        // 5.9e294 N once, and the summary said "max force inf N" beside
+        // `finite: true`). The run ends as diverged instead.
+        let tools = &msg.tools[..self.contacts.len()];
+        let sane = tools.iter().all(|t| {
+            Vec3::from_array(t.force_n).length().is_finite()
+                && t.stiffness_n_per_m.iter().flatten().all(|k| k.is_finite())
+        });
+        if !sane {
+            self.diverge();
+            return Ok(());
+        }
+        for t in tools {
             s.max_force_n = s.max_force_n.max(Vec3::from_array(t.force_n).length());
         }
         s.contact_s += (monotonic_ns() - t0) as Real * 1e-9;
