@@ -5,7 +5,7 @@ use crate::run_cmd::Lateness;
 use anyhow::{Result, bail};
 use haptic_daemon::daemon::{ChainConfig, RtLoop, Shared};
 use haptic_daemon::device::{
-    Device, HandModel, Haply, Path, Plugin, Replay, Simulated, Trajectory,
+    Device, HandModel, Haply, Mapped, Path, Plugin, Replay, Simulated, Trajectory, WorkspaceMap,
 };
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
@@ -17,48 +17,58 @@ use shared::source::Source;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-/// Makes the device `spec` names; the built-in poke of `simulated` aims at
-/// `poke` (see [`Path::poke_over`]), or at the z axis without it.
+/// Makes the device `spec` names, placed in the scene by `map`; the built-in
+/// poke of `simulated` aims at `poke` (scene coordinates, see
+/// [`Path::poke_over`]), or at the z axis without it; a trajectory file is
+/// in the device's own frame.
 pub(crate) fn make_device(
     spec: &str,
     max_force_n: f64,
     poke: Option<Path>,
+    map: WorkspaceMap,
 ) -> Result<DeviceChoice> {
     let (kind, arg) = spec
         .split_once(':')
         .map_or((spec, None), |(k, a)| (k, Some(a)));
+    let placed = |d| Mapped::new(d, map);
     match (kind, arg) {
         ("simulated", None) => {
-            let path = poke.unwrap_or_else(Path::default_poke);
-            Ok(DeviceChoice::Simulated(Simulated::new(
+            let path = poke
+                .unwrap_or_else(Path::default_poke)
+                .in_device_frame(&map);
+            Ok(DeviceChoice::Simulated(placed(Simulated::new(
                 path,
                 HandModel::default(),
                 max_force_n,
-            )))
+            ))))
         }
         ("simulated", Some(file)) => {
             let t = Trajectory::read(std::path::Path::new(file))?;
-            Ok(DeviceChoice::Simulated(Simulated::new(
+            Ok(DeviceChoice::Simulated(placed(Simulated::new(
                 Path::Trajectory(t),
                 HandModel::default(),
                 max_force_n,
-            )))
+            ))))
         }
         ("replay", Some(file)) => {
             let t = Trajectory::read(std::path::Path::new(file))?;
-            Ok(DeviceChoice::Replay(Replay::new(t, max_force_n)))
+            Ok(DeviceChoice::Replay(Mapped::new(
+                Replay::new(t, max_force_n),
+                map,
+            )))
         }
         ("plugin", Some(rest)) => {
             // plugin:PATH[:ARGS]
             let (lib, plugin_args) = rest.split_once(':').unwrap_or((rest, ""));
-            Ok(DeviceChoice::Plugin(Plugin::load(
-                std::path::Path::new(lib),
-                plugin_args,
-            )?))
+            Ok(DeviceChoice::Plugin(Mapped::new(
+                Plugin::load(std::path::Path::new(lib), plugin_args)?,
+                map,
+            )))
         }
-        ("haply", url) => Ok(DeviceChoice::Haply(Haply::connect(
-            url.unwrap_or("ws://localhost:10001"),
-        )?)),
+        ("haply", url) => Ok(DeviceChoice::Haply(Mapped::new(
+            Haply::connect(url.unwrap_or("ws://localhost:10001"))?,
+            map,
+        ))),
         _ => bail!(
             "unknown device {spec:?}: use simulated, simulated:FILE.csv, replay:FILE.csv or plugin:LIB.so[:ARGS]"
         ),
@@ -67,10 +77,10 @@ pub(crate) fn make_device(
 
 /// The devices this binary knows, as a closed set (the loop is generic).
 pub(crate) enum DeviceChoice {
-    Simulated(Simulated),
-    Replay(Replay),
-    Plugin(Plugin),
-    Haply(Haply),
+    Simulated(Mapped<Simulated>),
+    Replay(Mapped<Replay>),
+    Plugin(Mapped<Plugin>),
+    Haply(Mapped<Haply>),
 }
 
 impl DeviceChoice {

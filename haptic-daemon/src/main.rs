@@ -47,7 +47,7 @@ struct Cli {
 enum Command {
     /// Run the haptic loop.
     #[command(allow_negative_numbers = true)]
-    Run(RunArgs),
+    Run(Box<RunArgs>),
     /// Record a session's force samples and telemetry losslessly, counting
     /// sequence gaps (SIGINT/SIGTERM stop it after a flush).
     #[command(allow_negative_numbers = true)]
@@ -56,7 +56,7 @@ enum Command {
 
 fn main() -> Result<()> {
     match Cli::parse().command {
-        Command::Run(args) => run_cmd::run_main(args),
+        Command::Run(args) => run_cmd::run_main(*args),
         Command::Record(args) => record_main(args),
     }
 }

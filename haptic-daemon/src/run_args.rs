@@ -29,6 +29,20 @@ pub(crate) struct RunArgs {
     /// Force limit (N); at most the device's own.
     #[arg(long)]
     pub max_force: Option<f64>,
+    /// Where the device's workspace lies in the scene: the scene point of
+    /// the device's origin (m), `X,Y,Z` (docs/devices.md has examples per
+    /// device).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_v3, default_value = "0,0,0")]
+    pub workspace_offset_m: [f64; 3],
+    /// Scene metres per device metre (0.01 to 100): above 1 the tool moves
+    /// further than the hand and the stiffness at the hand is the scene's
+    /// times it.
+    #[arg(long, default_value_t = 1.0)]
+    pub workspace_scale: f64,
+    /// The device's axes turned onto the scene's: degrees about the
+    /// device's x, then y, then z axis, `RX,RY,RZ`.
+    #[arg(long, value_name = "RX,RY,RZ", value_parser = parse_v3, default_value = "0,0,0")]
+    pub workspace_rotate_deg: [f64; 3],
     /// The daemon's checks (pose plausibility, live samples, stiffness
     /// cap, passivity).
     #[command(flatten)]
@@ -68,4 +82,19 @@ pub(crate) struct RunArgs {
     /// No live status line.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `X,Y,Z` as three finite numbers.
+fn parse_v3(text: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [x, y, z] = parts[..] else {
+        return Err(format!("{text:?} is not three numbers X,Y,Z"));
+    };
+    let num = |v: &str| {
+        v.parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("{v:?} in {text:?} is not a finite number"))
+    };
+    Ok([num(x)?, num(y)?, num(z)?])
 }

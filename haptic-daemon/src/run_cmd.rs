@@ -7,6 +7,7 @@ use crate::device_choice::{LoopConfig, RtEnd};
 use crate::run_args::RunArgs;
 use anyhow::{Context, Result, bail};
 use haptic_daemon::daemon::Shared;
+use haptic_daemon::device::WorkspaceMap;
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoConfig, IoSpin, Stats, run_io};
@@ -40,6 +41,15 @@ impl Lateness {
     }
 }
 
+/// `--workspace-*` as the summary says them.
+#[derive(Serialize)]
+struct WorkspaceSummary {
+    offset_m: [f64; 3],
+    scale: f64,
+    rotate_deg: [f64; 3],
+    hand_max_stiffness_n_per_m: f64,
+}
+
 #[derive(Serialize)]
 struct Summary {
     /// With --connect: the clock offset estimate to the simulation's host
@@ -56,6 +66,9 @@ struct Summary {
     extrapolation: &'static str,
     device: String,
     max_stiffness_n_per_m: f64,
+    /// The device's workspace in the scene and the stiffness cap as the
+    /// hand feels it (`max_stiffness_n_per_m` times the scale).
+    workspace: WorkspaceSummary,
     samples_received: u64,
     samples_not_live: u64,
     /// `local-problem`: contact problems set up, of those with the tissue's
@@ -102,14 +115,34 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
     } else {
         (None, None)
     };
-    let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N, poke)?;
+    let map = WorkspaceMap::new(
+        args.workspace_offset_m,
+        args.workspace_scale,
+        args.workspace_rotate_deg,
+    )
+    .map_err(|e| anyhow::anyhow!("--workspace-*: {e}"))?;
+    let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N, poke, map)?;
     let device_max = device.specs().max_force_n;
     let limit = force_limit(args.max_force, device_max)?;
     let safety = SafetyConfig::new(limit)?;
-    let chain = args.chain.config(device.specs().max_stiffness_n_per_m)?;
+    // --max-stiffness-n-per-m is what the hand feels (a device's data
+    // sheet); the loop caps the scene's stiffness, that over the scale.
+    let mut chain = args
+        .chain
+        .config(map.stiffness_at_hand(device.specs().max_stiffness_n_per_m))?;
+    chain.max_stiffness_n_per_m = chain.max_stiffness_n_per_m.map(|k| k / map.scale);
     let stiffness_cap = chain
         .max_stiffness_n_per_m
         .unwrap_or(device.specs().max_stiffness_n_per_m);
+    if !map.is_identity() && !args.quiet {
+        let [x, y, z] = map.offset_m.map(|v| v * 1e3);
+        let [rx, ry, rz] = args.workspace_rotate_deg;
+        say!(
+            "workspace: the device's origin at ({x:.1}, {y:.1}, {z:.1}) mm in the scene, scale {}, turned ({rx}, {ry}, {rz}) deg; stiffness cap {stiffness_cap:.0} N/m in the scene, {:.0} N/m at the hand",
+            map.scale,
+            map.stiffness_at_hand(stiffness_cap)
+        );
+    }
     let shared = Arc::new(Shared::new(1 << 16));
     let stop_signal = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -220,6 +253,12 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
         extrapolation: method.name(),
         device: args.device.clone(),
         max_stiffness_n_per_m: stiffness_cap,
+        workspace: WorkspaceSummary {
+            offset_m: args.workspace_offset_m,
+            scale: map.scale,
+            rotate_deg: args.workspace_rotate_deg,
+            hand_max_stiffness_n_per_m: map.stiffness_at_hand(stiffness_cap),
+        },
         samples_received: shared.samples.load(Ordering::Relaxed),
         samples_not_live: shared.samples_not_live.load(Ordering::Relaxed),
         local_problems: shared.local_problems.load(Ordering::Relaxed),

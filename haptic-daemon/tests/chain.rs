@@ -391,3 +391,100 @@ fn bad_reads_that_persist_ramp_the_force_down_and_good_ones_ramp_it_in() {
         );
     }
 }
+
+/// A device at a fixed pose in its own frame that keeps what it is told
+/// to render.
+struct Recording {
+    at_m: [f64; 3],
+    written: std::sync::Arc<std::sync::Mutex<Vec<[f64; 3]>>>,
+}
+
+impl Device for Recording {
+    fn specs(&self) -> DeviceSpecs {
+        Scripted(|_| [0.0; 3]).specs()
+    }
+    fn enable(&mut self, _now_ns: u64) -> Result<(), DeviceError> {
+        Ok(())
+    }
+    fn disable(&mut self) {}
+    fn read(&mut self, _now_ns: u64) -> Result<DeviceState, DeviceError> {
+        Ok(DeviceState {
+            position_m: self.at_m,
+            ..DeviceState::default()
+        })
+    }
+    fn write_force(&mut self, force_n: [f64; 3], _now_ns: u64) -> Result<(), DeviceError> {
+        self.written.lock().unwrap().push(force_n);
+        Ok(())
+    }
+}
+
+#[test]
+fn a_placed_workspace_gives_the_same_force_at_the_same_scene_point() {
+    use haptic_daemon::device::{Mapped, WorkspaceMap};
+    let scene_point = [0.0, 0.0, -0.015];
+    let run = |map: WorkspaceMap, name: &str| {
+        let mut b = bench(name);
+        let written = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let device = Mapped::new(
+            Recording {
+                at_m: map.to_device(scene_point),
+                written: written.clone(),
+            },
+            map,
+        );
+        let specs = device.specs();
+        let mut rt = RtLoop::new(
+            device,
+            Method::LocalModel,
+            SafetyConfig::new(8.0).unwrap(),
+            b.subscriber.take(),
+            b.shared.clone(),
+        );
+        rt.enable(T0).unwrap();
+        let mut seen = Vec::new();
+        for k in 0..400u64 {
+            let now = T0 + k * MS;
+            if let Some(p) = b.shared.pose.read() {
+                seen.push(p.position_m);
+                b.publisher
+                    .send_copy(wall_msg(k, now, now - T0, p.position_m))
+                    .unwrap();
+            }
+            rt.tick(now, 0);
+            while b.shared.telemetry.pop().is_some() {}
+        }
+        let last = *written.lock().unwrap().last().unwrap();
+        (last, seen, specs)
+    };
+    let (plain, _, plain_specs) = run(WorkspaceMap::IDENTITY, "wsid");
+    // A workspace turned a quarter about x (the device's y is the scene's
+    // up) and about z, twice as large in the scene, its origin 10 cm aside
+    // and 5 cm up.
+    let map = WorkspaceMap::new([0.1, 0.0, 0.05], 2.0, [90.0, 0.0, 90.0]).unwrap();
+    let (placed, seen, specs) = run(map, "wsmap");
+    assert!((plain[2] - 4.5).abs() < 1e-9, "{plain:?}");
+    // The simulation saw the same scene point...
+    for p in &seen {
+        let d: f64 = (0..3).map(|i| (p[i] - scene_point[i]).powi(2)).sum();
+        assert!(d.sqrt() < 1e-12, "{p:?}");
+    }
+    // ... and the device renders the same force in its own axes.
+    let expected = map.force_to_device(plain);
+    assert!(
+        (expected[2]).abs() < 1e-9,
+        "the scene's up is not the device's: {expected:?}"
+    );
+    for i in 0..3 {
+        assert!(
+            (placed[i] - expected[i]).abs() < 1e-9,
+            "{placed:?} vs {expected:?}"
+        );
+    }
+    // The stiffness the scene may render is the device's over the scale.
+    assert_eq!(
+        specs.max_stiffness_n_per_m,
+        plain_specs.max_stiffness_n_per_m / 2.0
+    );
+    assert!(specs.workspace_max_m[0] > plain_specs.workspace_max_m[0]);
+}

@@ -10,12 +10,14 @@ mod plugin;
 mod replay;
 mod simulated;
 mod trajectory;
+mod workspace;
 
 pub use haply::{Haply, HaplyError, INVERSE3_MAX_FORCE_N, force_command, parse_state};
 pub use plugin::{ABI_VERSION, Plugin, PluginError};
 pub use replay::Replay;
 pub use simulated::{HandModel, Path, Simulated};
 pub use trajectory::{Trajectory, TrajectoryError};
+pub use workspace::{Mapped, WorkspaceError, WorkspaceMap};
 
 use crate::math::V3;
 use thiserror::Error;

@@ -106,6 +106,27 @@ impl Path {
         })
     }
 
+    /// This path, given in the scene, in the frame of a device that `map`
+    /// places there: the built-in poke aims at the same scene points
+    /// through the map; a trajectory is the device's own already
+    /// (unchanged).
+    pub fn in_device_frame(self, map: &super::WorkspaceMap) -> Self {
+        match self {
+            Path::Poke {
+                start_m,
+                direction,
+                depth_m,
+                period_s,
+            } => Path::Poke {
+                start_m: map.to_device(start_m),
+                direction: map.direction_to_device(direction),
+                depth_m: depth_m / map.scale,
+                period_s,
+            },
+            t @ Path::Trajectory(_) => t,
+        }
+    }
+
     fn at(&self, t_s: f64) -> (V3, f64) {
         match self {
             Path::Trajectory(t) => t.sample(t_s),

@@ -1,0 +1,193 @@
+//! A device's workspace placed in the scene (`--workspace-offset-m`,
+//! `--workspace-scale`, `--workspace-rotate-deg`; docs/devices.md) through
+//! the real processes: a replayed hand that presses the stiff box in the
+//! scene's frame, and the same hand given in a device's frame (turned,
+//! scaled, moved) with the map that places it back, hold the same force;
+//! the summary reports the map and the stiffness as the hand feels it. The
+//! simulated device's built-in poke reaches the organ through a map too.
+
+use std::path::Path;
+use system_tests::{Peer, daemon_run, read_json, scratch_dir, spawn_sim_server, wait_for};
+
+const STIFF_BOX: &str = r#"
+[mesh]
+generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }
+
+[material]
+young_pa = 20000.0
+poisson = 0.45
+density_kg_m3 = 1000.0
+damping_per_s = 40.0
+
+[[fixed]]
+name = "bottom"
+select = { box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }
+
+[[tool]]
+name = "probe"
+kind = "hook"
+fulcrum_m = [0.03, 0.02, 0.15]
+length_m = 0.3
+radius_m = 0.005
+tip_length_m = 0.01
+
+[simulation]
+dt_s = 0.001
+"#;
+
+/// The map of the second run: the device's y up, twice as small as the
+/// scene, its origin at the box's top centre.
+const OFFSET: [f64; 3] = [0.03, 0.02, 0.04];
+const SCALE: f64 = 2.0;
+/// Rx(90): device (x, y, z) -> scene (x, -z, y).
+fn to_device(p: [f64; 3]) -> [f64; 3] {
+    let d = [p[0] - OFFSET[0], p[1] - OFFSET[1], p[2] - OFFSET[2]];
+    [d[0] / SCALE, d[2] / SCALE, -d[1] / SCALE]
+}
+
+/// Wait above, press 15 mm in at 20 mm/s, hold (scene frame, the tip's
+/// centre); `map` turns each point into the frame the CSV is written in.
+fn press_csv(map: fn([f64; 3]) -> [f64; 3]) -> String {
+    let rows = [
+        (0.0, [0.03, 0.02, 0.055]),
+        (0.5, [0.03, 0.02, 0.055]),
+        (1.75, [0.03, 0.02, 0.03]),
+        (3.5, [0.03, 0.02, 0.03]),
+    ];
+    let mut s = String::from("t_s,x_m,y_m,z_m\n");
+    for (t, p) in rows {
+        let q = map(p);
+        s += &format!("{t},{},{},{}\n", q[0], q[1], q[2]);
+    }
+    s
+}
+
+/// |F| per tick of a daemon record.
+fn forces(path: &Path) -> Vec<f64> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let c: Vec<f64> = l
+                .split(',')
+                .skip(5)
+                .take(3)
+                .map(|x| x.parse().unwrap())
+                .collect();
+            (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+        })
+        .collect()
+}
+
+#[test]
+fn a_placed_workspace_holds_the_same_force_at_the_same_scene_point() {
+    let dir = scratch_dir("workspace");
+    let session = format!("workspace{}", std::process::id());
+    let scene = dir.join("box.toml");
+    std::fs::write(&scene, STIFF_BOX).unwrap();
+    let mut sim = spawn_sim_server(
+        &session,
+        &["--scene", scene.to_str().unwrap(), "--duration-s", "60"],
+    );
+    wait_for(&session, Peer::Simulation);
+    let run = |name: &str, csv: String, map: &[&str]| {
+        let path = dir.join(format!("{name}.csv"));
+        std::fs::write(&path, csv).unwrap();
+        let (json, record) = (
+            dir.join(format!("{name}.json")),
+            dir.join(format!("{name}-rec.csv")),
+        );
+        let out = daemon_run(&session)
+            .args(["--duration-s", "3.4", "--device"])
+            .arg(format!("replay:{}", path.display()))
+            .args(map)
+            .arg("--json")
+            .arg(&json)
+            .arg("--record")
+            .arg(&record)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (read_json(&json), forces(&record))
+    };
+    let (plain_json, plain) = run("scene-frame", press_csv(|p| p), &[]);
+    let (placed_json, placed) = run(
+        "device-frame",
+        press_csv(to_device),
+        &[
+            "--workspace-offset-m",
+            "0.03,0.02,0.04",
+            "--workspace-scale",
+            "2",
+            "--workspace-rotate-deg",
+            "90,0,0",
+        ],
+    );
+    let _ = sim.kill();
+    let _ = sim.wait();
+    // The hold's last 0.5 s.
+    let hold = |f: &[f64]| {
+        let tail = &f[f.len().saturating_sub(500)..];
+        tail.iter().sum::<f64>() / tail.len() as f64
+    };
+    let (a, b) = (hold(&plain), hold(&placed));
+    assert!(a > 1.0, "the probe does not press: {a} N");
+    assert!(
+        (a - b).abs() <= 0.05 * a,
+        "scene frame {a:.3} N, device frame {b:.3} N"
+    );
+    let ws = &placed_json["workspace"];
+    assert_eq!(ws["scale"], 2.0, "{placed_json}");
+    let (cap, hand) = (
+        placed_json["max_stiffness_n_per_m"].as_f64().unwrap(),
+        ws["hand_max_stiffness_n_per_m"].as_f64().unwrap(),
+    );
+    assert!((hand - 2.0 * cap).abs() < 1e-9, "{placed_json}");
+    assert!(
+        (cap - plain_json["max_stiffness_n_per_m"].as_f64().unwrap() / 2.0).abs() < 1e-9,
+        "the scene's cap is the device's over the scale: {placed_json}"
+    );
+}
+
+#[test]
+fn the_simulated_poke_reaches_the_organ_through_a_map() {
+    let dir = scratch_dir("workspace-poke");
+    let session = format!("wspoke{}", std::process::id());
+    let scene = dir.join("box.toml");
+    std::fs::write(&scene, STIFF_BOX).unwrap();
+    let mut sim = spawn_sim_server(
+        &session,
+        &["--scene", scene.to_str().unwrap(), "--duration-s", "30"],
+    );
+    wait_for(&session, Peer::Simulation);
+    let json = dir.join("poke.json");
+    let out = daemon_run(&session)
+        .args(["--duration-s", "4", "--device", "simulated"])
+        .args([
+            "--workspace-offset-m",
+            "0.05,0,0.1",
+            "--workspace-scale",
+            "0.5",
+        ])
+        .args(["--workspace-rotate-deg", "0,0,45", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    let _ = sim.kill();
+    let _ = sim.wait();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = read_json(&json);
+    assert!(
+        v["max_force_n"].as_f64().unwrap() > 0.5,
+        "the poke missed the box: {v}"
+    );
+}
