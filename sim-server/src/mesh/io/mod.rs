@@ -305,9 +305,26 @@ impl<'f> Builder<'f> {
             }
         })?;
         if mesh.reoriented() > 0 {
+            // Named as the file numbers them, with their lines.
+            let named: Vec<String> = mesh
+                .reoriented_first()
+                .iter()
+                .filter_map(|t| origin.get(*t))
+                .map(|(n, at)| match at {
+                    Location::Line(l) => format!("{element_word} {n} (line {l})"),
+                    other => format!("{element_word} {n} ({other})"),
+                })
+                .collect();
+            let more = mesh.reoriented() - named.len();
             self.warnings.push(format!(
-                "{} inverted tetrahedra reoriented",
-                mesh.reoriented()
+                "{} inverted tetrahedra reoriented: {}{}",
+                mesh.reoriented(),
+                named.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
             ));
         }
         Ok(ImportedMesh {

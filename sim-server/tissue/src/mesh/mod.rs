@@ -37,7 +37,12 @@ pub struct TetMesh {
     positions_m: Vec<Vec3>,
     tets: Vec<[VertexId; 4]>,
     reoriented: usize,
+    /// The first [`NAMED_REORIENTED`] of them, for messages.
+    reoriented_first: Vec<usize>,
 }
+
+/// How many reoriented tetrahedra [`TetMesh::reoriented_first`] names.
+pub const NAMED_REORIENTED: usize = 8;
 
 /// The largest coordinate magnitude a mesh may have (in its file's units,
 /// before any scaling): a kilometre in micrometres, far from where
@@ -158,6 +163,7 @@ impl TetMesh {
         let count = positions_m.len();
         let mut out = Vec::with_capacity(tets.len());
         let mut reoriented = 0;
+        let mut reoriented_first = Vec::new();
         for (t, tet) in tets.iter().enumerate() {
             let vertices = tet.map(|v| v as usize);
             if let Some(&vertex) = vertices.iter().find(|&&v| v >= count) {
@@ -192,6 +198,9 @@ impl TetMesh {
             if volume_m3 < 0.0 {
                 ids.swap(2, 3);
                 reoriented += 1;
+                if reoriented_first.len() < NAMED_REORIENTED {
+                    reoriented_first.push(t);
+                }
             }
             out.push(ids);
         }
@@ -202,6 +211,7 @@ impl TetMesh {
             positions_m,
             tets: out,
             reoriented,
+            reoriented_first,
         })
     }
 
@@ -228,6 +238,12 @@ impl TetMesh {
     /// How many tetrahedra were given inverted and reoriented by [`TetMesh::new`].
     pub fn reoriented(&self) -> usize {
         self.reoriented
+    }
+
+    /// The indices (0-based, in the order given) of the first
+    /// [`NAMED_REORIENTED`] reoriented tetrahedra.
+    pub fn reoriented_first(&self) -> &[usize] {
+        &self.reoriented_first
     }
 
     /// The rest positions of tetrahedron `t`.
@@ -270,6 +286,7 @@ impl TetMesh {
                 .map(|t| t.map(|v| VertexId(new_of_old[v.idx()])))
                 .collect(),
             reoriented: self.reoriented,
+            reoriented_first: self.reoriented_first.clone(),
         }
     }
 
