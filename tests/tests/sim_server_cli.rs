@@ -86,10 +86,30 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
         "membrane: linear",
         "anisotropy",
         "vessel",
+        // The step and sample rate a run will use, said.
+        "a run steps every 1.0000e-3 s (the scene's dt_s)",
+        "1000 force samples per second",
     ] {
         assert!(text.contains(needle), "missing {needle:?} in:\n{text}");
     }
     let dir = scratch_dir("check");
+    // Without dt_s the step is the stability bound, and check says so.
+    let ellipsoid = dir.join("ellipsoid.toml");
+    std::fs::write(
+        &ellipsoid,
+        "[mesh]\ngenerate = { shape = \"ellipsoid\", radii_m = [0.04, 0.03, 0.02], cell_m = 0.004 }\n[material]\nyoung_pa = 5000.0\npoisson = 0.45\ndensity_kg_m3 = 1000.0\n",
+    )
+    .unwrap();
+    let out = run_ok(
+        Command::new(binary("sim-server"))
+            .arg("check")
+            .arg(&ellipsoid),
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains("(no dt_s: 0.9 of the stable step; set [simulation] dt_s = 0.001 for 1 kHz)"),
+        "{said}"
+    );
     let bad = dir.join("bad.toml");
     std::fs::write(
         &bad,

@@ -243,14 +243,39 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
             sim_server::tensor_mass::BoundMethod::Element => &element,
         };
         let dt = b.settings.dt_s.unwrap_or(0.9 * element.dt_max_s);
-        sim_server::tensor_mass::explicit::substeps_for(dt, bound, b.settings.policy).map_err(
-            |e| anyhow::anyhow!("{name}: the tensor-mass backend would refuse this scene: {e}"),
-        )?;
+        let substeps =
+            sim_server::tensor_mass::explicit::substeps_for(dt, bound, b.settings.policy).map_err(
+                |e| anyhow::anyhow!("{name}: the tensor-mass backend would refuse this scene: {e}"),
+            )?;
+        // The defaults a run will take, said (without dt_s the step is the
+        // stability bound, a rate no one chose).
+        let why = if b.settings.dt_s.is_some() {
+            "the scene's dt_s"
+        } else {
+            "no dt_s: 0.9 of the stable step; set [simulation] dt_s = 0.001 for 1 kHz"
+        };
+        println!(
+            "a run steps every {dt:.4e} s ({why}), {substeps} sub-step{} each: {:.0} force samples per second",
+            if substeps == 1 { "" } else { "s" },
+            1.0 / dt
+        );
         // What `run` warns of too (after it prepares the backend).
         if let Some(w) = RealTime::of(b).warning(bound.dt_max_s) {
             println!("warning: {w}");
             real_time = Some(w);
         }
+    }
+    if b.settings.backend != sim_server::scene::spec::BackendName::TensorMass {
+        let dt = super::real_time_step(b);
+        let why = if b.settings.dt_s.is_some() {
+            "the scene's dt_s"
+        } else {
+            "no dt_s: 1 ms"
+        };
+        println!(
+            "a run steps every {dt:.4e} s ({why}): {:.0} force samples per second",
+            1.0 / dt
+        );
     }
     let cutting = b
         .tools
