@@ -69,12 +69,12 @@ pub enum IoError {
     #[error(transparent)]
     Transport(#[from] TransportError),
     /// The record file failed.
-    #[error("record {file}: {source}")]
+    #[error("record {file}: {reason}")]
     Record {
         /// The file.
         file: String,
         /// The OS error.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
 }
 
@@ -178,7 +178,7 @@ pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> R
         Some(path) => {
             let err = |source| IoError::Record {
                 file: path.display().to_string(),
-                source,
+                reason: source,
             };
             let file = std::fs::File::create(path).map_err(err)?;
             let mut w = std::io::BufWriter::new(file);
@@ -192,7 +192,7 @@ pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> R
             .as_ref()
             .map(|p| p.display().to_string())
             .unwrap_or_default(),
-        source,
+        reason: source,
     };
     let mut batch = TelemetryBatch::default();
     let mut batches = 0u64;

@@ -35,12 +35,12 @@ pub enum RecordError {
     #[error(transparent)]
     Transport(#[from] TransportError),
     /// A file.
-    #[error("{file}: {source}")]
+    #[error("{file}: {reason}")]
     File {
         /// The file.
         file: PathBuf,
         /// The OS error.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
 }
 
@@ -100,7 +100,7 @@ pub struct RecordSummary {
 fn create(path: &Path, header: &str) -> Result<BufWriter<File>, RecordError> {
     let err = |source| RecordError::File {
         file: path.to_path_buf(),
-        source,
+        reason: source,
     };
     let mut w = BufWriter::new(File::create(path).map_err(err)?);
     writeln!(w, "{header}").map_err(err)?;
@@ -111,7 +111,7 @@ fn finish(w: &mut Option<BufWriter<File>>, path: &Option<PathBuf>) -> Result<(),
     if let (Some(w), Some(p)) = (w.as_mut(), path) {
         let err = |source| RecordError::File {
             file: p.clone(),
-            source,
+            reason: source,
         };
         w.flush().map_err(err)?;
         w.get_ref().sync_data().map_err(err)?;
@@ -168,7 +168,10 @@ pub fn record(
     let mut flushed = start;
     let file_err = |p: &Option<PathBuf>| {
         let file = p.clone().unwrap_or_default();
-        move |source| RecordError::File { file, source }
+        move |source| RecordError::File {
+            file,
+            reason: source,
+        }
     };
     loop {
         let now = monotonic_ns();

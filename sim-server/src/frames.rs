@@ -43,12 +43,12 @@ pub const PVD_EVERY: usize = 30;
 #[derive(Debug, Error)]
 pub enum FramesError {
     /// The directory could not be created.
-    #[error("--save-frames {dir}: cannot create the directory: {source}")]
+    #[error("--save-frames {dir}: cannot create the directory: {reason}")]
     Dir {
         /// The directory.
         dir: String,
         /// Why.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The writer thread could not be started, or it failed.
     #[error("--save-frames: the frame writer thread: {0}")]
@@ -102,7 +102,7 @@ impl FrameRecorder {
     ) -> Result<Self, FramesError> {
         std::fs::create_dir_all(dir).map_err(|source| FramesError::Dir {
             dir: dir.display().to_string(),
-            source,
+            reason: source,
         })?;
         let (frames_tx, frames_rx) = sync_channel::<Frame>(QUEUE);
         let (spare_tx, spare_rx) = channel::<Frame>();

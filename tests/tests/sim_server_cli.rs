@@ -93,6 +93,25 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
         assert!(text.contains(needle), "missing {needle:?} in:\n{text}");
     }
     let dir = scratch_dir("check");
+    // A missing file is said once: the message, no "Caused by" repeating it.
+    for (bin, args) in [
+        ("sim-server", vec!["check", "/no/such/organ.msh"]),
+        (
+            "haptic-daemon",
+            vec!["run", "--device", "replay:/no/such/path.csv"],
+        ),
+    ] {
+        let err = run_err(
+            Command::new(binary(bin))
+                .args(&args)
+                .env("RUST_BACKTRACE", "0"),
+        );
+        assert!(err.contains("No such file"), "{err}");
+        assert!(
+            !err.contains("Caused by"),
+            "{bin}: the reason said twice:\n{err}"
+        );
+    }
     // Without dt_s the step is the stability bound, and check says so.
     let ellipsoid = dir.join("ellipsoid.toml");
     std::fs::write(

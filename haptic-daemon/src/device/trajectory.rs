@@ -21,12 +21,12 @@ pub struct Trajectory {
 #[derive(Debug, Error)]
 pub enum TrajectoryError {
     /// The file could not be read.
-    #[error("{file}: {source}")]
+    #[error("{file}: {reason}")]
     Io {
         /// The file.
         file: String,
         /// The OS error.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// A bad line.
     #[error("{file}:{line}: {message}")]
@@ -51,7 +51,7 @@ impl Trajectory {
     pub fn read(path: &Path) -> Result<Self, TrajectoryError> {
         let text = std::fs::read_to_string(path).map_err(|source| TrajectoryError::Io {
             file: path.display().to_string(),
-            source,
+            reason: source,
         })?;
         Self::parse(&path.display().to_string(), &text)
     }

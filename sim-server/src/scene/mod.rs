@@ -45,7 +45,7 @@ impl SceneSource {
     pub fn read(path: &Path) -> Result<Self, SceneError> {
         let io = |source| SceneError::Io {
             file: path.display().to_string(),
-            source,
+            reason: source,
         };
         let bytes = crate::input_file::read_at_most(path, crate::input_file::MAX_SCENE_BYTES)
             .map_err(io)?;
@@ -112,12 +112,12 @@ impl SceneSource {
 #[derive(Debug, Error)]
 pub enum SceneError {
     /// The file could not be read.
-    #[error("{file}: {source}")]
+    #[error("{file}: {reason}")]
     Io {
         /// The file.
         file: String,
         /// The OS error.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// Not valid TOML, an unknown key, or a value of the wrong type.
     #[error("{file}:{line}:{column}: {message}")]

@@ -44,12 +44,12 @@ fn place(location: &Option<Location>) -> String {
 #[derive(Debug, Error)]
 pub enum MeshIoError {
     /// The file could not be opened, read or written.
-    #[error("{file}: {source}")]
+    #[error("{file}: {reason}")]
     Io {
         /// The file.
         file: String,
         /// The operating-system error.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The file does not follow its format.
     #[error("{file}:{at}: {message}")]
@@ -84,7 +84,7 @@ pub enum MeshIoError {
         ignored: String,
     },
     /// The tetrahedra were read but do not form a valid mesh.
-    #[error("{file}{}: {context}{source}", place(.at))]
+    #[error("{file}{}: {context}{reason}", place(.at))]
     Invalid {
         /// The file.
         file: String,
@@ -93,7 +93,7 @@ pub enum MeshIoError {
         /// The element in the file's own numbering, e.g. `element 1234: `.
         context: String,
         /// The validation failure (its indices are 0-based, in import order).
-        source: MeshError,
+        reason: MeshError,
     },
     /// The file extension is none of `.msh`, `.vtk`, `.vtu`, `.mesh`.
     #[error("{file}: unknown mesh format (expected .msh, .vtk, .vtu or .mesh)")]

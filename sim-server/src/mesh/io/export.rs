@@ -25,7 +25,7 @@ pub(super) fn write_with(
 ) -> Result<(), MeshIoError> {
     let io = |source| MeshIoError::Io {
         file: file.to_owned(),
-        source,
+        reason: source,
     };
     let mut w = BufWriter::new(File::create(path).map_err(io)?);
     body(&mut w).map_err(io)?;
@@ -280,7 +280,10 @@ pub fn write_pvd(path: &Path, steps: &[(f64, PathBuf)]) -> Result<(), MeshIoErro
         writeln!(w, "  </Collection>")?;
         writeln!(w, "</VTKFile>")
     })?;
-    std::fs::rename(&tmp, path).map_err(|source| MeshIoError::Io { file, source })
+    std::fs::rename(&tmp, path).map_err(|source| MeshIoError::Io {
+        file,
+        reason: source,
+    })
 }
 
 /// Writes a Wavefront OBJ surface (vertices and 1-based triangle faces).

@@ -103,7 +103,7 @@ pub fn read_mesh(path: &Path) -> Result<ImportedMesh, MeshIoError> {
     let bytes = crate::input_file::read_at_most(path, crate::input_file::MAX_MESH_BYTES).map_err(
         |source| MeshIoError::Io {
             file: name.clone(),
-            source,
+            reason: source,
         },
     )?;
     parse_mesh(&name, &bytes, format)
@@ -301,7 +301,7 @@ impl<'f> Builder<'f> {
                 context: place
                     .map(|(n, _)| format!("{element_word} {n}: "))
                     .unwrap_or_default(),
-                source,
+                reason: source,
             }
         })?;
         if mesh.reoriented() > 0 {
