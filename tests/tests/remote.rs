@@ -86,7 +86,8 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
     let dir = scratch_dir("remote");
     write_liver_press(&dir.join("press.csv"));
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut sim = spawn_sim_server(&session, &[]);
+    // Bounded: a failing assertion must not leave them running.
+    let mut sim = spawn_sim_server(&session, &["--duration-s", "120"]);
     wait_for(&session, Peer::Simulation);
     // The station is given a copy of the bridge's token (as another host
     // would be); a wrong one is made beside it.
@@ -96,6 +97,7 @@ fn a_remote_station_sees_the_organ_feels_the_press_and_lets_go_when_the_bridge_d
     std::fs::set_permissions(&wrong, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
     let mut bridge = Command::new(binary("sim-server"))
         .args(["bridge", "--session", &session, "--listen", &endpoint])
+        .args(["--duration-s", "120"])
         .arg("--token-file")
         .arg(&token)
         .stdout(Stdio::null())

@@ -192,7 +192,8 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
             ),
         ),
     );
-    let mut sim = spawn_sim_server(&session, &[]);
+    // Bounded: a failing assertion must not leave it running.
+    let mut sim = spawn_sim_server(&session, &["--duration-s", "120"]);
     wait_for(&session, Peer::Simulation);
     let mut bridge = Command::new(binary("sim-server"))
         .args([
@@ -201,6 +202,8 @@ fn only_a_station_with_a_certificate_of_the_lab_sees_the_session() {
             &session,
             "--zenoh-config",
             &bridge_cfg,
+            "--duration-s",
+            "120",
         ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
