@@ -20,39 +20,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
-use system_tests::{binary, daemon_run, finish, read_json, scratch_dir, wait_bounded};
-
-/// tests/data/box-probe.toml made stiffer (5 -> 20 kPa), more damped
-/// (20 -> 40 /s), twice as thick and probed with a 5 mm probe: a 60 x 40 x
-/// 40 mm block on 5 mm cells, bottom fixed, the probe entering from above.
-/// (The box's own 2.5 mm probe, half a cell wide, slips off the vertex it
-/// presses past about 13 mm on these cells: a limit of the discretisation
-/// that README's penalty-law section states, not of the glitch handling.)
-const STIFF_BOX: &str = r#"
-[mesh]
-generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }
-
-[material]
-young_pa = 20000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 40.0
-
-[[fixed]]
-name = "bottom"
-select = { box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }
-
-[[tool]]
-name = "probe"
-kind = "hook"
-fulcrum_m = [0.03, 0.02, 0.15]
-length_m = 0.3
-radius_m = 0.005
-tip_length_m = 0.01
-
-[simulation]
-dt_s = 0.001
-"#;
+use system_tests::{STIFF_BOX, binary, daemon_run, finish, read_json, scratch_dir, wait_bounded};
 
 /// The block's top face (m).
 const TOP_M: f64 = 0.04;

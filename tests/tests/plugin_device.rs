@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use system_tests::{binary, read_json, scratch_dir, wait_bounded};
+use system_tests::{STIFF_BOX, binary, read_json, scratch_dir, wait_bounded};
 
 fn build_plugin(dir: &Path) -> PathBuf {
     let src = concat!(env!("CARGO_MANIFEST_DIR"), "/plugin/fake_device.c");
@@ -170,34 +170,6 @@ fn a_c_plugin_drives_the_daemon_and_its_faults_are_contained() {
         "{err}"
     );
 }
-
-/// tests/tests/glitch.rs's stiff box: 60 x 40 x 40 mm on 5 mm cells, 20 kPa,
-/// bottom fixed, a 5 mm probe from above (top at z = 40 mm).
-const STIFF_BOX: &str = r#"
-[mesh]
-generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }
-
-[material]
-young_pa = 20000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 40.0
-
-[[fixed]]
-name = "bottom"
-select = { box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }
-
-[[tool]]
-name = "probe"
-kind = "hook"
-fulcrum_m = [0.03, 0.02, 0.15]
-length_m = 0.3
-radius_m = 0.005
-tip_length_m = 0.01
-
-[simulation]
-dt_s = 0.001
-"#;
 
 /// Issue 48: holding a force through a C plugin, one bad read each of four
 /// kinds (a NaN position, an error code, a NaN velocity, a NaN gripper)

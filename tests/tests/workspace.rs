@@ -7,33 +7,9 @@
 //! simulated device's built-in poke reaches the organ through a map too.
 
 use std::path::Path;
-use system_tests::{Peer, daemon_run, read_json, scratch_dir, spawn_sim_server, wait_for};
-
-const STIFF_BOX: &str = r#"
-[mesh]
-generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }
-
-[material]
-young_pa = 20000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 40.0
-
-[[fixed]]
-name = "bottom"
-select = { box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }
-
-[[tool]]
-name = "probe"
-kind = "hook"
-fulcrum_m = [0.03, 0.02, 0.15]
-length_m = 0.3
-radius_m = 0.005
-tip_length_m = 0.01
-
-[simulation]
-dt_s = 0.001
-"#;
+use system_tests::{
+    Peer, STIFF_BOX, daemon_run, read_json, scratch_dir, spawn_sim_server, wait_for,
+};
 
 /// The map of the second run: the device's y up, twice as small as the
 /// scene, its origin at the box's top centre.
