@@ -39,7 +39,7 @@ pub fn overlay_lines(session: &Session, now_ns: u64, driving: Option<usize>) -> 
     }];
     if session.sim_alive(now_ns) {
         lines.push(format!(
-            "sim {:6.0} Hz  frames {}  topology v{}",
+            "sim {:6.0} Hz  mesh frames received {}  surface version {}",
             s.sim_hz, session.frames, session.topology_version
         ));
     } else {
