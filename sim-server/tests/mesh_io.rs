@@ -433,9 +433,10 @@ fn msh41_small_file_and_its_faults() {
         &with_line(MSH41, 21, "0.5 0.5 0"),
         f,
         29,
-        "element 3: tetrahedron 1",
+        // In the file's own numbering: element and node tags.
+        "element 3 (nodes 20 30 40 50) has zero volume",
     );
-    assert!(matches!(e, MeshIoError::Invalid { .. }), "{e}");
+    assert!(matches!(e, MeshIoError::Element { .. }), "{e}");
     let cut: String = MSH41.lines().take(28).map(|l| format!("{l}\n")).collect();
     fails_at(&cut, f, 29, "file ends before a tetrahedron");
     fails_at(
@@ -651,9 +652,19 @@ fn medit_small_file_and_its_faults() {
         &with_line(MEDIT, 9, "0.5 0.5 0 0"),
         f,
         16,
-        "tetrahedron 2: tetrahedron 1",
+        // Medit numbers from 1, as the message does.
+        "tetrahedron 2 (vertices 2 3 4 5) has zero volume",
     );
-    assert!(e.to_string().contains("zero volume"), "{e}");
+    assert!(matches!(e, MeshIoError::Element { .. }), "{e}");
+    // A repeated vertex, as the file numbers it (it said 0-based indices
+    // beside the file's element number before).
+    let e = fails_at(
+        &with_line(MEDIT, 16, "2 3 3 5 3"),
+        f,
+        16,
+        "tetrahedron 2 repeats a vertex: vertices 2 3 3 5",
+    );
+    assert!(!e.to_string().contains('['), "{e}");
 }
 
 const VTU: &str = r#"<?xml version="1.0"?>

@@ -95,6 +95,19 @@ pub enum MeshIoError {
         /// The validation failure (its indices are 0-based, in import order).
         reason: MeshError,
     },
+    /// One element is at fault (a repeated vertex, zero volume, a
+    /// duplicate): said in the file's own numbering, elements and vertices.
+    #[error("{file}:{at}: {message}")]
+    Element {
+        /// The file.
+        file: String,
+        /// Where the element is.
+        at: Location,
+        /// What is wrong, e.g. `element 952 repeats a node: nodes 145 320 320 585`.
+        message: String,
+        /// The validation failure (its indices 0-based, in import order).
+        kind: MeshError,
+    },
     /// The file extension is none of `.msh`, `.vtk`, `.vtu`, `.mesh`.
     #[error("{file}: unknown mesh format (expected .msh, .vtk, .vtu or .mesh)")]
     UnknownFormat {
@@ -118,6 +131,7 @@ impl MeshIoError {
         match self {
             MeshIoError::Parse { at, .. } | MeshIoError::UnsupportedElement { at, .. } => at.line(),
             MeshIoError::Invalid { at, .. } => at.and_then(Location::line),
+            MeshIoError::Element { at, .. } => at.line(),
             _ => None,
         }
     }

@@ -290,7 +290,7 @@ pub(super) fn node(
     b: &mut Builder,
 ) -> Result<(), MeshIoError> {
     let index = b.vertex_count() as u32;
-    b.vertex(p, at, &format!("node {tag}"))?;
+    b.vertex(p, at, "node", tag)?;
     if !nodes.insert(tag, index) {
         return Err(perr(file, at, format!("node {tag} is defined twice")));
     }

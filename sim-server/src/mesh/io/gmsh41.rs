@@ -189,7 +189,7 @@ fn node_blocks(
             }
             input.end_record()?;
             let index = b.vertex_count() as u32;
-            b.vertex(p, at, &format!("node {tag}"))?;
+            b.vertex(p, at, "node", tag)?;
             if !nodes.insert(tag, index) {
                 return Err(perr(file, at, format!("node {tag} is defined twice")));
             }

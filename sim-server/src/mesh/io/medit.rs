@@ -145,7 +145,7 @@ pub(super) fn parse<'a>(file: &str, bytes: &'a [u8]) -> Result<ImportedMesh, Mes
                                     ),
                                 )
                             })?;
-                            b.vertex(p, at, &format!("vertex {i}"))?;
+                            b.vertex(p, at, "vertex", i)?;
                         }
                     }
                     Section::Tetrahedra => {

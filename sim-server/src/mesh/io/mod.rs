@@ -154,6 +154,10 @@ pub(crate) struct Builder<'f> {
     surface_physical: Vec<([u32; 3], i32)>,
     /// Each tetrahedron's number in the file and where it is.
     tet_origin: Vec<(u64, Location)>,
+    /// Each vertex's number in the file (messages use the file's numbering).
+    vertex_numbers: Vec<u64>,
+    /// What the file calls a vertex (`node`, `vertex`, `point`).
+    vertex_noun: &'static str,
     /// Lower-dimensional elements ignored, by kind (plural noun).
     ignored: Vec<(&'static str, usize)>,
     warnings: Vec<String>,
@@ -170,6 +174,8 @@ impl<'f> Builder<'f> {
             tet_physical: Vec::new(),
             surface_physical: Vec::new(),
             tet_origin: Vec::new(),
+            vertex_numbers: Vec::new(),
+            vertex_noun: "vertex",
             ignored: Vec::new(),
             warnings: Vec::new(),
         }
@@ -178,8 +184,9 @@ impl<'f> Builder<'f> {
     /// Reserves room for `n` more vertices, but never more than `cap` (the
     /// bytes left in the input bound how many records can follow).
     pub fn reserve_vertices(&mut self, n: u64, cap: usize) {
-        self.positions
-            .reserve(usize::try_from(n).unwrap_or(usize::MAX).min(cap));
+        let n = usize::try_from(n).unwrap_or(usize::MAX).min(cap);
+        self.positions.reserve(n);
+        self.vertex_numbers.reserve(n);
     }
 
     /// Reserves room for `n` more tetrahedra, capped like
@@ -196,8 +203,17 @@ impl<'f> Builder<'f> {
         self.positions.len()
     }
 
-    /// Adds a vertex; refuses a non-finite coordinate here, where its line is known.
-    pub fn vertex(&mut self, p: [f64; 3], at: Location, label: &str) -> Result<(), MeshIoError> {
+    /// Adds a vertex, `noun number` in the file's own numbering (`node 145`,
+    /// `point 0`); refuses a non-finite coordinate here, where its line is
+    /// known.
+    pub fn vertex(
+        &mut self,
+        p: [f64; 3],
+        at: Location,
+        noun: &'static str,
+        number: u64,
+    ) -> Result<(), MeshIoError> {
+        let label = format!("{noun} {number}");
         if !p.iter().all(|c| c.is_finite()) {
             return Err(text::perr(
                 self.file,
@@ -213,6 +229,8 @@ impl<'f> Builder<'f> {
             ));
         }
         self.positions.push(Vec3::from_array(p));
+        self.vertex_numbers.push(number);
+        self.vertex_noun = noun;
         Ok(())
     }
 
@@ -284,7 +302,13 @@ impl<'f> Builder<'f> {
         let file = self.file;
         let element_word = self.element_word;
         let origin = std::mem::take(&mut self.tet_origin);
+        let (numbers, noun) = (std::mem::take(&mut self.vertex_numbers), self.vertex_noun);
         let mesh = TetMesh::new(self.positions, self.tets).map_err(|source| {
+            // An element's own fault, said in the file's numbering only.
+            let source = match element_error(file, element_word, &origin, &numbers, noun, source) {
+                Ok(e) => return e,
+                Err(source) => source,
+            };
             let tet = match &source {
                 MeshError::IndexOutOfRange { tet, .. }
                 | MeshError::RepeatedVertex { tet, .. }
@@ -377,4 +401,69 @@ impl NodeMap {
             None => (tag >= 1 && tag <= self.dense as u64).then(|| (tag - 1) as u32),
         }
     }
+}
+
+/// The [`MeshIoError::Element`] of a tetrahedron's own fault (a repeated
+/// vertex, zero volume, a duplicate), in the file's numbering: its element
+/// number and line, its vertices as the file numbers them. The fault back
+/// when it is not one element's.
+fn element_error(
+    file: &str,
+    element_word: &str,
+    origin: &[(u64, Location)],
+    numbers: &[u64],
+    noun: &str,
+    source: MeshError,
+) -> Result<MeshIoError, MeshError> {
+    let vertices = |v: &[usize; 4]| -> String {
+        let n: Vec<String> = v
+            .iter()
+            .map(|i| numbers.get(*i).map_or(format!("#{i}"), u64::to_string))
+            .collect();
+        let plural = if noun == "vertex" {
+            "vertices".to_string()
+        } else {
+            format!("{noun}s")
+        };
+        format!("{plural} {}", n.join(" "))
+    };
+    let (tet, message) = match &source {
+        MeshError::RepeatedVertex { tet, vertices: v } => {
+            (*tet, format!("repeats a {noun}: {}", vertices(v)))
+        }
+        MeshError::Degenerate {
+            tet,
+            vertices: v,
+            volume_m3,
+            longest_edge_m,
+        } => (
+            *tet,
+            format!(
+                "({}) has zero volume ({volume_m3:e} m^3 for a longest edge of {longest_edge_m:e} m)",
+                vertices(v)
+            ),
+        ),
+        MeshError::Duplicate { tet, first } => {
+            let Some(first) = origin.get(*first) else {
+                return Err(source);
+            };
+            (
+                *tet,
+                format!(
+                    "is the same tetrahedron as {element_word} {} ({})",
+                    first.0, first.1
+                ),
+            )
+        }
+        _ => return Err(source),
+    };
+    let Some((number, at)) = origin.get(tet) else {
+        return Err(source);
+    };
+    Ok(MeshIoError::Element {
+        file: file.to_owned(),
+        at: *at,
+        message: format!("{element_word} {number} {message}"),
+        kind: source,
+    })
 }

@@ -90,7 +90,7 @@ pub(super) fn parse(file: &str, bytes: &[u8]) -> Result<ImportedMesh, MeshIoErro
                     let x = r.float("a point coordinate")?;
                     let at = x.1;
                     let p = [x.0, r.float("y")?.0, r.float("z")?.0];
-                    b.vertex(p, at, &format!("point {i}"))?;
+                    b.vertex(p, at, "point", i)?;
                 }
             }
             "CELLS" => cells = Some(r.cells()?),

@@ -140,11 +140,7 @@ pub(super) fn parse(file: &str, bytes: &[u8], pos: usize) -> Result<ImportedMesh
                 let xyz = r.values(n.saturating_mul(3), ty, "POINTS")?;
                 b.reserve_vertices(n, xyz.len() / 3);
                 for (i, p) in xyz.chunks_exact(3).enumerate() {
-                    b.vertex(
-                        [p[0], p[1], p[2]],
-                        Location::Byte(at),
-                        &format!("point {i}"),
-                    )?;
+                    b.vertex([p[0], p[1], p[2]], Location::Byte(at), "point", i as u64)?;
                 }
             }
             "CELLS" => {

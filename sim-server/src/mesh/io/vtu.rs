@@ -274,7 +274,8 @@ fn add_piece(b: &mut Builder, d: &Decoder, p: &Piece) -> Result<(), MeshIoError>
         b.vertex(
             [c[0], c[1], c[2]],
             Location::Line(d.lines.line(pos.at)),
-            &format!("point {i}"),
+            "point",
+            i as u64,
         )?;
     }
     if p.cells == 0 {
