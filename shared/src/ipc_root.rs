@@ -210,26 +210,33 @@ pub fn check_private_dir(dir: &Path, uid: u32) -> Result<(), IpcRootError> {
 /// Refuses any object in `shm_dir` named with `prefix` that `uid` does not
 /// own. A missing `shm_dir` (not Linux) has none.
 pub fn check_segments(shm_dir: &Path, prefix: &str, uid: u32) -> Result<(), IpcRootError> {
-    let Ok(entries) = std::fs::read_dir(shm_dir) else {
-        return Ok(());
-    };
-    for e in entries.flatten() {
-        if !e.file_name().to_string_lossy().starts_with(prefix) {
-            continue;
-        }
-        // Gone meanwhile (a session ending) is fine.
-        let Ok(md) = std::fs::symlink_metadata(e.path()) else {
-            continue;
-        };
-        if md.uid() != uid {
-            return Err(IpcRootError::ForeignSegment {
-                path: e.path(),
-                owner: md.uid(),
-                uid,
-            });
-        }
+    match objects_with_prefix(shm_dir, prefix).find(|(_, md)| md.uid() != uid) {
+        Some((path, md)) => Err(IpcRootError::ForeignSegment {
+            path,
+            owner: md.uid(),
+            uid,
+        }),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// The objects in `shm_dir` whose names start with `prefix`, with their
+/// metadata (not followed through symlinks); none when `shm_dir` cannot be
+/// read (not Linux), and one that vanished meanwhile (a session ending) is
+/// skipped.
+fn objects_with_prefix<'a>(
+    shm_dir: &Path,
+    prefix: &'a str,
+) -> impl Iterator<Item = (PathBuf, std::fs::Metadata)> + 'a {
+    std::fs::read_dir(shm_dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(move |e| e.file_name().to_string_lossy().starts_with(prefix))
+        .filter_map(|e| {
+            let path = e.path();
+            std::fs::symlink_metadata(&path).ok().map(|md| (path, md))
+        })
 }
 
 /// Makes this user's objects in `shm_dir` named with `prefix` readable and
@@ -237,21 +244,12 @@ pub fn check_segments(shm_dir: &Path, prefix: &str, uid: u32) -> Result<(), IpcR
 /// segment 0666); returns how many it changed. Best effort: an object that
 /// vanished or cannot be changed is left as it is.
 pub fn make_segments_private(shm_dir: &Path, prefix: &str, uid: u32) -> usize {
-    let Ok(entries) = std::fs::read_dir(shm_dir) else {
-        return 0;
-    };
     let mut changed = 0;
-    for e in entries.flatten() {
-        if !e.file_name().to_string_lossy().starts_with(prefix) {
-            continue;
-        }
-        let Ok(md) = std::fs::symlink_metadata(e.path()) else {
-            continue;
-        };
+    for (path, md) in objects_with_prefix(shm_dir, prefix) {
         let mode = md.permissions().mode() & 0o777;
         if md.uid() == uid && md.is_file() && mode & 0o077 != 0 {
             let private = std::fs::Permissions::from_mode(mode & 0o700);
-            if std::fs::set_permissions(e.path(), private).is_ok() {
+            if std::fs::set_permissions(&path, private).is_ok() {
                 changed += 1;
             }
         }
