@@ -250,8 +250,15 @@ fn figures(
 /// force resolution above nothing.
 const CONTACT_FORCE_N: f64 = 0.02;
 
-/// [`MethodResult::zero_in_contact_ticks`] of `rendered`: sample `j` is
-/// delivered at `(j + 1) s + delay_s`, tick `k` is at `k h`.
+/// Whether sample `j` has reached the haptic loop at `t_s`: the sample for
+/// the pose at `j s` is delivered one period later, plus the transport
+/// delay (the rule every method's render and the counts below share).
+fn delivered(j: usize, t_s: f64, s: f64, delay_s: f64) -> bool {
+    (j + 1) as f64 * s + delay_s <= t_s + 1e-12
+}
+
+/// [`MethodResult::zero_in_contact_ticks`] of `rendered` (tick `k` at
+/// `k h`, samples as [`delivered`]).
 fn zero_in_contact(
     rendered: &[[f64; 3]],
     truth: &[[f64; 3]],
@@ -260,20 +267,22 @@ fn zero_in_contact(
     s: f64,
     delay_s: f64,
 ) -> usize {
-    rendered
-        .iter()
-        .enumerate()
-        .filter(|(k, f)| {
-            let t = *k as f64 * h;
-            let delivered = ((t - delay_s + 1e-12) / s).floor() as i64;
-            let newest = usize::try_from(delivered - 1)
-                .ok()
-                .and_then(|j| samples.get(j));
-            **f == [0.0; 3]
-                && truth.get(*k).is_some_and(|t| norm(*t) > CONTACT_FORCE_N)
-                && newest.is_some_and(|x| x.in_contact && norm(x.force_n) > 0.0)
-        })
-        .count()
+    let mut next = 0;
+    let mut zeros = 0;
+    for (k, f) in rendered.iter().enumerate() {
+        let t = k as f64 * h;
+        while next < samples.len() && delivered(next, t, s, delay_s) {
+            next += 1;
+        }
+        let newest = next.checked_sub(1).map(|j| &samples[j]);
+        if *f == [0.0; 3]
+            && truth.get(k).is_some_and(|t| norm(*t) > CONTACT_FORCE_N)
+            && newest.is_some_and(|x| x.in_contact && norm(x.force_n) > 0.0)
+        {
+            zeros += 1;
+        }
+    }
+    zeros
 }
 
 /// The per-tick CSV of `--series`.
@@ -475,7 +484,7 @@ pub fn run(args: &Args) -> Result<()> {
             let t = k as f64 * h;
             // Sample j (pose at j s) is delivered one simulation period
             // later, plus the transport delay.
-            while next < samples.len() && (next + 1) as f64 * s + delay_s <= t + 1e-12 {
+            while next < samples.len() && delivered(next, t, s, delay_s) {
                 ex.push(&ForceSample {
                     t_ns: ns((next + 1) as f64 * s),
                     seq: next as u64,
