@@ -323,3 +323,24 @@ tip_length_m = 0.01
 [simulation]
 dt_s = 0.001
 "#;
+
+/// |F| (N) of each tick of a daemon's `--record` CSV (columns 5-7 are
+/// `force_x_n,force_y_n,force_z_n`), panicking on a row that does not parse.
+pub fn record_force_norms(path: &std::path::Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let c: Vec<f64> = l
+                .split(',')
+                .skip(5)
+                .take(3)
+                .map(|x| {
+                    x.parse()
+                        .unwrap_or_else(|_| panic!("{}: {l}", path.display()))
+                })
+                .collect();
+            (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+        })
+        .collect()
+}

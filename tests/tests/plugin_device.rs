@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use system_tests::{STIFF_BOX, binary, read_json, scratch_dir, wait_bounded};
+use system_tests::{STIFF_BOX, binary, read_json, record_force_norms, scratch_dir, wait_bounded};
 
 fn build_plugin(dir: &Path) -> PathBuf {
     let src = concat!(env!("CARGO_MANIFEST_DIR"), "/plugin/fake_device.c");
@@ -211,20 +211,7 @@ fn a_held_force_survives_single_bad_plugin_reads() {
     assert_eq!(v["pose_rereferences"].as_u64(), Some(0), "{v}");
     // |F| per tick; the bad reads are reads 3001-3004, the daemon's ticks
     // 3000-3003 (one read per tick from the first).
-    let text = std::fs::read_to_string(&record).unwrap();
-    let f: Vec<f64> = text
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let c: Vec<f64> = l
-                .split(',')
-                .skip(5)
-                .take(3)
-                .map(|x| x.parse().unwrap())
-                .collect();
-            (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
-        })
-        .collect();
+    let f = record_force_norms(&record);
     assert!(f.len() > 3_300, "{} ticks", f.len());
     let before = f[2_900..3_000].iter().sum::<f64>() / 100.0;
     assert!(before > 1.0, "the probe does not press: {before} N");

@@ -6,9 +6,9 @@
 //! the summary reports the map and the stiffness as the hand feels it. The
 //! simulated device's built-in poke reaches the organ through a map too.
 
-use std::path::Path;
 use system_tests::{
-    Peer, STIFF_BOX, daemon_run, read_json, scratch_dir, spawn_sim_server, wait_for,
+    Peer, STIFF_BOX, daemon_run, read_json, record_force_norms, scratch_dir, spawn_sim_server,
+    wait_for,
 };
 
 /// The map of the second run: the device's y up, twice as small as the
@@ -36,24 +36,6 @@ fn press_csv(map: fn([f64; 3]) -> [f64; 3]) -> String {
         s += &format!("{t},{},{},{}\n", q[0], q[1], q[2]);
     }
     s
-}
-
-/// |F| per tick of a daemon record.
-fn forces(path: &Path) -> Vec<f64> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let c: Vec<f64> = l
-                .split(',')
-                .skip(5)
-                .take(3)
-                .map(|x| x.parse().unwrap())
-                .collect();
-            (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
-        })
-        .collect()
 }
 
 #[test]
@@ -89,7 +71,7 @@ fn a_placed_workspace_holds_the_same_force_at_the_same_scene_point() {
             "{name}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        (read_json(&json), forces(&record))
+        (read_json(&json), record_force_norms(&record))
     };
     let (plain_json, plain) = run("scene-frame", press_csv(|p| p), &[]);
     let (placed_json, placed) = run(
