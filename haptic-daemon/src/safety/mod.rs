@@ -69,8 +69,6 @@
 mod config;
 pub mod passivity;
 #[cfg(test)]
-mod passivity_tests;
-#[cfg(test)]
 mod tests;
 
 pub use config::{

@@ -17,7 +17,7 @@
 //! Near the tissue a proxy that is catching up (coming in from its fulcrum
 //! after a let-go, following a jump) moves no faster than the hand itself
 //! plus an entry speed ([`Proxy::slow_to`]; the tool decides when, from
-//! the surface ahead, in `tool_approach.rs`): a still hand whose tool
+//! the surface ahead, in `tool/approach.rs`): a still hand whose tool
 //! comes back must not feel the tool hit the tissue at the speed limit (the
 //! liver, held at 0.146 N, took a 1.08 N blow and rang for a second), while
 //! a hand that moves is followed as before. The hand's speed is the

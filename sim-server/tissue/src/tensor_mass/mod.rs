@@ -16,8 +16,6 @@ mod lanes_avx2;
 pub mod large_strain;
 pub mod model;
 pub mod nonlinear;
-#[cfg(test)]
-mod prepared_step_tests;
 pub mod stability;
 mod stvk_lanes;
 pub mod submodel;

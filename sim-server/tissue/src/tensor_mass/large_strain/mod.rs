@@ -446,9 +446,7 @@ fn gershgorin_abs(m: &Mat3) -> Real {
         .fold(0.0, Real::max)
 }
 
-#[path = "lane_set.rs"]
 mod lane_set;
 
 #[cfg(test)]
-#[path = "large_strain_tests.rs"]
 mod tests;

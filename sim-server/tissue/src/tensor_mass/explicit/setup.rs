@@ -4,7 +4,7 @@
 //! membrane's vertices, and every buffer a step reuses. A part of
 //! [`super`], which owns the integrator.
 
-use super::parts::{PartBuffers, plan_parts};
+use super::partition::{PartBuffers, plan_parts};
 use super::predicted::Prediction;
 use super::{Explicit, ExplicitConfig, ExplicitError, MAX_THREADS, substeps_for};
 use crate::tensor_mass::huge_pages::huge_vec;

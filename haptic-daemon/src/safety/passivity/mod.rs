@@ -205,3 +205,6 @@ impl Passivity {
         scale(v, -alpha)
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -471,7 +471,5 @@ impl Tools {
     }
 }
 
-#[path = "tools_local.rs"]
 mod local_problems;
-#[path = "tools_new.rs"]
-mod new;
+mod setup;

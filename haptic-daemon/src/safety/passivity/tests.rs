@@ -1,8 +1,8 @@
 //! The passivity observer/controller and the ramp-in from the output,
 //! through `Safety::filter_at` on a scripted 1 kHz clock.
 
-use super::*;
 use crate::math::{dot, norm, sub};
+use crate::safety::*;
 
 const MS: u64 = 1_000_000;
 const T0: u64 = 1_000 * MS;

@@ -475,5 +475,4 @@ impl Default for TelemetryBatch {
 }
 
 #[cfg(test)]
-#[path = "protocol_tests.rs"]
 mod tests;

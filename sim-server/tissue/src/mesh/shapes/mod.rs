@@ -24,7 +24,6 @@ use super::{GenerateError, TetMesh};
 use crate::math::{Real, Vec3, tet_signed_volume};
 use surface::{peel, snap};
 
-#[path = "shapes_surface.rs"]
 mod surface;
 
 /// How the bounds are filled with tetrahedra before trimming.

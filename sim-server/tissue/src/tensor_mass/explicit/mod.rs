@@ -9,7 +9,7 @@ use super::large_strain::LargeStrain;
 use super::model::ElasticModel;
 use super::stability::StableStep;
 use crate::math::Real;
-use parts::{PartBuffers, PartPlan, run_parts};
+use partition::{PartBuffers, PartPlan, run_parts};
 use predicted::Prediction;
 pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, substeps_for};
 pub use step_size::{MAX_SUBSTEPS, MAX_THREADS, PREDICTED_SUBSTEPS_MAX};
@@ -74,7 +74,7 @@ pub struct Explicit<S: Storage> {
     ku_ahead: Vec<V3>,
     ku_ready: bool,
     /// The whole next step computed ahead without the tools, where every
-    /// row is the linear kernel's (see `tensor_mass/predicted.rs`).
+    /// row is the linear kernel's (see `tensor_mass/explicit/predicted/`).
     prediction: Prediction,
     /// Steps finished from a prediction.
     predicted_steps: u64,
@@ -269,7 +269,7 @@ impl<S: Storage> Explicit<S> {
     /// kernel's (no nonlinear elements or membrane): the whole step without
     /// the tools, which the step then finishes by recomputing only the rows
     /// the tools' forces, prescribed vertices and changed loads reach, one
-    /// ring of neighbours a sub-step (`tensor_mass/predicted.rs`). Otherwise: the
+    /// ring of neighbours a sub-step (`tensor_mass/explicit/predicted/`). Otherwise: the
     /// first sub-step's K U (the kernel's deferred-row path). Either way
     /// the step's result is identical to the bit (tests). One part only
     /// (with worker threads it does nothing); a cut before the step has
@@ -415,13 +415,8 @@ impl<S: Storage> Explicit<S> {
     }
 }
 
-#[path = "explicit_new.rs"]
-mod new;
-#[path = "explicit_parts.rs"]
-mod parts;
-#[path = "predicted.rs"]
+mod inputs;
+mod partition;
 pub(in crate::tensor_mass) mod predicted;
-#[path = "explicit_state.rs"]
-mod state;
-#[path = "explicit_step_size.rs"]
+mod setup;
 mod step_size;

@@ -22,7 +22,7 @@
 //! recomputed by [`row_product`] in exactly the pass's order of additions,
 //! so the whole step equals the plain one to the bit (tests: each row
 //! alone in the kernel's `dispatched_and_portable_passes_are_identical`,
-//! `prepared_step_tests`, and the contact scenes in
+//! its `tests`, and the contact scenes in
 //! `sim-server/tests/predicted_step.rs`). On the liver (1,763 vertices, 3
 //! sub-steps) a tool pressing 4 mm has the step after a pose recompute
 //! about 90 rows against 5,289 for three passes. Once the rows reach half
@@ -477,3 +477,6 @@ impl<S: Storage> Explicit<S> {
         self.follow_tangent();
     }
 }
+
+#[cfg(test)]
+mod tests;

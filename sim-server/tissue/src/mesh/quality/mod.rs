@@ -423,5 +423,4 @@ impl fmt::Display for QualityReport {
 }
 
 #[cfg(test)]
-#[path = "quality_tests.rs"]
 mod tests;

@@ -323,5 +323,4 @@ pub fn element_tangent(
 }
 
 #[cfg(test)]
-#[path = "nonlinear_tests.rs"]
 mod tests;

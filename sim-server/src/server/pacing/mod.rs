@@ -247,5 +247,4 @@ impl Pacing {
 }
 
 #[cfg(test)]
-#[path = "pacing_tests.rs"]
 mod tests;

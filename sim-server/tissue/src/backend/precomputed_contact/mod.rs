@@ -55,7 +55,6 @@ use crate::contact::ContactField;
 use crate::dense_lu::DenseLu;
 use crate::math::{Mat3, Real, Vec3};
 
-#[path = "precomputed_newton.rs"]
 mod newton;
 
 /// Newton iterations at most per step.

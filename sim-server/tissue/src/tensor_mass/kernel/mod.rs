@@ -429,12 +429,9 @@ impl<S: Storage> Kernel<S> {
     }
 }
 
-#[path = "kernel_storage.rs"]
 mod storage;
 
-#[path = "kernel_membrane.rs"]
 mod membrane;
 
 #[cfg(test)]
-#[path = "kernel_tests.rs"]
 mod tests;

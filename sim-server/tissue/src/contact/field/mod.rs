@@ -442,14 +442,11 @@ impl ContactField {
     }
 }
 
-#[path = "field_evaluate.rs"]
 mod evaluate;
 
 /// Test fixtures shared by the contact modules' unit tests.
 #[cfg(test)]
-#[path = "field_fixtures.rs"]
 pub(crate) mod fixtures;
 
 #[cfg(test)]
-#[path = "field_tests.rs"]
 mod tests;

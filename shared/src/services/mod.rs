@@ -542,5 +542,4 @@ pub fn subscriber<T: std::fmt::Debug + ZeroCopySend>(
 }
 
 #[cfg(test)]
-#[path = "services_tests.rs"]
 mod tests;

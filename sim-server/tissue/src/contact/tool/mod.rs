@@ -520,7 +520,5 @@ impl ToolContact {
     }
 }
 
-#[path = "tool_approach.rs"]
 mod approach;
-#[path = "tool_outside.rs"]
 mod outside;

@@ -4,12 +4,12 @@
 //! recomputed where it acts, and what changes the model or the state
 //! discards it.
 
-use super::*;
 use crate::ids::{TetId, VertexId};
 use crate::material::{Elasticity, Isotropic, Material};
 use crate::material_map::TetMaterials;
 use crate::math::Vec3;
 use crate::mesh::{BoxSpec, CellSize};
+use crate::tensor_mass::*;
 
 /// A 2 x 1 x 1 cm block held at x = 0, pulled and pushed at x = 2 cm,
 /// stepped at 3 ms (several sub-steps).
@@ -157,7 +157,7 @@ fn many_sub_steps_compute_only_the_first_ahead() {
     // Above PREDICTED_SUBSTEPS_MAX a whole step is not predicted (an array
     // a sub-step): the first sub-step's K U is, and the step is unchanged.
     let (mut plain, mut prepared) = (block_at::<f32>(0.03), block_at::<f32>(0.03));
-    assert!(prepared.substeps() > super::explicit::PREDICTED_SUBSTEPS_MAX);
+    assert!(prepared.substeps() > crate::tensor_mass::explicit::PREDICTED_SUBSTEPS_MAX);
     for k in 0..10 {
         plain.step();
         prepared.prepare_step();
