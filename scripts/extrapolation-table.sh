@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's twelve `hapbench extrapolation` runs (box press-palpate-slide,
+# The twelve `hapbench extrapolation` runs (box press-palpate-slide,
 # box stroke, the embedded liver's press-slide; simulation at 30, 60, 100 and
 # 250 Hz, haptic loop at 1 kHz), printed as its Markdown table: each method's
 # RMS error (N) with its ratio to the constant hold, p99 per-tick change (N)

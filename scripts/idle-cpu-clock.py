@@ -7,7 +7,7 @@ summary's `step_cpu_us` uses) around each sleep. On bare metal the charge is
 the syscall and the wake-up (plus this interpreter's few tens of us); on a
 shared VM, interrupts and the hypervisor can be charged to the sleeping
 thread as well. The tail of this distribution is the floor under any
-CPU-clock tail measured on the same machine (README, Measurements).
+CPU-clock tail measured on the same machine (docs/results/tools.md).
 
 Usage: scripts/idle-cpu-clock.py [--iterations N]  (run under `chrt -f 70`
 to see it for a SCHED_FIFO thread).

@@ -10,7 +10,7 @@
 //! (which carries the poses to the simulation) waits for it: a few
 //! milliseconds of dense algebra a problem, which at normal priority
 //! shared a core with an RT thread without SCHED_FIFO and made its ticks
-//! late (measured with `hapbench latency`, README).
+//! late (measured with `hapbench latency`, docs/results/latency.md).
 
 use crate::daemon::Shared;
 use crate::extrapolate::local_problem::{LocalContactMsg, LocalProblem, LocalProblemError};

@@ -21,12 +21,12 @@ pub struct RemoteArgs {
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
     /// A zenoh configuration file (JSON5: TLS, mutual authentication;
-    /// docs/remote.md); implies a remote session.
+    /// docs/guide/remote.md); implies a remote session.
     #[arg(long, value_name = "FILE")]
     zenoh_config: Option<PathBuf>,
     /// The bridge's token (default: bridge.token in this user's private
     /// directory, where a bridge on this host writes it; on another host,
-    /// a copy of the bridge's; docs/security.md).
+    /// a copy of the bridge's; docs/guide/security.md).
     #[arg(long, value_name = "FILE")]
     token_file: Option<PathBuf>,
 }

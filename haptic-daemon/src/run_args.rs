@@ -17,7 +17,7 @@ pub(crate) struct RunArgs {
     #[arg(long, default_value_t = 1000.0)]
     pub rate: f64,
     /// The force extrapolator (default local-problem: the lowest error on
-    /// every `hapbench extrapolation` run in the README, passive on all;
+    /// every `hapbench extrapolation` run in docs/results/extrapolation.md, passive on all;
     /// without contact problems from the simulation it renders as
     /// local-normal, the next best).
     #[arg(long, value_enum, default_value_t = Method::LocalProblem)]
@@ -30,7 +30,7 @@ pub(crate) struct RunArgs {
     #[arg(long)]
     pub max_force: Option<f64>,
     /// Where the device's workspace lies in the scene: the scene point of
-    /// the device's origin (m), `X,Y,Z` (docs/devices.md has examples per
+    /// the device's origin (m), `X,Y,Z` (docs/guide/devices.md has examples per
     /// device).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_v3, default_value = "0,0,0")]
     pub workspace_offset_m: [f64; 3],

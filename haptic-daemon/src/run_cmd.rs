@@ -402,7 +402,7 @@ fn spawn_io(
     };
     // The I/O thread stays at normal priority: SCHED_FIFO 5 below the
     // RT thread was tried and measured slower at the median beside a
-    // normal-priority simulation on two cores (README, Latency).
+    // normal-priority simulation on two cores (docs/results/latency.md).
     let (shared, stats) = (shared.clone(), stats.clone());
     Ok(std::thread::Builder::new()
         .name("haptic-io".into())

@@ -1,5 +1,5 @@
 """Press the organ with tool 0 for a second and print the force (the
-README's example). Run beside `sim-server run [--session S]`:
+docs/guide/python.md's example). Run beside `sim-server run [--session S]`:
 
     python3 python/examples/press.py [--session S] [--depth-m D]
 """

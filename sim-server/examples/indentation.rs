@@ -1,7 +1,7 @@
 //! A rigid probe pressed into a block, held at each depth until the tissue
 //! settles: the static force against depth under either contact law, for
 //! comparing the laws with each other and with an analytic indentation
-//! (README, "The two contact laws against an analytic indentation").
+//! (docs/design/contact.md, "The two laws against an analytic indentation").
 //!
 //! ```sh
 //! cargo run --release -p sim-server --example indentation -- \

@@ -143,7 +143,7 @@ pub const LOCAL_MARGIN_M: f64 = 3e-3;
 /// Sampling, the compliance, the column mass and the daemon's set-up cost
 /// some milliseconds of CPU a problem, which at the stiffness solver's
 /// ~4 ms pace took a 2-core machine's spare time and the daemon's tick
-/// deadlines with it (measured: `hapbench latency`, README).
+/// deadlines with it (measured: `hapbench latency`, docs/results/latency.md).
 pub const LOCAL_EVERY_S: f64 = 0.008;
 
 /// The contact problem of tool `tool` the wire can carry: points

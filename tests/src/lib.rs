@@ -297,7 +297,7 @@ pub fn wait_for(session: &str, peer: Peer) {
 /// 40 mm block on 5 mm cells, bottom fixed, the probe entering from above.
 /// (The box's own 2.5 mm probe, half a cell wide, slips off the vertex it
 /// presses past about 13 mm on these cells: a limit of the discretisation
-/// that README's penalty-law section states, not of the glitch handling.)
+/// that docs/design/contact.md's penalty-law limits state, not of the glitch handling.)
 pub const STIFF_BOX: &str = r#"
 [mesh]
 generate = { shape = "box", size_m = [0.06, 0.04, 0.04], cell_m = 0.005 }

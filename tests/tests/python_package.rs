@@ -1,5 +1,5 @@
 //! The Python package (`python/hapsim`) against the real simulation: it
-//! installs with pip from the checkout, and its README example attaches to
+//! installs with pip from the checkout, and docs/guide/python.md's example attaches to
 //! `sim-server run`, finds the organ from a mesh frame, presses it with
 //! tool 0 and reads the force samples as numpy arrays.
 

@@ -1,5 +1,5 @@
 //! A remote session over TLS with mutual authentication, configured as
-//! `docs/remote.md` shows (zenoh configuration files given with
+//! `docs/guide/remote.md` shows (zenoh configuration files given with
 //! `--zenoh-config`): a lab CA (made here with openssl) signs the bridge's
 //! certificate and a station's. The station's viewer, presenting its
 //! certificate, gets a snapshot of the organ; a viewer that trusts the

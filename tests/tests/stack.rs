@@ -173,7 +173,7 @@ fn the_precomputed_demo_presses_with_the_penalty_law_by_default() {
     // under other tests' load more; the daemon used to start at once and
     // the grasp was over before the first step); under the penalty
     // law the precomputed backend's largest force is the explicit
-    // backend's (2.20 N against 2.04, README), under the projection law it
+    // backend's (2.20 N against 2.04, docs/results/precomputed-contact.md), under the projection law it
     // was 1.36 N (the probe held on a plane between the vertices).
     let v = headless_demo(
         &scratch_dir("demo-precomputed"),

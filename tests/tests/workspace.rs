@@ -1,5 +1,5 @@
 //! A device's workspace placed in the scene (`--workspace-offset-m`,
-//! `--workspace-scale`, `--workspace-rotate-deg`; docs/devices.md) through
+//! `--workspace-scale`, `--workspace-rotate-deg`; docs/guide/devices.md) through
 //! the real processes: a replayed hand that presses the stiff box in the
 //! scene's frame, and the same hand given in a device's frame (turned,
 //! scaled, moved) with the map that places it back, hold the same force;

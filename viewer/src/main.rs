@@ -44,11 +44,11 @@ struct Args {
     #[arg(long, value_name = "ENDPOINT")]
     connect: Vec<String>,
     /// A zenoh configuration file (JSON5: TLS, mutual authentication;
-    /// docs/remote.md); implies a remote session.
+    /// docs/guide/remote.md); implies a remote session.
     #[arg(long, value_name = "FILE")]
     zenoh_config: Option<PathBuf>,
     /// The bridge's token (default: bridge.token in this user's private
-    /// directory; on another host, a copy of the bridge's; docs/security.md).
+    /// directory; on another host, a copy of the bridge's; docs/guide/security.md).
     #[arg(long, value_name = "FILE")]
     token_file: Option<PathBuf>,
 }

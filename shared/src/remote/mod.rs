@@ -69,7 +69,7 @@ pub const ALIVE_DAEMON: &str = "alive/daemon";
 
 /// Where a zenoh session listens and connects, and an optional zenoh
 /// configuration file (JSON5) for everything else: TLS certificates,
-/// mutual authentication, routers (`docs/remote.md` shows how).
+/// mutual authentication, routers (`docs/guide/remote.md` shows how).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct RemoteConfig {
     /// Endpoints to listen on (`tcp/127.0.0.1:7447`, `tls/0.0.0.0:7447`).
@@ -149,7 +149,7 @@ impl RemoteConfig {
     /// on the LAN), takes no message over 64 MiB (zenoh's default is 1 GiB,
     /// a peer could make it allocate that) and connects where told. A
     /// configuration file is taken as written (its own listen, scouting and
-    /// size settings: `docs/remote.md` shows them).
+    /// size settings: `docs/guide/remote.md` shows them).
     pub fn zenoh_config(&self) -> Result<zenoh::Config, RemoteError> {
         let mut config = match &self.config_file {
             Some(path) => zenoh::Config::from_file(path).map_err(|e| RemoteError::ConfigFile {
@@ -270,7 +270,7 @@ pub enum RemoteError {
     },
     /// No bridge answered for the session.
     #[error(
-        "no bridge answers for session {session} ({what}) within {waited_ms} ms: is `sim-server bridge --session {session}` running and reachable, and is this client's --token-file a copy of its token (docs/security.md)?"
+        "no bridge answers for session {session} ({what}) within {waited_ms} ms: is `sim-server bridge --session {session}` running and reachable, and is this client's --token-file a copy of its token (docs/guide/security.md)?"
     )]
     NoBridge {
         /// The session.

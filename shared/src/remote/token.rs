@@ -20,7 +20,7 @@
 //! What it does not do: authenticate the bridge to the client (zenoh's
 //! extension is one-way; a local user who takes the port first could pose
 //! as the bridge, without learning the token) nor encrypt the link: for
-//! both, use TLS (`docs/remote.md`).
+//! both, use TLS (`docs/guide/remote.md`).
 
 use std::io::{Read, Write};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};

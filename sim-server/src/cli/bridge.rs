@@ -27,14 +27,14 @@ pub struct BridgeArgs {
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
     /// A zenoh configuration file (JSON5): TLS, mutual authentication,
-    /// access control (docs/remote.md). --listen and --connect override
+    /// access control (docs/guide/remote.md). --listen and --connect override
     /// its endpoints.
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
     /// The token every client must know (mode 0600; written with a new
     /// random token if missing, then kept). Default: bridge.token in this
     /// user's private directory (/tmp/hapsim-<uid>/), where clients of the
-    /// same user and host find it; give a station a copy (docs/security.md).
+    /// same user and host find it; give a station a copy (docs/guide/security.md).
     #[arg(long, value_name = "FILE")]
     pub token_file: Option<PathBuf>,
     /// The longest a force sample waits in the bridge (us): shared memory

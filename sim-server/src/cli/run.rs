@@ -56,7 +56,7 @@ pub struct RunArgs {
     /// The step (s) instead of the scene's `[simulation] dt_s`: the period
     /// of force samples and of pose intake. A shorter step answers a pose
     /// sooner (device -> force) for more CPU and a larger contact share;
-    /// README, Measurements, Latency.
+    /// docs/results/latency.md.
     #[arg(long)]
     pub dt_s: Option<f64>,
     /// Run the stepping loop under SCHED_FIFO at this priority (1-98; 0:
@@ -71,12 +71,12 @@ pub struct RunArgs {
     /// or a cut makes the factor stale until its rebuild arrives from the
     /// worker thread (tens of ms); bounded, those steps cost what any step
     /// costs and stop short of the tolerance (counted in the summary's
-    /// `solve_capped_steps`). README, Backends.
+    /// `solve_capped_steps`). docs/guide/backends.md.
     #[arg(long, default_value_t = crate::server::IMPLICIT_STEP_ITERATIONS)]
     pub implicit_iterations: usize,
     /// The contact law instead of the scene's `[contact] law` (penalty:
     /// tensor-mass and precomputed, their default; projection: every
-    /// backend, the default of implicit and hybrid). README, Contact.
+    /// backend, the default of implicit and hybrid). docs/design/contact.md.
     #[arg(long, value_enum)]
     pub contact_law: Option<super::ContactLawArg>,
 }

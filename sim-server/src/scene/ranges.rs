@@ -1,7 +1,7 @@
 //! The plausible range of every physical scene key, in one table: a value
 //! outside `min ..= max` is refused at its line, one outside the usual
 //! `warn_min ..= warn_max` is accepted with a warning (a lab may mean it).
-//! The README's scene reference lists the same table.
+//! docs/guide/scenes.md lists the same table.
 
 use super::build::SceneReport;
 use super::real_time::thousands;

@@ -113,7 +113,7 @@ pub struct RunSummary {
     pub contact_steps: u64,
     /// Steps where the tissue's surface held a tool's tip short of its
     /// pose (it slipped past the tip, or the tip would have entered it:
-    /// the linear model far beyond its range; README, Contact).
+    /// the linear model far beyond its range; docs/design/contact.md).
     pub held_outside_steps: u64,
     /// Steps where a tool was catching up with its pose near the tissue
     /// (coming back in at the entry speed after a let-go or a jump, or

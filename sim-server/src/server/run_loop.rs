@@ -260,7 +260,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                         "the linear model is far beyond its range: model = \"corotational\" in [material] holds deeper"
                     };
                     eprintln!(
-                        "sim-server: the tissue slipped past tool {i}'s tip (or the tip would have entered it): the tool is held outside, at the surface; {advice} (README, Contact)"
+                        "sim-server: the tissue slipped past tool {i}'s tip (or the tip would have entered it): the tool is held outside, at the surface; {advice} (docs/design/contact.md, the tip held outside the tissue)"
                     );
                 }
                 self.summary.held_outside_steps += 1;

@@ -3,7 +3,7 @@
 //! Newton systems of the precomputed backend's penalty contact (a few tens
 //! to 192 unknowns, several times a step). The hand-written elimination
 //! of [`crate::math::solve_in_place`] ran at about 2 GFLOP/s there and was
-//! the largest single cost of such a step (`perf`, README); faer's
+//! the largest single cost of such a step (`perf`, docs/results/precomputed-contact.md); faer's
 //! in-place API takes its scratch from a buffer kept here, so a solve
 //! allocates nothing once the largest size has been seen.
 

@@ -132,7 +132,7 @@ impl LocalProblem {
     /// steps a new problem through the hand's recent positions so that the
     /// RT thread goes on from now, one tick a step, where one implicit step
     /// over the whole age damped the problem's transient (measured:
-    /// `hapbench extrapolation`, README). False if the step failed (the
+    /// `hapbench extrapolation`, docs/results/extrapolation.md). False if the step failed (the
     /// state before it stands; the set-up stops catching up there).
     pub fn catch_up(&mut self, t_ns: u64, tool_m: V3) -> bool {
         if !self.has_inertia() {

@@ -40,7 +40,7 @@ pub enum Preconditioner {
 
 /// The Cholesky preconditioner is rebuilt once the CG iterations beyond one
 /// per step since it was built exceed this: one factorisation costs about
-/// 50 preconditioner solves on the meshes measured (README).
+/// 50 preconditioner solves on the meshes measured (docs/guide/backends.md).
 pub const REFACTOR_BUDGET: usize = 50;
 
 impl ImplicitConfig {

@@ -42,7 +42,7 @@
 //! direction with it does not descend, the step takes H's slopes k n n^T
 //! alone (positive) for the rest of the step, and where that does not
 //! either (holds left out) dG = f - G, which always does (T is positive).
-//! Measured on the liver demo's grasp and poke (README): with the slopes
+//! Measured on the liver demo's grasp and poke (docs/results/precomputed-contact.md): with the slopes
 //! alone and no holds' coupling, 3,089 of 7,533 contact steps ended at the
 //! iteration limit, converging linearly; with both, 13-24. The springs'
 //! forces at the last state are the tools' reactions. Static: no damping
@@ -219,7 +219,7 @@ impl Precomputed {
     /// one (2 G_n - G_n-1: a linear predictor, so that a tool moving
     /// steadily starts the iterations a second-order distance from the
     /// solution instead of a first-order one; measured on the liver poke
-    /// and sway: README). A vertex that only now carries a force starts at
+    /// and sway: docs/results/precomputed-contact.md). A vertex that only now carries a force starts at
     /// it. The line search makes any start safe: the iterates are
     /// consistent states and only descend. Returns whether any vertex was
     /// carried on (see [`Precomputed::restart_unpredicted`]).

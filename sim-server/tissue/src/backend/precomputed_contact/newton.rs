@@ -94,7 +94,7 @@ impl Precomputed {
     /// moves no row more than the tolerance. That step of the simplified
     /// Newton method stands for the Newton step the test used to take a
     /// new Jacobian and factorisation for (the last iteration of nearly
-    /// every step, only to confirm the one before: README); where the
+    /// every step, only to confirm the one before: docs/results/precomputed-contact.md); where the
     /// matrix changed little it differs from it by a small factor, and the
     /// convergence it confirms is quadratic.
     pub(super) fn chord_converged(&mut self, field: &ContactField, cs: &mut ContactSolve) -> bool {

@@ -88,8 +88,8 @@ impl Tools {
             // on the static backend (precomputed) it is a Newton solve a
             // step, several times the projection law's cost, but the
             // projection law over-states the force on fine meshes and
-            // misses the organ between vertices on coarse ones (README,
-            // contact laws); `law = "projection"` keeps the cheap one.
+            // misses the organ between vertices on coarse ones (docs/design/contact.md,
+            // the two laws against an analytic indentation); `law = "projection"` keeps the cheap one.
             None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
             None => ContactLaw::Projection,
         };

@@ -6,7 +6,7 @@
 //! kernel, and the pass computed each element's difference from its linear
 //! force: on the embedded liver a step cost 17% more that way with
 //! `model = "corotational"` and 32% more with `"stvk"` (medians of five
-//! interleaved rounds, README). A part of [`super`], which owns the
+//! interleaved rounds, docs/results/large-strain.md). A part of [`super`], which owns the
 //! kernel's storage.
 
 use super::storage::pack;
