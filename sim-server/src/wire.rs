@@ -4,7 +4,7 @@
 //! contact problem around a tool into `LocalContactMsg`.
 
 use crate::backend::Backend;
-use crate::contact::field::ONSET_OF_RADIUS;
+use crate::contact::penalty::field::ONSET_OF_RADIUS;
 use crate::contact::{ContactReport, LocalContact, LocalSpec, Reaction, Tools};
 use crate::math::Vec3;
 use shared::protocol::{

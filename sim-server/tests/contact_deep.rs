@@ -2,7 +2,7 @@
 //! wraps the tip and, around 11 mm into the 2 cm block, slips past it. The
 //! tool's tip must never end up inside the tissue (it would be pushed in,
 //! not out, and pulled in on the way back): the proxy is held outside
-//! (`contact/surface_crossing.rs`). Checked independently of that code, by
+//! (`contact/surface/crossing.rs`). Checked independently of that code, by
 //! the parity of the surface crossings of a ray from the tip's centre.
 
 mod common;

@@ -25,7 +25,7 @@ pub(super) fn closest_on_segment(a: V3, b: V3, y: V3) -> (V3, bool) {
 
 /// A point's spring at penetration `d` (m): energy (J), force (N) and
 /// slope (N/m), with the quadratic onset over `d0` (the law of the
-/// simulation's contact field, `tissue::contact::field::spring`).
+/// simulation's contact field, `tissue::contact::penalty::field::spring`).
 pub(super) fn spring(k: f64, d: f64, d0: f64) -> (f64, f64, f64) {
     if d < d0 {
         (

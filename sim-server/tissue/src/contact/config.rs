@@ -9,7 +9,7 @@ use crate::math::Real;
 pub enum ContactLaw {
     /// Compliant Hunt-Crossley contact between the tool capsules and points
     /// on the surface triangles, evaluated every integrator sub-step
-    /// ([`super::field`]): continuous in the tool pose. Needs a backend that
+    /// ([`crate::contact::penalty::field`]): continuous in the tool pose. Needs a backend that
     /// integrates it (tensor-mass) or solves each step's equilibrium with
     /// it (precomputed, [`crate::backend`]).
     Penalty,
@@ -65,7 +65,7 @@ pub struct ContactConfig {
     /// jump) enters the tissue at this speed, not at the speed limit.
     pub entry_speed_m_s: Real,
     /// The penalty springs are integrated linearly implicitly at the end
-    /// of each sub-step ([`super::implicit`]) instead of explicitly with
+    /// of each sub-step ([`crate::contact::penalty::implicit`]) instead of explicitly with
     /// the tissue's forces (which makes them size the sub-steps).
     pub implicit_springs: bool,
     /// The linear tetrahedra within this distance of a tool's tip (at

@@ -22,9 +22,9 @@
 //! inertia and the points outside the margin (the haptic daemon's
 //! `local-problem` extrapolator does it).
 
-use super::field::{ContactField, PartSweep};
-use super::geometry::Segment;
 use crate::backend::Backend;
+use crate::contact::penalty::field::{ContactField, PartSweep};
+use crate::contact::tool::geometry::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 

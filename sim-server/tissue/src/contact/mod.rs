@@ -8,6 +8,22 @@
 //! `tools.update(&mut sim, &inputs)` (detect and impose),
 //! `sim.step()`, then `tools.reaction(i, &sim)` (what tool `i` feels).
 //!
+//! # Where things are
+//! - [`tools`](Tools): the scene's tools together, set up and stepped
+//!   (with the contact problems made for the daemon, `tools/local_problems.rs`).
+//! - `tool/`: one tool: its contact state ([`ToolContact`]), the proxy
+//!   that follows the pose, its geometry, its declaration, the claims on
+//!   vertices, the approach and the tip held outside.
+//! - `surface/`: the tissue's surface as the tools meet it (the index of its
+//!   triangles, where a point crosses it, live faces, adjacency).
+//! - [`penalty`]: the penalty law (the field, friction, implicit springs,
+//!   where the points are sampled and kept).
+//! - `response/`: what the tool feels (the reaction, the contact stiffness
+//!   and its worker).
+//! - `local.rs`: the contact problem around one tool, for the daemon;
+//!   `follow_region.rs`: the corotational region following the tools;
+//!   `config.rs`: the law and its constants.
+//!
 //! # Rules (and where they simplify the paper)
 //! - **Geometry.** The shaft runs from the fulcrum through the tip; the tip
 //!   is its last `tip_length_m`, the rest inside the fulcrum is the shaft;
@@ -82,40 +98,27 @@
 //! quasi-static stiffness; it is what a local-model extrapolator needs to
 //! stay stiff enough on contact, not an exact compliance.
 
-pub(crate) mod adjacency;
-mod claims;
 mod config;
-mod decl;
-pub mod field;
 mod follow_region;
-pub mod friction;
-mod geometry;
-pub mod implicit;
 mod local;
-mod proxy;
-pub(crate) mod reaction;
-mod sampling;
-mod selection;
-mod stiffness;
-mod stiffness_thread;
-mod surface_crossing;
-mod surface_faces;
-mod surface_index;
+pub mod penalty;
+pub(crate) mod response;
+pub(crate) mod surface;
 mod tool;
 mod tools;
 
 pub use config::{ContactConfig, ContactLaw, MAX_IMPLICIT_STIFFNESS_FACTOR};
-pub use decl::{ToolDecl, ToolKind};
-pub use field::ContactField;
-pub use friction::Friction;
-pub use geometry::{Plane, Segment, ToolPose};
 pub use local::{LocalContact, LocalPart, LocalPoint};
-pub use proxy::Proxy;
-pub use reaction::Reaction;
-pub use stiffness::MAX_FACTOR_VERTICES;
-pub use stiffness_thread::{ContactStiffness, StiffnessSolves};
-pub use surface_index::SurfaceIndex;
+pub use penalty::field::ContactField;
+pub use penalty::friction::Friction;
+pub use response::reaction::Reaction;
+pub use response::stiffness::MAX_FACTOR_VERTICES;
+pub use response::worker::{ContactStiffness, StiffnessSolves};
+pub use surface::index::SurfaceIndex;
 pub use tool::ToolContact;
+pub use tool::decl::{ToolDecl, ToolKind};
+pub use tool::geometry::{Plane, Segment, ToolPose};
+pub use tool::proxy::Proxy;
 pub use tools::{ContactError, LocalSpec, ToolInput, Tools};
 
 use crate::ids::VertexId;

@@ -368,8 +368,8 @@ fn pulled_out(
 /// not balance).
 #[test]
 fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
-    use crate::contact::adjacency::Adjacency;
-    use crate::contact::reaction::{elastic_force_n, vertex_force_n};
+    use crate::contact::response::reaction::{elastic_force_n, vertex_force_n};
+    use crate::contact::surface::adjacency::Adjacency;
     let (m, tm_tets, fixed) = stvk_half();
     let held = vertices(&m, |p| p.x > SIZE[0] - 1e-9);
     let sim = pulled_out(&m, &fixed, &tm_tets, &held, Vec3::new(0.008, 0.0, -0.002));
@@ -415,8 +415,8 @@ fn a_hybrid_reports_the_force_of_its_nonlinear_part() {
 /// the StVK half, nearly unloaded, gives almost nothing).
 #[test]
 fn a_grip_on_the_parts_interface_feels_the_whole_body_s_force() {
-    use crate::contact::adjacency::Adjacency;
-    use crate::contact::reaction::vertex_force_n;
+    use crate::contact::response::reaction::vertex_force_n;
+    use crate::contact::surface::adjacency::Adjacency;
     use crate::static_newton::{NewtonConfig, solve_static_nonlinear};
     let (m, tm_tets, fixed) = stvk_half();
     let grip = vertices(&m, |p| (p.x - 0.02).abs() < 1e-9);

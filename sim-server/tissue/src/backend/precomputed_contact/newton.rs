@@ -9,7 +9,7 @@
 use super::{ContactSolve, TOLERANCE_M, largest_change, step_at};
 use crate::backend::precomputed::Precomputed;
 use crate::contact::ContactField;
-use crate::contact::field::ContactPoint;
+use crate::contact::penalty::field::ContactPoint;
 use crate::math::Mat3;
 
 /// Contact vertices beyond which the Newton direction takes each vertex's

@@ -2,10 +2,10 @@
 //! catching up (coming in from its fulcrum after a let-go, following a
 //! pose that jumped) slows down near the tissue, so a still hand feels its
 //! tool come back at the entry speed instead of a blow at the speed limit
-//! (see [`crate::contact::proxy`]).
+//! (see [`crate::contact::tool::proxy`]).
 //!
 //! Ahead of the proxy the tissue is found as the tips' surface test finds
-//! it ([`crate::contact::surface_crossing`]: the first surface triangle
+//! it ([`crate::contact::surface::crossing`]: the first surface triangle
 //! the tip's centre line would enter), over the distance the proxy needs
 //! to slow down; the step is then taken again no faster than lets the
 //! proxy slow to the hand's speed plus the entry speed by the time its tip
@@ -14,11 +14,11 @@
 use super::ToolContact;
 use crate::backend::Backend;
 use crate::contact::ToolKind;
-use crate::contact::adjacency::Adjacency;
 use crate::contact::config::ContactLaw;
-use crate::contact::geometry::ToolPose;
-use crate::contact::surface_crossing::Crossing;
-use crate::contact::surface_index::SurfaceIndex;
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::crossing::Crossing;
+use crate::contact::surface::index::SurfaceIndex;
+use crate::contact::tool::geometry::ToolPose;
 use crate::math::{Real, Vec3};
 
 /// A proxy that followed the hand this recently (s) is not slowed: it
@@ -42,7 +42,7 @@ impl ToolContact {
 
     /// Whether [`ToolContact::approach`] may slow the proxy this step
     /// (after [`ToolContact::note_catching_up`]): it has been catching up
-    /// ([`crate::contact::proxy::Proxy::catching_up`]: a proxy following
+    /// ([`crate::contact::tool::proxy::Proxy::catching_up`]: a proxy following
     /// the hand never is) for longer than [`RECENTLY_FOLLOWING_S`], faster
     /// than it may near the tissue. Not for the cavitron (it burns its way
     /// where the hand takes it) nor jaws holding tissue (they carry it

@@ -4,16 +4,16 @@
 
 use super::ToolDecl;
 use super::ToolKind;
-use super::adjacency::Adjacency;
-use super::claims::Claims;
 use super::config::ContactLaw;
-use super::field::{ContactField, PartSweep};
-use super::geometry::{Plane, Segment, ToolPose};
-use super::proxy::Proxy;
-use super::reaction::{self, Reaction};
-use super::surface_index::SurfaceIndex;
 use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
 use crate::backend::Backend;
+use crate::contact::penalty::field::{ContactField, PartSweep};
+use crate::contact::response::reaction::{self, Reaction};
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::index::SurfaceIndex;
+use crate::contact::tool::claims::Claims;
+use crate::contact::tool::geometry::{Plane, Segment, ToolPose};
+use crate::contact::tool::proxy::Proxy;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::mesh::TET_FACES;
@@ -521,4 +521,8 @@ impl ToolContact {
 }
 
 mod approach;
+pub(super) mod claims;
+pub(super) mod decl;
+pub(super) mod geometry;
 mod outside;
+pub(super) mod proxy;

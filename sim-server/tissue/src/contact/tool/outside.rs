@@ -1,14 +1,14 @@
 //! Phase 1b of a tool's update under the penalty law: its tip is kept
-//! outside the tissue (see [`crate::contact::surface_crossing`]).
+//! outside the tissue (see [`crate::contact::surface::crossing`]).
 
 use super::ToolContact;
 use crate::backend::Backend;
 use crate::contact::ToolKind;
-use crate::contact::adjacency::Adjacency;
 use crate::contact::config::ContactLaw;
-use crate::contact::geometry::ToolPose;
-use crate::contact::surface_crossing::Crossing;
-use crate::contact::surface_index::SurfaceIndex;
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::crossing::Crossing;
+use crate::contact::surface::index::SurfaceIndex;
+use crate::contact::tool::geometry::ToolPose;
 use crate::math::{Real, Vec3};
 
 /// The penalty tool's tip stops this fraction of its radius short of the
@@ -26,7 +26,7 @@ impl ToolContact {
     /// Phase 1b (penalty law, after every tool's phase 1, when
     /// [`ToolContact::surface_check_due`]): the tip's centre
     /// stops short of the first surface triangle its path this step would
-    /// enter (see [`crate::contact::surface_crossing`]). The cavitron's tip goes
+    /// enter (see [`crate::contact::surface::crossing`]). The cavitron's tip goes
     /// where the hand takes it (it burns its way), and jaws holding tissue
     /// carry it along.
     pub(in crate::contact) fn keep_outside<B: Backend + ?Sized>(

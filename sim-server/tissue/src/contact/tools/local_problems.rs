@@ -5,12 +5,12 @@
 
 use super::Tools;
 use crate::backend::Backend;
-use crate::contact::adjacency::Adjacency;
-use crate::contact::field::{ContactField, PartSweep};
 use crate::contact::local::LocalContact;
-use crate::contact::sampling::Sampler;
-use crate::contact::stiffness_thread::ContactStiffness;
-use crate::contact::surface_index::SurfaceIndex;
+use crate::contact::penalty::field::{ContactField, PartSweep};
+use crate::contact::penalty::sampling::Sampler;
+use crate::contact::response::worker::ContactStiffness;
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::index::SurfaceIndex;
 use crate::contact::tool::ToolContact;
 use crate::ids::VertexId;
 use crate::math::Real;

@@ -1,18 +1,18 @@
 //! The tools of a scene, updated together each step so that they share one
 //! surface index and never fight over a vertex.
 
-use super::adjacency::Adjacency;
-use super::claims::Claims;
 use super::config::ContactLaw;
-use super::field::ContactField;
 use super::local::LocalContact;
-use super::sampling::Sampler;
-use super::stiffness_thread::{ContactStiffness, StiffnessSolves};
-use super::surface_crossing::Crossing;
-use super::surface_index::SurfaceIndex;
 use super::tool::ToolContact;
 use super::{ContactReport, Reaction};
 use crate::backend::Backend;
+use crate::contact::penalty::field::ContactField;
+use crate::contact::penalty::sampling::Sampler;
+use crate::contact::response::worker::{ContactStiffness, StiffnessSolves};
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::crossing::Crossing;
+use crate::contact::surface::index::SurfaceIndex;
+use crate::contact::tool::claims::Claims;
 use crate::ids::VertexId;
 use crate::math::{Mat3, Real, Vec3};
 use crate::tensor_mass::ElasticModel;
@@ -234,7 +234,7 @@ impl Tools {
     /// which delayed those steps' forces. The sample then carries the
     /// stiffness received a step earlier (zero at once when nothing
     /// touches) (it is a few steps old anyway: the
-    /// solver works on snapshots every `HAND_OVER_EVERY_S` (`contact/stiffness_thread.rs`)).
+    /// solver works on snapshots every `HAND_OVER_EVERY_S` (`contact/response/worker.rs`)).
     pub fn hand_over_after_sample(&mut self, deferred: bool) {
         self.deferred_hand_over = deferred;
     }

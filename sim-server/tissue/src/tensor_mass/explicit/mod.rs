@@ -208,7 +208,7 @@ impl<S: Storage> Explicit<S> {
             self.membrane_step();
             let s = (k + 1) as Real / self.substeps as Real;
             let rest = self.model.mesh().positions_m();
-            let at = crate::contact::field::SubStep {
+            let at = crate::contact::penalty::field::SubStep {
                 h_s: h,
                 step_s: self.dt_s,
                 s,

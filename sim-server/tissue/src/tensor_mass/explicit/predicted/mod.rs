@@ -445,7 +445,7 @@ impl<S: Storage> Explicit<S> {
             if let Some(field) = field.as_deref_mut() {
                 field.zero(fmem);
                 let (prev, now, _) = prediction.substep(k);
-                let at = crate::contact::field::SubStep {
+                let at = crate::contact::penalty::field::SubStep {
                     h_s: h,
                     step_s: *dt_s,
                     s: (k + 1) as Real / substeps as Real,

@@ -1,6 +1,6 @@
 //! What each vertex touches, in compressed rows, built once per scene and
 //! shared by every tool: its edges (for the elastic force on one vertex,
-//! [`super::reaction::elastic_force_n`])
+//! [`crate::contact::response::reaction::elastic_force_n`])
 //! and its tetrahedra (for cutting and for the surface normals around it).
 //! Neither list changes under cutting: removed tetrahedra are skipped by
 //! their users, orphaned edges keep zero tensors.

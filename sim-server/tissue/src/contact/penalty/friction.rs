@@ -31,7 +31,7 @@
 //! ([`point_key`]). A triangle stretched enough to change its lattice
 //! (see `sampling::subdivisions`) starts its new points unstuck.
 
-use super::field::{ContactPoint, PartSweep};
+use crate::contact::penalty::field::{ContactPoint, PartSweep};
 use crate::math::{Real, Vec3};
 
 /// A tool's Coulomb coefficients (zero: frictionless, the default).

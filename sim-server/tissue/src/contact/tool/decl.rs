@@ -2,7 +2,7 @@
 //! that the core does not depend on the scene format (which builds these
 //! from its `[[tool]]` tables).
 
-use super::friction::Friction;
+use crate::contact::penalty::friction::Friction;
 use crate::math::Real;
 use serde::{Deserialize, Serialize};
 

@@ -9,12 +9,12 @@
 //! weights spread the triangle's area exactly a third to each vertex, so a
 //! uniformly pressed triangle loads its vertices equally whatever n is.
 
-use super::adjacency::Adjacency;
-use super::field::{ContactField, ContactPoint, PartSweep};
-use super::selection::{REUSE_MARGIN_OF_RADIUS, SelectionCache};
-use super::surface_faces::SurfaceFaces;
-use super::surface_index::SurfaceIndex;
 use crate::backend::Backend;
+use crate::contact::penalty::field::{ContactField, ContactPoint, PartSweep};
+use crate::contact::penalty::selection::{REUSE_MARGIN_OF_RADIUS, SelectionCache};
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::faces::SurfaceFaces;
+use crate::contact::surface::index::SurfaceIndex;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::ElasticModel;
@@ -168,7 +168,7 @@ impl Sampler {
 
     /// Adds to `field` the points within the step's reach of part `part`
     /// or `extra_m` further, leaving the selection kept for the next steps
-    /// alone (for [`super::local::LocalContact`]).
+    /// alone (for [`crate::contact::local::LocalContact`]).
     pub fn sample_around<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
@@ -182,7 +182,7 @@ impl Sampler {
     }
 
     /// The longest rest edge of a surface triangle (m).
-    pub(super) fn max_edge_m(&self) -> Real {
+    pub(in crate::contact) fn max_edge_m(&self) -> Real {
         self.max_edge_m
     }
 
@@ -219,7 +219,7 @@ impl Sampler {
         // A triangle with a point within `keep_m` of the part at the end of
         // the step has a vertex within that plus its longest edge (1.5x the
         // longest rest edge: stretched tissue) of the sweep's box.
-        let query = super::geometry::Segment {
+        let query = crate::contact::tool::geometry::Segment {
             a_m: sweep
                 .from
                 .a_m
@@ -286,7 +286,7 @@ impl Sampler {
 /// points `spacing_m` apart. The lattice follows the deformed triangle: a
 /// triangle stretched around a deep probe must not let it slip between its
 /// points.
-pub(super) fn subdivisions(x0: &[Vec3; 3], x: &[Vec3; 3], spacing_m: Real) -> usize {
+pub(in crate::contact) fn subdivisions(x0: &[Vec3; 3], x: &[Vec3; 3], spacing_m: Real) -> usize {
     let longest = [(0, 1), (1, 2), (2, 0)]
         .iter()
         .map(|&(a, b)| x0[a].distance(x0[b]).max(x[a].distance(x[b])))
@@ -327,7 +327,7 @@ struct SegmentQuery {
 }
 
 impl SegmentQuery {
-    fn new(seg: &super::geometry::Segment) -> Self {
+    fn new(seg: &crate::contact::tool::geometry::Segment) -> Self {
         let d = seg.b_m - seg.a_m;
         let len2 = d.length_squared();
         Self {

@@ -7,7 +7,7 @@ use super::{
     Acting, CLEAR_MARGIN, CLEAR_MARGIN_M, ContactField, DAMPING_STABILITY, REPORT_WINDOW_S,
     SubStep, spring,
 };
-use crate::contact::friction::{Stick, along_surface};
+use crate::contact::penalty::friction::{Stick, along_surface};
 use crate::math::{Mat3, Real, Vec3, outer};
 
 impl ContactField {

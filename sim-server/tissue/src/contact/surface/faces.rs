@@ -1,15 +1,15 @@
 //! The live surface triangles around a set of vertices, each visited once
 //! per pass: how the point sampler and the tips' surface test
-//! ([`super::surface_crossing`]) go from the [`super::SurfaceIndex`]'s
+//! ([`crate::contact::surface::crossing`]) go from the [`crate::contact::SurfaceIndex`]'s
 //! candidate vertices to triangles.
 
-use super::adjacency::Adjacency;
+use crate::contact::surface::adjacency::Adjacency;
 use crate::ids::VertexId;
 use crate::mesh::TET_FACES;
 use crate::tensor_mass::ElasticModel;
 
 /// Which (tetrahedron, face) pairs a pass has visited.
-pub(super) struct SurfaceFaces {
+pub(in crate::contact) struct SurfaceFaces {
     /// Per (tet, face): the stamp of the last pass that visited it.
     visited: Vec<u32>,
     stamp: u32,
@@ -17,7 +17,7 @@ pub(super) struct SurfaceFaces {
 
 impl SurfaceFaces {
     /// For `model`'s tetrahedra, nothing visited.
-    pub(super) fn new(model: &ElasticModel) -> Self {
+    pub(in crate::contact) fn new(model: &ElasticModel) -> Self {
         Self {
             visited: vec![0; 4 * model.mesh().tet_count()],
             stamp: 0,
@@ -25,7 +25,7 @@ impl SurfaceFaces {
     }
 
     /// Starts a pass: every face unvisited.
-    pub(super) fn begin(&mut self) {
+    pub(in crate::contact) fn begin(&mut self) {
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
             // Wrapped (after 2^32 passes): old stamps must not match.
@@ -36,7 +36,7 @@ impl SurfaceFaces {
 
     /// Calls `f` with the vertices (outward order, [`TET_FACES`]) of each
     /// live surface triangle through `v` not yet visited in this pass.
-    pub(super) fn around(
+    pub(in crate::contact) fn around(
         &mut self,
         model: &ElasticModel,
         adj: &Adjacency,

@@ -5,7 +5,7 @@
 //! the tissue. A god-object in the sense of Zilles and Salisbury (1995),
 //! reduced to what a compliant contact needs: the contact keeps the proxy
 //! out of the tissue, the proxy keeps it from tunnelling, and where tissue
-//! slips past the tip all the same, [`super::surface_crossing`] puts the
+//! slips past the tip all the same, [`crate::contact::surface::crossing`] puts the
 //! proxy back outside ([`Proxy::stop_at`]).
 //!
 //! Each step the proxy heads for the requested tip at the speed that

@@ -19,9 +19,9 @@
 //! thread timing. The snapshot buffers travel to the worker and back, so
 //! neither side allocates per step once warm.
 
-use super::field::ContactField;
-use super::local::LocalContact;
-use super::stiffness::{Snapshot, Solver};
+use crate::contact::local::LocalContact;
+use crate::contact::penalty::field::ContactField;
+use crate::contact::response::stiffness::{Snapshot, Solver};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Mat3, Real};
 use crate::tensor_mass::ElasticModel;

@@ -4,9 +4,9 @@
 //! field's force on its parts plus that elastic force at every vertex it
 //! constrains), and the contact stiffness beside it.
 
-use super::adjacency::Adjacency;
-use super::{Constraint, ConstraintKind};
 use crate::backend::Backend;
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::{Constraint, ConstraintKind};
 use crate::ids::VertexId;
 use crate::math::{Mat3, Vec3, outer};
 use crate::tensor_mass::ElasticModel;

@@ -32,9 +32,9 @@
 //! appearing or going (a tool withdrawn, a grip closing), a selection made
 //! within a step (long steps re-select every millisecond).
 
-use super::field::{ContactField, ContactPoint, PartSweep};
-use super::geometry::Segment;
-use super::sampling::subdivisions;
+use crate::contact::penalty::field::{ContactField, ContactPoint, PartSweep};
+use crate::contact::penalty::sampling::subdivisions;
+use crate::contact::tool::geometry::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 
@@ -214,7 +214,7 @@ impl SelectionCache {
 /// segment's largest end displacement from the selected one, plus twice its
 /// motion within the step (a point within reach of the part during the
 /// step is kept if it is within reach plus twice that motion of the part at
-/// the end of the step; see [`super::sampling`]).
+/// the end of the step; see [`crate::contact::penalty::sampling`]).
 fn part_motion_m(selected: &Segment, p: &PartSweep) -> Real {
     p.to.end_shift_m(selected) + 2.0 * p.motion_m()
 }

@@ -20,11 +20,11 @@
 //! [`SurfaceIndex`] BVH, then [`SurfaceFaces`]), each triangle oriented
 //! outwards by its tetrahedron's face order ([`crate::mesh::TET_FACES`]).
 
-use super::adjacency::Adjacency;
-use super::geometry::Segment;
-use super::surface_faces::SurfaceFaces;
-use super::surface_index::SurfaceIndex;
 use crate::backend::Backend;
+use crate::contact::surface::adjacency::Adjacency;
+use crate::contact::surface::faces::SurfaceFaces;
+use crate::contact::surface::index::SurfaceIndex;
+use crate::contact::tool::geometry::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::ElasticModel;
@@ -34,7 +34,7 @@ use crate::tensor_mass::ElasticModel;
 const EDGE_SLACK: Real = 1e-9;
 
 /// Finds where a path first enters the tissue; holds its scratch.
-pub(super) struct Crossing {
+pub(in crate::contact) struct Crossing {
     /// How far from the path a vertex of a crossed triangle can be (m):
     /// a triangle's longest rest edge, stretched up to twice (what the
     /// point sampler assumes too).
@@ -49,7 +49,11 @@ impl Crossing {
     /// Scratch for `model`'s surface, whose longest rest triangle edge is
     /// `longest_edge_m`, sampled by contact points every
     /// `spacing_of_radius` tool radii.
-    pub(super) fn new(model: &ElasticModel, longest_edge_m: Real, spacing_of_radius: Real) -> Self {
+    pub(in crate::contact) fn new(
+        model: &ElasticModel,
+        longest_edge_m: Real,
+        spacing_of_radius: Real,
+    ) -> Self {
         Self {
             reach_m: 2.0 * longest_edge_m,
             spacing_of_radius,
@@ -59,7 +63,7 @@ impl Crossing {
     }
 
     /// The contact points' spacing (tool radii).
-    pub(super) fn spacing_of_radius(&self) -> Real {
+    pub(in crate::contact) fn spacing_of_radius(&self) -> Real {
         self.spacing_of_radius
     }
 
@@ -67,7 +71,7 @@ impl Crossing {
     /// first enters the tissue through a live surface triangle (at the
     /// simulation's current positions), if it does. `index` must be
     /// refitted to those positions.
-    pub(super) fn first_entry<B: Backend + ?Sized>(
+    pub(in crate::contact) fn first_entry<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
         index: &SurfaceIndex,
@@ -87,7 +91,7 @@ impl Crossing {
     /// The last place (fraction of the way) where the path from `from_m`
     /// to `to_m` crosses the surface, if that crossing enters the tissue:
     /// then `to_m` is inside, just past that surface.
-    pub(super) fn inside_past<B: Backend + ?Sized>(
+    pub(in crate::contact) fn inside_past<B: Backend + ?Sized>(
         &mut self,
         sim: &B,
         index: &SurfaceIndex,

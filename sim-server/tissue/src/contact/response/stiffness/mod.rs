@@ -37,15 +37,15 @@
 //!
 //! The solver works on a [`Snapshot`] of the active points, so that the
 //! live simulation can run it on a worker thread
-//! ([`super::stiffness_thread`]).
+//! ([`crate::contact::response::worker`]).
 //!
 //! Neglected: the Hunt-Crossley damping (zero at rest), the tissue's
 //! inertia (K_eff is the quasi-static stiffness), points entering or
 //! leaving contact (they do so at zero force), grips and the other tools'
 //! contacts (their vertices count as free tissue).
 
-use super::field::ContactField;
-use super::local::LocalContact;
+use crate::contact::local::LocalContact;
+use crate::contact::penalty::field::ContactField;
 use crate::ids::VertexId;
 use crate::math::{Mat3, Real, Vec3};
 use crate::static_solve::{Dirichlet, Factorized};
@@ -76,13 +76,13 @@ struct SnapPoint {
 /// The active contact points of a step, copied out of the field (buffers
 /// reused).
 #[derive(Clone, Debug, Default)]
-pub(super) struct Snapshot {
+pub(in crate::contact) struct Snapshot {
     points: Vec<SnapPoint>,
 }
 
 impl Snapshot {
     /// Copies the field's points in contact.
-    pub(super) fn fill(&mut self, field: &ContactField) {
+    pub(in crate::contact) fn fill(&mut self, field: &ContactField) {
         self.points.clear();
         for (i, p) in field.points().iter().enumerate() {
             if field.penetrations_m()[i] > 0.0 {
@@ -104,7 +104,7 @@ impl Snapshot {
 }
 
 /// The contact stiffness solver of a scene.
-pub(super) struct Solver {
+pub(in crate::contact) struct Solver {
     dirichlet: Vec<VertexId>,
     factor: Option<Factorized>,
     /// `ElasticModel::topology_changes` the factor was built for.
@@ -133,7 +133,7 @@ pub(super) struct Solver {
 impl Solver {
     /// For `model` with `held` vertices fixed (the scene's fixed and
     /// prescribed ones); factorises K now unless the mesh is too large.
-    pub(super) fn new(model: &ElasticModel, held: &[VertexId]) -> Self {
+    pub(in crate::contact) fn new(model: &ElasticModel, held: &[VertexId]) -> Self {
         let mut out = Self {
             dirichlet: held.to_vec(),
             factor: None,
@@ -160,7 +160,7 @@ impl Solver {
 
     /// Whether K_eff uses the tissue's full compliance (else the diagonal
     /// blocks only).
-    pub(super) fn exact(&self) -> bool {
+    pub(in crate::contact) fn exact(&self) -> bool {
         self.factor.is_some()
     }
 
@@ -199,7 +199,12 @@ impl Solver {
     }
 
     /// K_eff (N/m) of tool `tool` from the snapshot's points.
-    pub(super) fn stiffness(&mut self, model: &ElasticModel, snap: &Snapshot, tool: usize) -> Mat3 {
+    pub(in crate::contact) fn stiffness(
+        &mut self,
+        model: &ElasticModel,
+        snap: &Snapshot,
+        tool: usize,
+    ) -> Mat3 {
         self.refresh(model);
         let full = self.effective(model, snap, tool, |p| p.hessian);
         // With the normals' turning, K + H can lose definiteness (a round

@@ -20,7 +20,7 @@
 //! is clamped to [0, 2]: the damping never pulls and never more than
 //! doubles the spring), and frictionless (along n only) unless the tool
 //! has Coulomb friction: then each point also carries a tangential
-//! stick-slip spring of stiffness k_p, |f_t| <= mu f ([`super::friction`]).
+//! stick-slip spring of stiffness k_p, |f_t| <= mu f ([`crate::contact::penalty::friction`]).
 //! The point
 //! stiffness is k_p = kappa a_p, a foundation modulus times the point's
 //! share of the rest area, so the total over a surface does not depend on
@@ -38,9 +38,9 @@
 //! earlier three times better than at its own pose). The window still
 //! averages the stiff springs' sub-step ripple, as a 1 kHz step does.
 
-use super::friction::{Carried, Friction, Stick, point_key};
-use super::geometry::Segment;
-use super::implicit::ImplicitSprings;
+use crate::contact::penalty::friction::{Carried, Friction, Stick, point_key};
+use crate::contact::penalty::implicit::ImplicitSprings;
+use crate::contact::tool::geometry::Segment;
 use crate::math::{Mat3, Real, Vec3};
 
 /// One contact point: a triangle's vertices, its barycentric weights, the
@@ -200,7 +200,7 @@ pub struct ContactField {
     sticks: Vec<Stick>,
     /// The friction states of the points dropped last.
     carried: Carried,
-    /// Springs integrated implicitly ([`super::implicit`]), if so.
+    /// Springs integrated implicitly ([`crate::contact::penalty::implicit`]), if so.
     implicit: Option<Box<ImplicitSprings>>,
     /// Whether the last evaluation was in the report window.
     last_reported: bool,
@@ -223,7 +223,7 @@ impl ContactField {
     }
 
     /// The same with the springs integrated implicitly (`true`) or
-    /// explicitly (see [`super::implicit`]).
+    /// explicitly (see [`crate::contact::penalty::implicit`]).
     pub fn with_implicit_springs(mut self, implicit: bool) -> Self {
         self.implicit = implicit.then(Box::default);
         self
@@ -236,7 +236,7 @@ impl ContactField {
 
     /// Corrects the explicit sub-step `u_new` (from `u_old`) for the
     /// springs of the last evaluation taken at its end (linearly implicit;
-    /// see [`super::implicit`]), `inverse_d(i)` being a free vertex's
+    /// see [`crate::contact::penalty::implicit`]), `inverse_d(i)` being a free vertex's
     /// integration coefficient h^2 / m' (`None`: its motion is imposed).
     /// The tools' reported forces include the change. Does nothing when
     /// the springs are explicit. Returns the solver's iterations.
