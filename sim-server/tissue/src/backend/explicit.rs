@@ -3,7 +3,7 @@
 use super::Backend;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
-use crate::tensor_mass::{CutChange, CutError, ElasticModel, Explicit, Storage};
+use crate::tensor_mass::{CutChange, CutError, ElasticModel, Explicit, ForceTerm, Storage};
 
 impl<S: Storage> Backend for Explicit<S> {
     fn name(&self) -> &'static str {
@@ -70,11 +70,11 @@ impl<S: Storage> Backend for Explicit<S> {
     fn set_contact_bound(&mut self, omega2: Real) {
         Explicit::set_contact_bound(self, omega2);
     }
-    fn step_with_contact(
+    fn step_with_contact<F: ForceTerm>(
         &mut self,
-        field: &mut crate::contact::ContactField,
+        field: &mut F,
         resample_every_s: Real,
-        resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+        resample: &mut dyn FnMut(&Self, &mut F),
     ) {
         Explicit::step_with_contact(self, field, resample_every_s, resample);
     }

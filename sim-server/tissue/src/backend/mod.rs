@@ -36,7 +36,7 @@ pub use precomputed::{Precomputed, PrecomputedError};
 
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
-use crate::tensor_mass::{CutChange, CutError, ElasticModel};
+use crate::tensor_mass::{CutChange, CutError, ElasticModel, ForceTerm};
 
 /// A deformable-body simulation the tools can act on.
 pub trait Backend {
@@ -143,7 +143,7 @@ pub trait Backend {
     }
     /// Makes the linear tetrahedra flagged in `corotational` corotational
     /// (and the others linear) from the next step on: the region that
-    /// follows the tools ([`crate::contact::ContactConfig::corotational_radius_m`]).
+    /// follows the tools (the scene's `[contact] corotational_radius_m`).
     /// Returns false for a backend that cannot (its model is fixed when it
     /// starts: implicit, precomputed, hybrid), which the contact set-up
     /// refuses with the reason. Cold: called when the region changes.
@@ -161,11 +161,11 @@ pub trait Backend {
     /// select its points again every `resample_every_s` of simulated time
     /// within the step; a backend that does not integrate contact steps
     /// without it.
-    fn step_with_contact(
+    fn step_with_contact<F: ForceTerm>(
         &mut self,
-        field: &mut crate::contact::ContactField,
+        field: &mut F,
         resample_every_s: Real,
-        resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+        resample: &mut dyn FnMut(&Self, &mut F),
     ) where
         Self: Sized,
     {

@@ -20,7 +20,7 @@ use super::holds::Holds;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::static_solve::{Dirichlet, Factorized, StaticError};
-use crate::tensor_mass::{CutChange, CutError, ElasticModel};
+use crate::tensor_mass::{CutChange, CutError, ElasticModel, ForceTerm};
 use std::path::{Path, PathBuf};
 
 const NONE: u32 = u32::MAX;
@@ -442,11 +442,11 @@ impl Backend for Precomputed {
         })
     }
 
-    fn step_with_contact(
+    fn step_with_contact<F: ForceTerm>(
         &mut self,
-        field: &mut crate::contact::ContactField,
+        field: &mut F,
         _resample_every_s: Real,
-        _resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+        _resample: &mut dyn FnMut(&Self, &mut F),
     ) {
         // Static: one solve a step, nothing to re-select within it.
         self.step_with_penalty(field);

@@ -8,6 +8,7 @@ mod avx2;
 mod corotational_lanes;
 pub mod element;
 pub mod explicit;
+pub mod force_term;
 pub mod huge_pages;
 pub mod kernel;
 mod lanes;
@@ -22,6 +23,7 @@ pub mod submodel;
 
 pub use element::{Geometry, TetElastic};
 pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError, substeps_for};
+pub use force_term::{ForcePoint, ForceTerm, NoForce, SubStep};
 pub use kernel::{Kernel, Storage};
 pub use model::{CutChange, CutError, ElasticModel, LinearOnly, ModelError};
 pub use stability::{BoundMethod, PowerEstimate, StableStep, element_bound, power_iteration};

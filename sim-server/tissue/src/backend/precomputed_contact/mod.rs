@@ -51,9 +51,9 @@
 
 use super::Backend;
 use super::precomputed::Precomputed;
-use crate::contact::ContactField;
 use crate::dense_lu::DenseLu;
 use crate::math::{Mat3, Real, Vec3};
+use crate::tensor_mass::{ForcePoint, ForceTerm};
 
 mod newton;
 
@@ -127,9 +127,9 @@ pub(super) struct ContactSolve {
 
 /// The vertices of `field`'s points and of the applied forces, each once,
 /// into `cs.rows` (the slots left clean).
-fn gather_rows(field: &ContactField, cs: &mut ContactSolve) {
+fn gather_rows<F: ForceTerm>(field: &F, cs: &mut ContactSolve) {
     cs.rows.clear();
-    let points = field.points().iter().flat_map(|p| p.vertices);
+    let points = field.points().iter().flat_map(|p| p.vertices());
     for v in points.chain(cs.applied_vertices.iter().copied()) {
         if cs.slot[v as usize] == u32::MAX {
             cs.slot[v as usize] = 0;
@@ -179,7 +179,7 @@ fn dot(vertices: &[u32], a: &[[Real; 3]], b: &[Vec3]) -> Real {
 
 impl Precomputed {
     /// One step under the penalty contact `field` (see the module docs).
-    pub(super) fn step_with_penalty(&mut self, field: &mut ContactField) {
+    pub(super) fn step_with_penalty<F: ForceTerm>(&mut self, field: &mut F) {
         let n = self.vertex_len();
         let mut cs = std::mem::take(&mut self.contact);
         if cs.force.len() != n {
@@ -256,7 +256,7 @@ impl Precomputed {
     /// alone from there ended 273 steps a run at the iteration limit
     /// (stagnating, or walking off towards another equilibrium) where the
     /// plain warm start ended 15-19.
-    fn restart_unpredicted(&mut self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
+    fn restart_unpredicted<F: ForceTerm>(&mut self, field: &mut F, cs: &mut ContactSolve) -> Real {
         clear_applied(cs);
         for &v in &cs.previous_vertices {
             if let Some(f) = cs.previous[v as usize]
@@ -272,7 +272,7 @@ impl Precomputed {
     /// The iterations' starting state for G = `cs.applied`: S applied at
     /// the rows (kept in `cs.u_at`), no chord yet, and the springs there;
     /// returns E there.
-    fn start_at(&mut self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
+    fn start_at<F: ForceTerm>(&mut self, field: &mut F, cs: &mut ContactSolve) -> Real {
         self.set_contact_forces(&cs.applied_vertices, &cs.applied);
         self.step_rows(&cs.rows);
         for &v in &cs.rows {
@@ -284,16 +284,16 @@ impl Precomputed {
 
     /// The springs at the current state: their forces into `cs.force`, the
     /// field's report and penetrations, and their energy (J).
-    fn evaluate_springs(&self, field: &mut ContactField, cs: &mut ContactSolve) -> Real {
+    fn evaluate_springs<F: ForceTerm>(&self, field: &mut F, cs: &mut ContactSolve) -> Real {
         field.restart_report();
         let (rest, u) = (self.model().mesh().positions_m(), self.displacements());
         field.static_forces(rest, u, &mut cs.force);
         field.spring_energy_j()
     }
 
-    fn solve_contact(
+    fn solve_contact<F: ForceTerm>(
         &mut self,
-        field: &mut ContactField,
+        field: &mut F,
         cs: &mut ContactSolve,
         mut predicted: bool,
     ) {
@@ -455,14 +455,14 @@ impl Precomputed {
 
     /// The contact vertices: the loadable vertices of the acting points and
     /// of the applied forces.
-    fn gather_contact_vertices(&self, field: &ContactField, cs: &mut ContactSolve) {
+    fn gather_contact_vertices<F: ForceTerm>(&self, field: &F, cs: &mut ContactSolve) {
         for &v in &cs.vertices {
             cs.slot[v as usize] = u32::MAX;
         }
         cs.vertices.clear();
         let acting = (field.points().iter().zip(field.penetrations_m()))
             .filter(|(_, d)| **d > 0.0)
-            .flat_map(|(p, _)| p.vertices);
+            .flat_map(|(p, _)| p.vertices());
         for v in acting.chain(cs.applied_vertices.iter().copied()) {
             let vi = v as usize;
             if cs.slot[vi] == u32::MAX && self.loadable(vi) {

@@ -8,9 +8,8 @@
 
 use super::{ContactSolve, TOLERANCE_M, largest_change, step_at};
 use crate::backend::precomputed::Precomputed;
-use crate::contact::ContactField;
-use crate::contact::penalty::field::ContactPoint;
 use crate::math::Mat3;
+use crate::tensor_mass::{ForcePoint, ForceTerm};
 
 /// Contact vertices beyond which the Newton direction takes each vertex's
 /// own block of the system alone, (I + H_vv T_vv) dG_v = (f - G)_v: the
@@ -32,7 +31,7 @@ pub(super) const HOLD_COUPLING_FLOPS: usize = 2_000_000;
 /// the sum of their indices: equal when no point started or stopped
 /// acting between two evaluations of a step (the points do not change
 /// within it).
-pub(super) fn field_signature(field: &ContactField) -> (usize, usize) {
+pub(super) fn field_signature<F: ForceTerm>(field: &F) -> (usize, usize) {
     (field.penetrations_m().iter().enumerate())
         .filter(|(_, d)| **d > 0.0)
         .fold((0, 0), |(n, sum), (i, _)| (n + 1, sum + i))
@@ -40,10 +39,10 @@ pub(super) fn field_signature(field: &ContactField) -> (usize, usize) {
 
 /// The acting points (penetrating) with their springs' whole Hessian
 /// (`whole`) or their slopes k n n^T alone.
-pub(super) fn acting_hessians(
-    field: &ContactField,
+pub(super) fn acting_hessians<F: ForceTerm>(
+    field: &F,
     whole: bool,
-) -> impl Iterator<Item = (&ContactPoint, Mat3)> {
+) -> impl Iterator<Item = (&F::Point, Mat3)> {
     let hessians = if whole {
         field.hessians()
     } else {
@@ -63,9 +62,9 @@ impl Precomputed {
     /// state into `cs.du`: (I + H T) dG = f - G (the transpose of
     /// J = I + T H), H the springs' whole Hessian or their slopes alone; the
     /// direction f - G where that matrix is singular.
-    pub(super) fn newton_direction(
+    pub(super) fn newton_direction<F: ForceTerm>(
         &mut self,
-        field: &ContactField,
+        field: &F,
         cs: &mut ContactSolve,
         whole: bool,
     ) {
@@ -97,7 +96,11 @@ impl Precomputed {
     /// every step, only to confirm the one before: docs/results/precomputed-contact.md); where the
     /// matrix changed little it differs from it by a small factor, and the
     /// convergence it confirms is quadratic.
-    pub(super) fn chord_converged(&mut self, field: &ContactField, cs: &mut ContactSolve) -> bool {
+    pub(super) fn chord_converged<F: ForceTerm>(
+        &mut self,
+        field: &F,
+        cs: &mut ContactSolve,
+    ) -> bool {
         let Some(signature) = cs.chord else {
             return false;
         };
@@ -116,12 +119,17 @@ impl Precomputed {
     /// Beyond [`DENSE_LIMIT`] contact vertices: `cs.rhs` (f - G) turned into
     /// each vertex's own Newton step, (I + H_vv T_vv)^-1 (f - G)_v (left as
     /// it is where that block is singular).
-    pub(super) fn block_direction(&self, field: &ContactField, cs: &mut ContactSolve, whole: bool) {
+    pub(super) fn block_direction<F: ForceTerm>(
+        &self,
+        field: &F,
+        cs: &mut ContactSolve,
+        whole: bool,
+    ) {
         let c = cs.vertices.len();
         cs.blocks.clear();
         cs.blocks.resize(c, Mat3::ZERO);
         for (p, g) in acting_hessians(field, whole) {
-            for (v, w) in p.vertices.iter().zip(p.weights) {
+            for (v, w) in p.vertices().iter().zip(p.weights()) {
                 let s = cs.slot[*v as usize];
                 if s != u32::MAX {
                     cs.blocks[s as usize] += g * (w * w);
@@ -193,9 +201,9 @@ impl Precomputed {
     /// k n n^T alone. H couples only vertices that share a point's
     /// triangle, so each row of J adds the few rows of T its non-zero
     /// entries pick (O(c^2) per row of H's entries, not O(c^3)).
-    pub(super) fn assemble_jacobian(
+    pub(super) fn assemble_jacobian<F: ForceTerm>(
         &mut self,
-        field: &ContactField,
+        field: &F,
         cs: &mut ContactSolve,
         whole: bool,
     ) {
@@ -206,16 +214,16 @@ impl Precomputed {
         cs.hessian.resize(m * m, 0.0);
         for (p, g) in acting_hessians(field, whole) {
             for a in 0..3 {
-                let sa = cs.slot[p.vertices[a] as usize];
+                let sa = cs.slot[p.vertices()[a] as usize];
                 if sa == u32::MAX {
                     continue;
                 }
                 for b in 0..3 {
-                    let sb = cs.slot[p.vertices[b] as usize];
+                    let sb = cs.slot[p.vertices()[b] as usize];
                     if sb == u32::MAX {
                         continue;
                     }
-                    let w = p.weights[a] * p.weights[b];
+                    let w = p.weights()[a] * p.weights()[b];
                     for r in 0..3 {
                         for q in 0..3 {
                             cs.hessian[(3 * sa as usize + r) * m + 3 * sb as usize + q] +=

@@ -63,7 +63,7 @@ impl<S: Storage> Explicit<S> {
     /// Makes the linear tetrahedra flagged in `corotational` (per
     /// tetrahedron) corotational from the next step on, and every other
     /// linear one linear again: the region round the tools that the contact
-    /// moves with them ([`crate::contact::ContactConfig::corotational_radius_m`]).
+    /// moves with them (the scene's `[contact] corotational_radius_m`).
     /// The kernel keeps every element's linear tensors; the nonlinear pass
     /// adds the region's corrections (rebuilt here, with fresh rotations).
     /// A scene whose every element is already nonlinear has nothing to

@@ -3,6 +3,7 @@
 //! with fixed and prescribed vertices, external forces, cutting, and a time
 //! step checked against the stability bound (refused, or split into sub-steps).
 
+use super::force_term::{ForceTerm, NoForce, SubStep};
 use super::huge_pages::huge_vec;
 use super::kernel::{Kernel, Part, StepInputs, Storage, V3, kind};
 use super::large_strain::LargeStrain;
@@ -104,7 +105,7 @@ impl<S: Storage> Explicit<S> {
     /// Advances by `dt_s` (in `substeps()` equal sub-steps).
     pub fn step(&mut self) {
         if self.prediction.ready(self.substeps) {
-            self.finish_predicted(None);
+            self.finish_predicted(None::<&mut NoForce>);
             return;
         }
         let mut k = 0;
@@ -168,11 +169,11 @@ impl<S: Storage> Explicit<S> {
     /// to the elastic ones; `resample` selects the field's points again
     /// every `resample_every_s` of simulated time within the step. The
     /// first contact allocates one force array.
-    pub fn step_with_contact(
+    pub fn step_with_contact<F: ForceTerm>(
         &mut self,
-        field: &mut crate::contact::ContactField,
+        field: &mut F,
         resample_every_s: Real,
-        resample: &mut dyn FnMut(&Self, &mut crate::contact::ContactField),
+        resample: &mut dyn FnMut(&Self, &mut F),
     ) {
         if field.is_idle() {
             self.step();
@@ -208,7 +209,7 @@ impl<S: Storage> Explicit<S> {
             self.membrane_step();
             let s = (k + 1) as Real / self.substeps as Real;
             let rest = self.model.mesh().positions_m();
-            let at = crate::contact::penalty::field::SubStep {
+            let at = SubStep {
                 h_s: h,
                 step_s: self.dt_s,
                 s,

@@ -42,6 +42,7 @@ use crate::contact::penalty::friction::{Carried, Friction, Stick, point_key};
 use crate::contact::penalty::implicit::ImplicitSprings;
 use crate::contact::tool::geometry::Segment;
 use crate::math::{Mat3, Real, Vec3};
+use crate::tensor_mass::{ForcePoint, ForceTerm};
 
 /// One contact point: a triangle's vertices, its barycentric weights, the
 /// tool part it faces and its stiffness.
@@ -140,18 +141,7 @@ pub fn spring_energy(k_n_per_m: Real, depth_m: Real, radius_m: Real) -> Real {
 /// stays monotone below 1).
 pub const DAMPING_STABILITY: Real = 0.5;
 
-/// Where in a step an evaluation is.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SubStep<'a> {
-    /// The sub-step (s): `u` and `u_prev` are this far apart.
-    pub h_s: Real,
-    /// The whole step (s): the tools sweep across it.
-    pub step_s: Real,
-    /// The fraction of the step the tools have swept (0 to 1).
-    pub s: Real,
-    /// The vertex masses (kg): bound the damping (empty: no damping).
-    pub masses_kg: &'a [Real],
-}
+pub use crate::tensor_mass::SubStep;
 
 /// A point in contact at this evaluation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -439,6 +429,70 @@ impl ContactField {
         };
         self.evaluate(rest_m, u, u, at, false, out);
         self.damping_s_per_m = alpha;
+    }
+}
+
+impl ForcePoint for ContactPoint {
+    fn vertices(&self) -> [u32; 3] {
+        self.vertices
+    }
+    fn weights(&self) -> [Real; 3] {
+        self.weights
+    }
+}
+
+/// The penalty field as the integrators see it (each method is the one
+/// above of the same name).
+impl ForceTerm for ContactField {
+    type Point = ContactPoint;
+
+    fn is_idle(&self) -> bool {
+        ContactField::is_idle(self)
+    }
+    fn zero(&mut self, out: &mut [[Real; 3]]) {
+        ContactField::zero(self, out);
+    }
+    fn add_forces(
+        &mut self,
+        rest_m: &[Vec3],
+        u: &[[Real; 3]],
+        u_prev: &[[Real; 3]],
+        at: SubStep,
+        out: &mut [[Real; 3]],
+    ) {
+        ContactField::add_forces(self, rest_m, u, u_prev, at, out);
+    }
+    fn implicit_springs(&self) -> bool {
+        ContactField::implicit_springs(self)
+    }
+    fn correct_implicit(
+        &mut self,
+        inverse_d: impl Fn(usize) -> Option<Real>,
+        u_old: &[[Real; 3]],
+        u_new: &mut [[Real; 3]],
+    ) -> usize {
+        ContactField::correct_implicit(self, inverse_d, u_old, u_new)
+    }
+    fn points(&self) -> &[ContactPoint] {
+        ContactField::points(self)
+    }
+    fn penetrations_m(&self) -> &[Real] {
+        ContactField::penetrations_m(self)
+    }
+    fn hessians(&self) -> &[Mat3] {
+        ContactField::hessians(self)
+    }
+    fn spring_hessians(&self) -> &[Mat3] {
+        ContactField::spring_hessians(self)
+    }
+    fn static_forces(&mut self, rest_m: &[Vec3], u: &[[Real; 3]], out: &mut [[Real; 3]]) {
+        ContactField::static_forces(self, rest_m, u, out);
+    }
+    fn spring_energy_j(&self) -> Real {
+        ContactField::spring_energy_j(self)
+    }
+    fn restart_report(&mut self) {
+        ContactField::restart_report(self);
     }
 }
 

@@ -36,6 +36,7 @@
 
 use super::Explicit;
 use crate::math::Real;
+use crate::tensor_mass::force_term::{ForcePoint, ForceTerm, SubStep};
 use crate::tensor_mass::huge_pages::huge_vec;
 use crate::tensor_mass::kernel::{Kernel, Part, R4, StepInputs, Storage, V3, kind, widen};
 
@@ -412,10 +413,7 @@ impl<S: Storage> Explicit<S> {
     /// The predicted step finished with the tools: `field`'s forces (if
     /// any) at every sub-step, and the rows they and the changed vertices
     /// reach recomputed (the same arithmetic as the plain step).
-    pub(super) fn finish_predicted(
-        &mut self,
-        mut field: Option<&mut crate::contact::ContactField>,
-    ) {
+    pub(super) fn finish_predicted<F: ForceTerm>(&mut self, mut field: Option<&mut F>) {
         let substeps = self.substeps;
         let h = self.dt_s / substeps as Real;
         let Self {
@@ -436,7 +434,7 @@ impl<S: Storage> Explicit<S> {
         let contact = field
             .as_deref()
             .into_iter()
-            .flat_map(|f| f.points().iter().flat_map(|p| p.vertices));
+            .flat_map(|f| f.points().iter().flat_map(|p| p.vertices()));
         prediction.begin(next, u, contact);
         for k in 0..substeps {
             if k > 0 {
@@ -445,7 +443,7 @@ impl<S: Storage> Explicit<S> {
             if let Some(field) = field.as_deref_mut() {
                 field.zero(fmem);
                 let (prev, now, _) = prediction.substep(k);
-                let at = crate::contact::penalty::field::SubStep {
+                let at = SubStep {
                     h_s: h,
                     step_s: *dt_s,
                     s: (k + 1) as Real / substeps as Real,
