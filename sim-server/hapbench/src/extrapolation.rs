@@ -33,7 +33,7 @@ use crate::plot::{Log, Series, chart};
 use crate::progress::bar;
 
 /// The default hand path (tool 0).
-const PRESS_SLIDE_CSV: &str = include_str!("../../data/press-slide.csv");
+const PRESS_SLIDE_CSV: &str = include_str!("../../../tests/data/press-slide.csv");
 
 /// Flags of `hapbench extrapolation`.
 #[derive(clap::Args)]

@@ -157,7 +157,7 @@ fn hapbench_extrapolation_truth_on_the_box_is_smooth_passive_and_substep_indepen
 
 fn box_truth_holds(scene: &str) {
     let dir = scratch_dir("hapbench-box");
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data");
     let (scene, path) = (data.join(scene), data.join("box-palpate.csv"));
     let v = hapbench(
         &[
@@ -449,7 +449,7 @@ fn hapbench_extrapolation_refuses_runs_no_memory_holds() {
 #[test]
 fn hapbench_extrapolation_local_problem_does_not_ring_on_a_fast_stroke() {
     let dir = scratch_dir("hapbench-stroke");
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data");
     let path = data.join("liver-fast-stroke.csv");
     let v = hapbench(
         &[
@@ -484,7 +484,7 @@ fn hapbench_extrapolation_local_problem_does_not_ring_on_a_fast_stroke() {
 #[test]
 fn hapbench_extrapolation_local_problem_never_renders_zero_in_steady_contact() {
     let dir = scratch_dir("hapbench-zero-ticks");
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data");
     let scene = data.join("box-probe-soft.toml");
     for path in [
         "box-palpate-diagonal.csv",
