@@ -38,10 +38,10 @@ use crate::live::{Live, LiveConfig, LiveError, LiveGuard};
 use crate::math::is_finite;
 use crate::plausible::{Plausible, PlausibleConfig, PlausibleError, Verdict};
 use crate::pose_history::PoseHistory;
-use crate::rt::LatenessHistogram;
 use crate::safety::{PassivityConfig, PassivityError, Safety, SafetyConfig, SafetyState};
 use crate::slots::{Flags, PoseSlot};
 use crossbeam_queue::ArrayQueue;
+use shared::loop_stats::LoopHistogram;
 use shared::monotonic_ns;
 use shared::protocol::{ForceMsg, PROTOCOL_VERSION, TelemetryTick};
 use shared::source::Source;
@@ -234,9 +234,9 @@ pub struct RtLoop<D: Device> {
     bad_reads: u64,
     /// `local-problem`: the newest contact problem, set up off this thread.
     local: Option<triple_buffer::Output<LocalProblem>>,
-    /// `local-problem`: the time each tick's render took (1 us buckets,
+    /// `local-problem`: the time each tick's render took (an HDR histogram,
     /// allocated with the loop).
-    render_times: Option<LatenessHistogram>,
+    render_times: Option<LoopHistogram>,
 }
 
 impl<D: Device> RtLoop<D> {
@@ -296,13 +296,13 @@ impl<D: Device> RtLoop<D> {
     /// or while none fits the newest sample, it renders as `local-normal`.
     pub fn with_local_problems(mut self, output: triple_buffer::Output<LocalProblem>) -> Self {
         self.local = Some(output);
-        self.render_times = Some(LatenessHistogram::default());
+        self.render_times = Some(LoopHistogram::new());
         self
     }
 
     /// `local-problem`: how long each tick's render took, the update of the
     /// triple buffer included (`None` for other methods).
-    pub fn render_times(&self) -> Option<&LatenessHistogram> {
+    pub fn render_times(&self) -> Option<&LoopHistogram> {
         self.render_times.as_ref()
     }
 
@@ -324,7 +324,7 @@ impl<D: Device> RtLoop<D> {
                 self.extrapolator.max_stiffness_n_per_m(),
             );
             if let Some(h) = &mut self.render_times {
-                h.record(monotonic_ns().saturating_sub(t0) as i64);
+                h.record_elapsed_ns(monotonic_ns().saturating_sub(t0));
             }
             if let Some(f) = rendered
                 && is_finite(f)

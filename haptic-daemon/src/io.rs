@@ -12,9 +12,9 @@
 //! window's CPU every period.
 
 use crate::daemon::Shared;
-use crate::rt::LatenessHistogram;
 use crate::transport::{IoPorts, Transport, TransportError};
 use shared::SessionName;
+use shared::loop_stats::LoopHistogram;
 use shared::protocol::{
     PROTOCOL_VERSION, PoseMsg, TELEMETRY_BATCH, TOOL_PRESENT, TelemetryBatch, TelemetryTick,
 };
@@ -31,7 +31,7 @@ pub struct Stats {
     /// Ticks seen.
     pub ticks: u64,
     /// Lateness histogram.
-    pub lateness: LatenessHistogram,
+    pub lateness: LoopHistogram,
     /// Largest |force| sent (N).
     pub max_force_n: f64,
     /// Last force sent (N).
@@ -236,7 +236,7 @@ pub fn run_io(shared: Arc<Shared>, cfg: IoConfig, stats: Arc<Mutex<Stats>>) -> R
                 }
                 s.ticks += 1;
                 s.last_t_ns = t.t_ns;
-                s.lateness.record(t.lateness_ns);
+                s.lateness.record_ns(t.lateness_ns);
                 let f = (t.force_n[0].powi(2) + t.force_n[1].powi(2) + t.force_n[2].powi(2)).sqrt();
                 s.max_force_n = s.max_force_n.max(f);
                 s.last_force_n = t.force_n;

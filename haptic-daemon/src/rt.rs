@@ -156,89 +156,9 @@ pub fn pin_to_cpu(cpu: usize) -> Result<usize, String> {
     }
 }
 
-/// A lateness histogram with 1 us buckets up to 20 ms (preallocated; `record`
-/// never allocates), plus exact maximum.
-pub struct LatenessHistogram {
-    buckets: Vec<u64>,
-    count: u64,
-    max_ns: i64,
-}
-
-const BUCKET_NS: i64 = 1_000;
-const BUCKETS: usize = 20_000;
-
-impl Default for LatenessHistogram {
-    fn default() -> Self {
-        Self {
-            buckets: vec![0; BUCKETS + 1],
-            count: 0,
-            max_ns: i64::MIN,
-        }
-    }
-}
-
-impl LatenessHistogram {
-    /// Records one lateness (negative = early, counted in the first bucket).
-    pub fn record(&mut self, lateness_ns: i64) {
-        let b = (lateness_ns.max(0) / BUCKET_NS).min(BUCKETS as i64) as usize;
-        self.buckets[b] += 1;
-        self.count += 1;
-        self.max_ns = self.max_ns.max(lateness_ns);
-    }
-
-    /// Number of samples.
-    pub fn count(&self) -> u64 {
-        self.count
-    }
-
-    /// The q-quantile (0..1) in microseconds (bucket upper edge; the last
-    /// bucket holds everything above 20 ms); `max_us` for q = 1.
-    pub fn quantile_us(&self, q: f64) -> f64 {
-        if self.count == 0 {
-            return 0.0;
-        }
-        if q >= 1.0 {
-            return self.max_us();
-        }
-        let rank = ((q * self.count as f64).ceil() as u64).max(1);
-        let mut seen = 0;
-        for (b, n) in self.buckets.iter().enumerate() {
-            seen += n;
-            if seen >= rank {
-                return ((b as i64 + 1) * BUCKET_NS) as f64 / 1e3;
-            }
-        }
-        self.max_us()
-    }
-
-    /// The largest lateness (us).
-    pub fn max_us(&self) -> f64 {
-        if self.count == 0 {
-            0.0
-        } else {
-            self.max_ns as f64 / 1e3
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn histogram_quantiles() {
-        let mut h = LatenessHistogram::default();
-        for us in 0..1000 {
-            h.record(us * 1000 + 500);
-        }
-        assert_eq!(h.count(), 1000);
-        assert_eq!(h.quantile_us(0.5), 500.0);
-        assert_eq!(h.quantile_us(0.99), 990.0);
-        assert!((h.max_us() - 999.5).abs() < 1e-9);
-        h.record(-5000);
-        h.record(50_000_000);
-        assert_eq!(h.max_us(), 50_000.0);
-    }
 
     #[test]
     fn pacer_keeps_absolute_deadlines() {

@@ -12,10 +12,11 @@ use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoConfig, IoSpin, Stats, run_io};
 use haptic_daemon::local_setup::{LocalSetup, run_local_setup};
-use haptic_daemon::rt::{LatenessHistogram, RtReport, lock_memory, pin_to_cpu, set_fifo};
+use haptic_daemon::rt::{RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::SafetyConfig;
 use haptic_daemon::transport::Transport;
 use serde::Serialize;
+use shared::loop_stats::LoopHistogram;
 use shared::{SessionName, services};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -31,7 +32,7 @@ pub(crate) struct Lateness {
 }
 
 impl Lateness {
-    pub(crate) fn of(h: &LatenessHistogram) -> Self {
+    pub(crate) fn of(h: &LoopHistogram) -> Self {
         Self {
             p50: h.quantile_us(0.5),
             p99: h.quantile_us(0.99),

@@ -16,6 +16,7 @@
 pub mod alloc_count;
 mod clock;
 pub mod ipc_root;
+pub mod loop_stats;
 pub mod protocol;
 pub mod reaper;
 pub mod remote;

@@ -3,17 +3,17 @@
 //! allocations while 100,000 step times are recorded.
 
 use shared::alloc_count::{Counting, count};
-use sim_server::step_time::StepHistogram;
+use sim_server::step_time::LoopHistogram;
 
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
 
 #[test]
 fn recording_step_times_allocates_nothing() {
-    let mut h = StepHistogram::new();
+    let mut h = LoopHistogram::new();
     let ((), allocations) = count(|| {
-        for k in 0..100_000u64 {
-            h.record(400_000 + (k * 7919) % 300_000);
+        for k in 0..100_000i64 {
+            h.record_ns(400_000 + (k * 7919) % 300_000);
         }
     });
     assert_eq!(allocations, 0);

@@ -14,6 +14,7 @@
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 
 pub mod local_out;
+mod loop_stats;
 pub mod outputs;
 pub mod pacing;
 pub mod poses;

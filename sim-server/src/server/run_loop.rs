@@ -8,6 +8,7 @@
 //! drop the time a stall missed).
 
 use super::local_out::LocalOut;
+use super::loop_stats::LoopStats;
 use super::outputs::{self, MeshOut};
 use super::pacing::Pacing;
 use super::poses::{PoseIntake, WaitEnd};
@@ -20,7 +21,6 @@ use sim_server::backend::Backend;
 use sim_server::contact::Tools;
 use sim_server::frames::FrameRecorder;
 use sim_server::math::{Real, Vec3};
-use sim_server::step_time::StepHistogram;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -50,37 +50,36 @@ pub struct RunLoop<'a, B: Backend> {
     mesh_out: MeshOut,
     scene_out: SceneOut,
     summary: RunSummary,
-    step_times: StepHistogram,
-    /// From the loop's wake-up to its force sample sent.
-    turnaround_times: StepHistogram,
-    hand_over_times: StepHistogram,
+    stats: LoopStats,
     /// Whether the pose this step started on woke the waiting loop.
     pose_on_arrival: bool,
-    /// From a new pose's device read to the loop's wake-up for it.
-    pose_wait_times: StepHistogram,
     /// The last pose taken (its seq), to time only new ones.
     last_pose_seq: Option<u64>,
     /// When the loop woke for this step (ns).
     woke_ns: u64,
     /// The thread's CPU clock at the end of the last step's work (ns).
     last_cpu_ns: u64,
-    /// The loop's CPU time per step, from one step's end to the next's.
-    work_cpu_times: StepHistogram,
-    /// The loop's wall time per step's work, from its wake-up to the end
-    /// of the next step's prediction.
-    work_times: StepHistogram,
     /// Linear-solver iterations summed over the steps (implicit backend).
     solve_iterations: u64,
     start_ns: u64,
     pacing: Pacing,
-    stalls_told: u64,
-    last_stall_told: u64,
+    told: Told,
     frame_every: u64,
-    last_status: u64,
     last_step_ns: u64,
     removed_total: u64,
     diverged_at: Option<u64>,
-    cut_refusal_told: bool,
+}
+
+/// What the loop has told its user on stderr, so that each message comes
+/// once (a refused cut) or at most once a second (status, stalls).
+struct Told {
+    /// When the last status line went out (ns).
+    last_status_ns: u64,
+    /// Stalls counted when the last stall message went out, and when (ns).
+    stalls: u64,
+    last_stall_ns: u64,
+    /// A refused cut was told.
+    cut_refusal: bool,
 }
 
 impl<'a, B: Backend> RunLoop<'a, B> {
@@ -164,25 +163,22 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             mesh_out,
             scene_out,
             summary,
-            step_times: StepHistogram::new(),
-            turnaround_times: StepHistogram::new(),
-            hand_over_times: StepHistogram::new(),
+            stats: LoopStats::default(),
             pose_on_arrival: false,
-            pose_wait_times: StepHistogram::new(),
             last_pose_seq: None,
             woke_ns: 0,
             last_cpu_ns: shared::thread_cpu_ns(),
-            work_cpu_times: StepHistogram::new(),
-            work_times: StepHistogram::new(),
             solve_iterations: 0,
             start_ns,
-            stalls_told: 0,
-            last_stall_told: 0,
-            last_status: start_ns,
+            told: Told {
+                last_status_ns: start_ns,
+                stalls: 0,
+                last_stall_ns: 0,
+                cut_refusal: false,
+            },
             last_step_ns: start_ns,
             removed_total: 0,
             diverged_at: None,
-            cut_refusal_told: false,
         })
     }
 
@@ -211,8 +207,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 .observe_pose(p.seq, p.t_ns, self.woke_ns, self.pose_on_arrival);
             // Told once: a step that starts on the clock next has none.
             self.pose_on_arrival = false;
-            self.pose_wait_times
-                .record(self.woke_ns.saturating_sub(p.t_ns));
+            self.stats
+                .pose_wait
+                .record_elapsed_ns(self.woke_ns.saturating_sub(p.t_ns));
         }
         let sim_t_s = self.summary.steps as Real * self.dt_s;
         let inputs = outputs::tool_inputs(self.contacts.len(), &self.cfg.scripts, pose, sim_t_s);
@@ -237,16 +234,16 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         }
         let t1 = monotonic_ns();
         self.summary.step_s += (t1 - t0) as Real * 1e-9;
-        self.step_times.record(t1 - t0);
+        self.stats.step.record_elapsed_ns(t1 - t0);
         let outcome = StepOutcome {
             flags: sim_server::wire::tool_flags(reports),
             any_contact: reports.iter().any(|r| r.contact),
         };
         for (i, report) in reports.iter().enumerate() {
             if let Some(why) = report.cut_refused
-                && !self.cut_refusal_told
+                && !self.told.cut_refusal
             {
-                self.cut_refusal_told = true;
+                self.told.cut_refusal = true;
                 eprintln!(
                     "sim-server: tool {i} tried to cut, but the {} backend refused: {why}",
                     self.sim.name()
@@ -360,8 +357,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             .send_copy(msg)
             .map_err(|e| publish_err("force sample")(format!("{e:?}")))?;
         s.samples_published += 1;
-        self.turnaround_times
-            .record(monotonic_ns().saturating_sub(self.woke_ns));
+        self.stats
+            .turnaround
+            .record_elapsed_ns(monotonic_ns().saturating_sub(self.woke_ns));
         // The contact stiffness's hand-over, left by the step until the
         // sample was out (`Tools::hand_over_after_sample`); its time counts
         // in `step_s` (contact_fraction compares as before), not in
@@ -370,7 +368,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         self.contacts.hand_over(&self.sim);
         let t1 = monotonic_ns();
         s.step_s += (t1 - t0) as Real * 1e-9;
-        self.hand_over_times.record(t1 - t0);
+        self.stats.hand_over.record_elapsed_ns(t1 - t0);
         // After the force sample: the problem reaches the daemon later
         // than the force it explains, never before.
         self.local_out.after_sample(
@@ -399,18 +397,20 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         // blocking wait between them costing only its few microseconds of
         // wake-up.
         let cpu_ns = shared::thread_cpu_ns();
-        self.work_cpu_times
-            .record(cpu_ns.saturating_sub(self.last_cpu_ns));
+        self.stats
+            .work_cpu
+            .record_elapsed_ns(cpu_ns.saturating_sub(self.last_cpu_ns));
         self.last_cpu_ns = cpu_ns;
-        self.work_times
-            .record(monotonic_ns().saturating_sub(self.woke_ns));
+        self.stats
+            .work
+            .record_elapsed_ns(monotonic_ns().saturating_sub(self.woke_ns));
         Ok(())
     }
 
     /// The once-a-second status line (with `cfg.status`).
     pub fn status(&mut self, pose: Option<PoseMsg>, step: &StepOutcome) {
         let now = monotonic_ns();
-        if !self.cfg.status || now - self.last_status < 1_000_000_000 {
+        if !self.cfg.status || now - self.told.last_status_ns < 1_000_000_000 {
             return;
         }
         let s = &self.summary;
@@ -433,10 +433,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             if step.any_contact { "yes" } else { "no" },
             self.removed_total,
             s.max_force_n,
-            self.step_times.quantile_ns(0.5) * 1e-3,
-            self.step_times.quantile_ns(0.999) * 1e-3,
+            self.stats.step.quantile_us(0.5),
+            self.stats.step.quantile_us(0.999),
         );
-        self.last_status = now;
+        self.told.last_status_ns = now;
     }
 
     /// Real time: the next step starts when it is due, or on a fresh pose
@@ -452,7 +452,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let now = monotonic_ns();
         if let Some(dropped) = self.pacing.catch_up(steps, now)
             && self.cfg.status
-            && now.saturating_sub(self.last_stall_told) >= 1_000_000_000
+            && now.saturating_sub(self.told.last_stall_ns) >= 1_000_000_000
         {
             // A backend stable at any step has a remedy to name for steps
             // that take longer than they simulate.
@@ -464,11 +464,11 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             eprintln!(
                 "sim-server: {:.1} ms behind real time (a stall): the missed time is dropped, not run fast ({} stall(s) since the last message, {:.3} s dropped in all: simulated time now runs that far behind wall time){hint}",
                 dropped as Real * 1e-6,
-                self.pacing.stalls() - self.stalls_told,
+                self.pacing.stalls() - self.told.stalls,
                 self.pacing.dropped_ns() as Real * 1e-9
             );
-            self.stalls_told = self.pacing.stalls();
-            self.last_stall_told = now;
+            self.told.stalls = self.pacing.stalls();
+            self.told.last_stall_ns = now;
         }
         let (earliest, due) = (self.pacing.earliest(steps), self.pacing.due(steps));
         loop {
@@ -543,14 +543,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             summary.contact_s / (summary.contact_s + summary.step_s).max(1e-12);
         summary.poses_received = self.poses.received;
         summary.pose_timeouts = self.poses.timeouts;
-        summary.step_us = self.step_times.percentiles_us();
-        summary.step_cpu_us = self.work_cpu_times.percentiles_us();
-        summary.step_work_us = self.work_times.percentiles_us();
+        self.stats.write_into(&mut summary);
         summary.solve_iterations_mean =
             self.solve_iterations as Real / (summary.steps.max(1)) as Real;
-        summary.turnaround_us = self.turnaround_times.percentiles_us();
-        summary.hand_over_us = self.hand_over_times.percentiles_us();
-        summary.pose_wait_us = self.pose_wait_times.percentiles_us();
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
         summary.local_problems = self.local_out.published;

@@ -31,6 +31,18 @@ enum Part {
     Shaft,
 }
 
+/// The buffers one tool's detection pass reuses (allocated once, cleared
+/// each step).
+struct Scratch {
+    /// Per vertex: among this pass's hits or kept vertices.
+    mark: Vec<bool>,
+    candidates: Vec<VertexId>,
+    hits: Vec<VertexId>,
+    kept: Vec<VertexId>,
+    /// Tetrahedra a cut removes.
+    doomed: Vec<TetId>,
+}
+
 /// One tool's contact with the tissue, its state kept between steps.
 pub struct ToolContact {
     decl: ToolDecl,
@@ -46,11 +58,7 @@ pub struct ToolContact {
     jaw: Real,
     constraints: Vec<Constraint>,
     previous: Vec<Constraint>,
-    /// Per vertex: among this pass's hits or kept vertices.
-    mark: Vec<bool>,
-    candidates: Vec<VertexId>,
-    hits: Vec<VertexId>,
-    kept: Vec<VertexId>,
+    scratch: Scratch,
     gripped: Vec<(VertexId, Vec3)>,
     grip_end_m: Vec3,
     gripping: bool,
@@ -61,7 +69,6 @@ pub struct ToolContact {
     /// The proxy was slowed near the tissue this step (it is catching up).
     slowed: bool,
     cut_refused: Option<&'static str>,
-    doomed: Vec<TetId>,
     /// Simulated time since the cavitron last burnt (s).
     since_burn_s: Real,
     /// Simulated time since the proxy last followed the hand (s; infinite
@@ -98,10 +105,13 @@ impl ToolContact {
             pose: None,
             constraints: Vec::new(),
             previous: Vec::new(),
-            mark: vec![false; n],
-            candidates: Vec::new(),
-            hits: Vec::new(),
-            kept: Vec::new(),
+            scratch: Scratch {
+                mark: vec![false; n],
+                candidates: Vec::new(),
+                hits: Vec::new(),
+                kept: Vec::new(),
+                doomed: Vec::new(),
+            },
             gripped: Vec::new(),
             grip_end_m: Vec3::ZERO,
             gripping: false,
@@ -110,7 +120,6 @@ impl ToolContact {
             held_outside: false,
             slowed: false,
             cut_refused: None,
-            doomed: Vec::new(),
             since_burn_s: Real::INFINITY,
             catching_up_s: Real::INFINITY,
         }
@@ -349,17 +358,17 @@ impl ToolContact {
     ) {
         let Some(pose) = self.pose else { return };
         let r = pose.radius_m;
-        self.candidates.clear();
-        index.candidates(segment, r, &mut self.candidates);
-        self.hits.clear();
-        for &v in &self.candidates {
+        self.scratch.candidates.clear();
+        index.candidates(segment, r, &mut self.scratch.candidates);
+        self.scratch.hits.clear();
+        for &v in &self.scratch.candidates {
             if claims.is_free(v) && segment.distance_m(sim.position(v)) < r {
-                self.hits.push(v);
-                self.mark[v.idx()] = true;
+                self.scratch.hits.push(v);
+                self.scratch.mark[v.idx()] = true;
             }
         }
         // Persistence: what this part held at the previous update.
-        self.kept.clear();
+        self.scratch.kept.clear();
         for c in &self.previous {
             let same = match c.kind {
                 ConstraintKind::Tip(_) => part == Part::Tip,
@@ -367,16 +376,16 @@ impl ToolContact {
                 ConstraintKind::Grip => false,
             };
             let v = c.vertex;
-            if same && !self.mark[v.idx()] && claims.is_free(v) && index.contains(v) {
-                self.kept.push(v);
-                self.mark[v.idx()] = true;
+            if same && !self.scratch.mark[v.idx()] && claims.is_free(v) && index.contains(v) {
+                self.scratch.kept.push(v);
+                self.scratch.mark[v.idx()] = true;
             }
         }
         let normal = self.mean_normal(sim, adj);
-        for v in self.hits.iter().chain(&self.kept) {
-            self.mark[v.idx()] = false;
+        for v in self.scratch.hits.iter().chain(&self.scratch.kept) {
+            self.scratch.mark[v.idx()] = false;
         }
-        if self.hits.is_empty() && self.kept.is_empty() {
+        if self.scratch.hits.is_empty() && self.scratch.kept.is_empty() {
             return;
         }
         let n = normal.unwrap_or(-pose.direction);
@@ -392,13 +401,13 @@ impl ToolContact {
             }
         };
         let plane = Plane::tangent(segment, r, n);
-        for i in 0..self.hits.len() {
-            let v = self.hits[i];
+        for i in 0..self.scratch.hits.len() {
+            let v = self.scratch.hits[i];
             let target = plane.project(sim.position(v));
             self.push(claims, v, kind(n), target);
         }
-        for i in 0..self.kept.len() {
-            let v = self.kept[i];
+        for i in 0..self.scratch.kept.len() {
+            let v = self.scratch.kept[i];
             let x = sim.position(v);
             let pushing = reaction::vertex_force_n(sim, adj, v).dot(n) > 0.0;
             if pushing
@@ -418,7 +427,7 @@ impl ToolContact {
         let topo = model.topology();
         let tets = model.mesh().tets();
         let mut sum = Vec3::ZERO;
-        for &v in self.hits.iter().chain(&self.kept) {
+        for &v in self.scratch.hits.iter().chain(&self.scratch.kept) {
             for &t in adj.tets_of(v) {
                 if !topo.is_alive(t) {
                     continue;
@@ -428,7 +437,10 @@ impl ToolContact {
                     let [a, b, c] = face.map(|l| tet[l]);
                     // Face k leaves out local vertex k; count the face from
                     // its lowest-numbered marked vertex only.
-                    let first = [a, b, c].into_iter().filter(|w| self.mark[w.idx()]).min();
+                    let first = [a, b, c]
+                        .into_iter()
+                        .filter(|w| self.scratch.mark[w.idx()])
+                        .min();
                     if tet[k] == v || first != Some(v) || !topo.is_surface_face(t, k) {
                         continue;
                     }
@@ -462,9 +474,9 @@ impl ToolContact {
         if !(self.gripping && jaw < CUT_BELOW) {
             return 0;
         }
-        self.doomed.clear();
+        self.scratch.doomed.clear();
         for &(v, _) in &self.gripped {
-            self.doomed.extend_from_slice(adj.tets_of(v));
+            self.scratch.doomed.extend_from_slice(adj.tets_of(v));
         }
         self.gripped.clear();
         self.gripping = false;
@@ -479,7 +491,7 @@ impl ToolContact {
         adj: &Adjacency,
         pose: &ToolPose,
     ) -> usize {
-        self.doomed.clear();
+        self.scratch.doomed.clear();
         let topo = sim.model().topology();
         // The tip's box first (arithmetic on the position only): this scan
         // visits every vertex each millisecond, and most are far.
@@ -496,7 +508,7 @@ impl ToolContact {
             }
             let v = VertexId::from(v);
             if topo.vertex_tet_count(v) > 0 && pose.tip.distance_m(x) < pose.radius_m {
-                self.doomed.extend_from_slice(adj.tets_of(v));
+                self.scratch.doomed.extend_from_slice(adj.tets_of(v));
             }
         }
         self.remove_doomed(sim)
@@ -504,7 +516,7 @@ impl ToolContact {
 
     fn remove_doomed<B: Backend + ?Sized>(&mut self, sim: &mut B) -> usize {
         let mut removed = 0;
-        for &t in &self.doomed {
+        for &t in &self.scratch.doomed {
             // A tetrahedron may be listed once per doomed vertex.
             if !sim.model().topology().is_alive(t) {
                 continue;
