@@ -1,0 +1,110 @@
+//! The documents hold together: every relative link in the repository's
+//! Markdown (README, ARCHITECTURE, docs/, the crates' READMEs) names a
+//! file that exists, and the README stays a quick start (at most 200
+//! lines, the two commands first, CI's test command in it).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ sits in the workspace")
+        .to_path_buf()
+}
+
+fn markdown_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if path.is_dir() {
+            if !name.starts_with('.') && name != "target" && name != "node_modules" {
+                markdown_files(&path, out);
+            }
+        } else if name.ends_with(".md") {
+            out.push(path);
+        }
+    }
+}
+
+/// The targets of `](target)` links in `text`, without their `#anchor`.
+fn link_targets(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find("](") {
+        rest = &rest[i + 2..];
+        let end = rest.find(')').unwrap_or(rest.len());
+        let target = rest[..end].split('#').next().unwrap_or("").trim();
+        if !target.is_empty() && !target.contains("://") && !target.starts_with("mailto:") {
+            out.push(target.to_owned());
+        }
+    }
+    out
+}
+
+#[test]
+fn every_relative_link_in_the_documents_resolves() {
+    let root = workspace();
+    let mut files = Vec::new();
+    markdown_files(&root, &mut files);
+    assert!(
+        files.len() > 20,
+        "found only {} Markdown files",
+        files.len()
+    );
+    let mut checked = 0;
+    let mut broken = Vec::new();
+    for file in &files {
+        let text = fs::read_to_string(file).expect("readable Markdown");
+        let dir = file.parent().expect("a file has a folder");
+        for target in link_targets(&text) {
+            checked += 1;
+            if !dir.join(&target).exists() {
+                let from = file.strip_prefix(&root).unwrap_or(file).display();
+                broken.push(format!("{from}: {target}"));
+            }
+        }
+    }
+    assert!(
+        checked > 100,
+        "only {checked} links found: is the reader broken?"
+    );
+    assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));
+}
+
+#[test]
+fn the_link_reader_finds_targets_and_skips_web_addresses() {
+    let text = "see [a](docs/a.md#x), [b](https://e.org/b.md) and [c](../c.md).";
+    assert_eq!(link_targets(text), ["docs/a.md", "../c.md"]);
+}
+
+#[test]
+fn the_readme_is_a_quick_start_with_the_two_commands() {
+    let root = workspace();
+    let readme = fs::read_to_string(root.join("README.md")).expect("README.md");
+    assert!(
+        readme.lines().count() <= 200,
+        "README.md: {} lines",
+        readme.lines().count()
+    );
+    let first_block = readme.split("```sh").nth(1).expect("a sh block");
+    let first_block = first_block.split("```").next().unwrap_or("");
+    assert!(first_block.contains("scripts/demo.sh"), "{first_block}");
+    let test_command = "cargo test --workspace --release --locked";
+    assert!(first_block.contains(test_command), "{first_block}");
+    let ci = fs::read_to_string(root.join(".ci/run")).expect(".ci/run");
+    assert!(
+        ci.contains(test_command),
+        ".ci/run does not run the README's tests"
+    );
+    let architecture = fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    assert!(
+        architecture.lines().count() <= 80,
+        "ARCHITECTURE.md: {} lines",
+        architecture.lines().count()
+    );
+}
