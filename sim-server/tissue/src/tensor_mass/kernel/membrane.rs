@@ -11,10 +11,10 @@
 
 use super::storage::pack;
 use super::{EdgeBlock, Holds, Kernel, Storage, V3};
+use super::{LowerRows, row_product};
 use crate::ids::VertexId;
 use crate::math::Mat3;
 use crate::membrane::{Membrane, MembraneModel};
-use crate::tensor_mass::explicit::predicted::{LowerRows, row_product};
 use crate::tensor_mass::huge_pages::collect_huge;
 use crate::tensor_mass::model::{CutChange, ElasticModel};
 

@@ -13,11 +13,12 @@
 use super::huge_pages::collect_huge;
 use super::model::{CutChange, ElasticModel};
 use crate::math::Real;
+pub(in crate::tensor_mass) use rows::{LowerRows, row_product};
 #[cfg(target_arch = "x86_64")]
 pub use storage::Windows;
 use storage::pack;
 pub(super) use storage::widen;
-pub use storage::{Block, Storage};
+pub use storage::{Block, LanePrecision, Storage};
 
 /// A 3-vector of state.
 pub type V3 = [Real; 3];
@@ -429,6 +430,7 @@ impl<S: Storage> Kernel<S> {
     }
 }
 
+mod rows;
 mod storage;
 
 mod membrane;

@@ -3,7 +3,6 @@
 //! the three AVX2 row windows the fused pass multiplies. A part of
 //! [`super`], the kernel.
 
-use super::super::large_strain::LanePrecision;
 use crate::math::{Mat3, Real};
 
 /// A block as its three row windows, in f64x4 (see [`Storage::rows`]).
@@ -13,6 +12,16 @@ pub type Windows = (
     std::arch::x86_64::__m256d,
     std::arch::x86_64::__m256d,
 );
+
+/// The scalar of the nonlinear elements' lanes (`large_strain`), which
+/// follows the storage's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LanePrecision {
+    /// Four f64 lanes (equal to the scalar path to round-off).
+    F64,
+    /// Eight f32 lanes.
+    F32,
+}
 
 /// Storage precision of the kernel's tensors. State (displacements, forces)
 /// is always `f64`.

@@ -1,11 +1,11 @@
 //! The kernel's unit tests: the dispatched and portable passes agree, storage and layout.
 
 use super::*;
+use super::{LowerRows, row_product};
 use crate::material::Material;
 use crate::material_map::TetMaterials;
 use crate::math::Vec3;
 use crate::mesh::{BoxSpec, CellSize};
-use crate::tensor_mass::explicit::predicted::{LowerRows, row_product};
 
 /// The dispatched (AVX2 where available) and portable passes agree bit
 /// for bit, and both equal the plain product, in both storages; so

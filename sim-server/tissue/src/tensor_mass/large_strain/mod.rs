@@ -23,6 +23,7 @@
 
 use super::corotational_lanes::Q;
 use super::element::{Geometry, TetElastic};
+pub use super::kernel::LanePrecision;
 use super::kernel::V3;
 use super::lanes::Scalar;
 use super::model::ElasticModel;
@@ -339,15 +340,6 @@ impl LargeStrain {
             Lanes::F32(set) => set.load(i),
         }
     }
-}
-
-/// The scalar of the lanes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LanePrecision {
-    /// Four f64 lanes (equal to the scalar path to round-off).
-    F64,
-    /// Eight f32 lanes.
-    F32,
 }
 
 /// The lanes of one precision.

@@ -1,0 +1,100 @@
+//! One row of the kernel's product K u, computed alone in exactly the
+//! fused pass's order of additions: for the predicted step's local
+//! corrector (`explicit/predicted/`) and the membrane's capsule rows
+//! ([`super::membrane`]), each of which must equal the whole pass to the
+//! bit.
+
+use super::{Kernel, Storage, V3, widen};
+
+/// The kernel's edges seen from their column: for each vertex `i`, the
+/// rows `j < i` whose stored edge reaches it, ascending (the order in
+/// which the pass scatters them into row `i`), with the edge's slot.
+#[derive(Clone, Debug, Default)]
+pub(in crate::tensor_mass) struct LowerRows {
+    start: Vec<u32>,
+    /// (row j, edge slot).
+    entries: Vec<[u32; 2]>,
+}
+
+impl LowerRows {
+    /// Built once per kernel: cuts change the tensors' values, never the
+    /// edges' places.
+    pub(in crate::tensor_mass) fn new<S: Storage>(kernel: &Kernel<S>) -> Self {
+        let n = kernel.rows();
+        let (_, _, edges) = kernel.parts();
+        let mut start = vec![0u32; n + 1];
+        for e in edges {
+            start[e.col as usize + 1] += 1;
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut entries = vec![[0u32; 2]; edges.len()];
+        for j in 0..n {
+            for slot in kernel.row(j) {
+                let i = edges[slot].col as usize;
+                entries[fill[i] as usize] = [j as u32, slot as u32];
+                fill[i] += 1;
+            }
+        }
+        Self { start, entries }
+    }
+
+    /// Row `i`'s entries: (lower row j, edge slot), ascending j.
+    pub(in crate::tensor_mass) fn of(&self, i: usize) -> &[[u32; 2]] {
+        &self.entries[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+
+    /// Whether it was built for a kernel of `rows` rows.
+    pub(in crate::tensor_mass) fn fits(&self, rows: usize) -> bool {
+        self.start.len() == rows + 1
+    }
+}
+
+/// (K u)_i, added up exactly as the fused pass does (`Kernel::run_part_body`,
+/// which the AVX2 pass equals to the bit): the lower rows' K_ji^T u_j in
+/// ascending j into a zeroed accumulator, then the row's own products,
+/// entry by entry, reduced once and added.
+#[inline]
+pub(in crate::tensor_mass) fn row_product<S: Storage>(
+    kernel: &Kernel<S>,
+    lower: &LowerRows,
+    u: &[V3],
+    i: usize,
+) -> V3 {
+    let (diag, _, edges) = kernel.parts();
+    let mut acc = [0.0; 3];
+    for &[j, slot] in lower.of(i) {
+        let k = widen(&edges[slot as usize].k);
+        let uj = u[j as usize];
+        let tj = [
+            uj[0], uj[0], uj[0], uj[1], uj[1], uj[1], uj[2], uj[2], uj[2],
+        ];
+        let mut t = [0.0; 9];
+        for q in 0..9 {
+            t[q] = k[q] * tj[q];
+        }
+        acc[0] += t[0] + t[3] + t[6];
+        acc[1] += t[1] + t[4] + t[7];
+        acc[2] += t[2] + t[5] + t[8];
+    }
+    let tile = |v: V3| [v[0], v[1], v[2], v[0], v[1], v[2], v[0], v[1], v[2]];
+    let d = widen(&diag[i]);
+    let tu = tile(u[i]);
+    let mut m = [0.0; 9];
+    for q in 0..9 {
+        m[q] = d[q] * tu[q];
+    }
+    for e in &edges[kernel.row(i)] {
+        let k = widen(&e.k);
+        let tj = tile(u[e.col as usize]);
+        for q in 0..9 {
+            m[q] += k[q] * tj[q];
+        }
+    }
+    acc[0] += m[0] + m[1] + m[2];
+    acc[1] += m[3] + m[4] + m[5];
+    acc[2] += m[6] + m[7] + m[8];
+    acc
+}
