@@ -4,32 +4,7 @@
 //! lines, the two commands first, CI's test command in it).
 
 use std::fs;
-use std::path::{Path, PathBuf};
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ sits in the workspace")
-        .to_path_buf()
-}
-
-fn markdown_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        let name = entry.file_name();
-        let name = name.to_string_lossy();
-        if path.is_dir() {
-            if !name.starts_with('.') && name != "target" && name != "node_modules" {
-                markdown_files(&path, out);
-            }
-        } else if name.ends_with(".md") {
-            out.push(path);
-        }
-    }
-}
+use system_tests::{files_with_extension, workspace_root};
 
 /// The targets of `](target)` links in `text`, without their `#anchor`.
 fn link_targets(text: &str) -> Vec<String> {
@@ -48,9 +23,8 @@ fn link_targets(text: &str) -> Vec<String> {
 
 #[test]
 fn every_relative_link_in_the_documents_resolves() {
-    let root = workspace();
-    let mut files = Vec::new();
-    markdown_files(&root, &mut files);
+    let root = workspace_root();
+    let files = files_with_extension(&root, "md");
     assert!(
         files.len() > 20,
         "found only {} Markdown files",
@@ -84,7 +58,7 @@ fn the_link_reader_finds_targets_and_skips_web_addresses() {
 
 #[test]
 fn the_readme_is_a_quick_start_with_the_two_commands() {
-    let root = workspace();
+    let root = workspace_root();
     let readme = fs::read_to_string(root.join("README.md")).expect("README.md");
     assert!(
         readme.lines().count() <= 200,

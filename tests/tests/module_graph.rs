@@ -11,26 +11,8 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
-use std::path::{Path, PathBuf};
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("tests/ sits in the workspace")
-        .to_path_buf()
-}
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-    for entry in entries {
-        let path = entry.expect("a directory entry").path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
+use std::path::Path;
+use system_tests::{files_with_extension, workspace_root};
 
 /// The production text of a source file: no unit-test module, no comment.
 fn production_lines(path: &Path) -> Vec<String> {
@@ -82,9 +64,8 @@ fn crate_modules(line: &str, out: &mut BTreeSet<String>) {
 
 /// tissue's module graph: top-level module -> the top-level modules it uses.
 fn tissue_graph() -> BTreeMap<String, BTreeSet<String>> {
-    let src = workspace().join("sim-server/tissue/src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
+    let src = workspace_root().join("sim-server/tissue/src");
+    let files = files_with_extension(&src, "rs");
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     for file in files {
         let rel = file.strip_prefix(&src).expect("under src");
@@ -181,20 +162,17 @@ fn the_cycle_finder_finds_a_cycle() {
 
 #[test]
 fn no_source_file_is_a_path_sibling_of_its_module() {
-    let root = workspace();
-    let mut files = Vec::new();
-    for crate_dir in ["sim-server", "haptic-daemon", "shared", "viewer", "tests"] {
-        rust_files(&root.join(crate_dir), &mut files);
-    }
-    let offenders: Vec<String> = files
+    let root = workspace_root();
+    let files = ["sim-server", "haptic-daemon", "shared", "viewer", "tests"]
         .iter()
-        .filter(|f| !f.components().any(|c| c.as_os_str() == "target"))
+        .flat_map(|crate_dir| files_with_extension(&root.join(crate_dir), "rs"));
+    let offenders: Vec<String> = files
         .filter(|f| {
             fs::read_to_string(f)
                 .map(|t| t.lines().any(|l| l.trim_start().starts_with("#[path")))
                 .unwrap_or(false)
         })
-        .map(|f| f.strip_prefix(&root).unwrap_or(f).display().to_string())
+        .map(|f| f.strip_prefix(&root).unwrap_or(&f).display().to_string())
         .collect();
     assert!(offenders.is_empty(), "#[path] modules: {offenders:?}");
 }
