@@ -26,8 +26,6 @@ mod holds;
 mod hybrid;
 mod implicit;
 mod precomputed;
-mod precomputed_contact;
-mod precomputed_rows;
 
 pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
 pub use hybrid::{Hybrid, HybridConfig, HybridError};

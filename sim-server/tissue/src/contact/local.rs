@@ -23,8 +23,8 @@
 //! `local-problem` extrapolator does it).
 
 use crate::backend::Backend;
+use crate::contact::instrument::Segment;
 use crate::contact::penalty::field::{ContactField, PartSweep};
-use crate::contact::tool::geometry::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 

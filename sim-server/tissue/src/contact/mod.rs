@@ -9,19 +9,23 @@
 //! `sim.step()`, then `tools.reaction(i, &sim)` (what tool `i` feels).
 //!
 //! # Where things are
+//! From the top down (each layer imports only those below it; the
+//! `module_graph` system test checks it):
 //! - [`tools`](Tools): the scene's tools together, set up and stepped
 //!   (with the contact problems made for the daemon, `tools/local_problems.rs`).
-//! - `tool/`: one tool: its contact state ([`ToolContact`]), the proxy
-//!   that follows the pose, its geometry, its declaration, the claims on
-//!   vertices, the approach and the tip held outside.
-//! - `surface/`: the tissue's surface as the tools meet it (the index of its
-//!   triangles, where a point crosses it, live faces, adjacency).
-//! - [`penalty`]: the penalty law (the field, friction, implicit springs,
-//!   where the points are sampled and kept).
+//! - `tool/`: one tool's contact state ([`ToolContact`]), the proxy that
+//!   follows the pose, the claims on vertices, the approach and the tip
+//!   held outside.
 //! - `response/`: what the tool feels (the reaction, the contact stiffness
 //!   and its worker).
-//! - `local.rs`: the contact problem around one tool, for the daemon;
-//!   `follow_region.rs`: the corotational region following the tools;
+//! - `local.rs`: the contact problem around one tool, for the daemon.
+//! - [`penalty`]: the penalty law (`field/` with its friction and implicit
+//!   springs; `sampling/`: where the points are sampled and kept).
+//! - `surface/`: the tissue's surface as the tools meet it (the index of its
+//!   triangles, where a point crosses it, live faces, adjacency).
+//! - `instrument/`: what a tool is (its declaration, friction coefficients,
+//!   pose and segments).
+//! - `follow_region.rs`: the corotational region following the tools;
 //!   `config.rs`: the law and its constants.
 //!
 //! # Rules (and where they simplify the paper)
@@ -100,6 +104,7 @@
 
 mod config;
 mod follow_region;
+mod instrument;
 mod local;
 pub mod penalty;
 pub(crate) mod response;
@@ -108,16 +113,14 @@ mod tool;
 mod tools;
 
 pub use config::{ContactConfig, ContactLaw, MAX_IMPLICIT_STIFFNESS_FACTOR};
+pub use instrument::{Friction, Plane, Segment, ToolDecl, ToolKind, ToolPose};
 pub use local::{LocalContact, LocalPart, LocalPoint};
 pub use penalty::field::ContactField;
-pub use penalty::friction::Friction;
 pub use response::reaction::Reaction;
 pub use response::stiffness::MAX_FACTOR_VERTICES;
 pub use response::worker::{ContactStiffness, StiffnessSolves};
 pub use surface::index::SurfaceIndex;
 pub use tool::ToolContact;
-pub use tool::decl::{ToolDecl, ToolKind};
-pub use tool::geometry::{Plane, Segment, ToolPose};
 pub use tool::proxy::Proxy;
 pub use tools::{ContactError, LocalSpec, ToolInput, Tools};
 

@@ -3,8 +3,6 @@
 //! the hot kernel, explicit integration and its stability bound; and the
 //! large-strain models (StVK, corotational) as a per-element pass beside it.
 
-#[cfg(target_arch = "x86_64")]
-mod avx2;
 mod corotational_lanes;
 pub mod element;
 pub mod explicit;
@@ -12,8 +10,6 @@ pub mod force_term;
 pub mod huge_pages;
 pub mod kernel;
 mod lanes;
-#[cfg(target_arch = "x86_64")]
-mod lanes_avx2;
 pub mod large_strain;
 pub mod model;
 pub mod nonlinear;

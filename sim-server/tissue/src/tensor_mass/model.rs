@@ -109,7 +109,7 @@ pub struct ElasticModel {
     topology_changes: u64,
     /// Each tetrahedron's Irons eigenvalue, computed on first use
     /// ([`ElasticModel::element_lambdas`]).
-    element_lambdas: std::sync::OnceLock<std::sync::Arc<[Real]>>,
+    pub(super) element_lambdas: std::sync::OnceLock<std::sync::Arc<[Real]>>,
 }
 
 impl ElasticModel {
@@ -187,24 +187,6 @@ impl ElasticModel {
         // The capsule springs belong to their tetrahedra's elements.
         self.element_lambdas = std::sync::OnceLock::new();
         Ok(self)
-    }
-
-    /// Each tetrahedron's largest eigenvalue of (K_e, M_e) (1/s^2, Irons'
-    /// element bound; removed tetrahedra included), computed once on first
-    /// use, in parallel, and kept with the model (clones share it): the
-    /// explicit integrator's bound, the scene's default step and the
-    /// nonlinear elements' rest bound all read it, instead of each solving
-    /// the 12 x 12 eigenproblems again (seconds on a million tetrahedra).
-    /// Cuts do not change an element's own value.
-    pub fn element_lambdas(&self) -> &[Real] {
-        use rayon::prelude::*;
-        self.element_lambdas.get_or_init(|| {
-            (0..self.mesh.tet_count())
-                .into_par_iter()
-                .map(|t| super::stability::element_lambda(self, TetId::from(t)))
-                .collect::<Vec<Real>>()
-                .into()
-        })
     }
 
     /// Adds mass (kg) and damping (kg/s) to vertex `v` from outside the

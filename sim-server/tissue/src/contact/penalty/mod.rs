@@ -1,9 +1,6 @@
-//! The penalty contact law: the field of contact points and their forces,
-//! friction, the linearly implicit springs, and where the points are
-//! sampled and kept across steps.
+//! The penalty contact law: the field of contact points and their forces
+//! (with its friction and linearly implicit springs, `field/`), and where
+//! the points are sampled and kept across steps (`sampling/`).
 
 pub mod field;
-pub mod friction;
-pub mod implicit;
 pub(super) mod sampling;
-pub(super) mod selection;

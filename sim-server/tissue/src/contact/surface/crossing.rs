@@ -21,10 +21,10 @@
 //! outwards by its tetrahedron's face order ([`crate::mesh::TET_FACES`]).
 
 use crate::backend::Backend;
+use crate::contact::instrument::Segment;
 use crate::contact::surface::adjacency::Adjacency;
 use crate::contact::surface::faces::SurfaceFaces;
 use crate::contact::surface::index::SurfaceIndex;
-use crate::contact::tool::geometry::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::ElasticModel;

@@ -20,7 +20,7 @@ use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy, BvhWorkspace};
 
 use crate::backend::Backend;
-use crate::contact::tool::geometry::Segment;
+use crate::contact::instrument::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::ElasticModel;

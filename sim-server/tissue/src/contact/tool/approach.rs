@@ -15,10 +15,10 @@ use super::ToolContact;
 use crate::backend::Backend;
 use crate::contact::ToolKind;
 use crate::contact::config::ContactLaw;
+use crate::contact::instrument::ToolPose;
 use crate::contact::surface::adjacency::Adjacency;
 use crate::contact::surface::crossing::Crossing;
 use crate::contact::surface::index::SurfaceIndex;
-use crate::contact::tool::geometry::ToolPose;
 use crate::math::{Real, Vec3};
 
 /// A proxy that followed the hand this recently (s) is not slowed: it

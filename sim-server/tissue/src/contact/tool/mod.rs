@@ -7,12 +7,12 @@ use super::ToolKind;
 use super::config::ContactLaw;
 use super::{CUT_BELOW, Constraint, ConstraintKind, ContactReport, GRIP_BELOW};
 use crate::backend::Backend;
+use crate::contact::instrument::{Plane, Segment, ToolPose};
 use crate::contact::penalty::field::{ContactField, PartSweep};
 use crate::contact::response::reaction::{self, Reaction};
 use crate::contact::surface::adjacency::Adjacency;
 use crate::contact::surface::index::SurfaceIndex;
 use crate::contact::tool::claims::Claims;
-use crate::contact::tool::geometry::{Plane, Segment, ToolPose};
 use crate::contact::tool::proxy::Proxy;
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
@@ -534,7 +534,5 @@ impl ToolContact {
 
 mod approach;
 pub(super) mod claims;
-pub(super) mod decl;
-pub(super) mod geometry;
 mod outside;
 pub(super) mod proxy;

@@ -5,10 +5,10 @@ use super::ToolContact;
 use crate::backend::Backend;
 use crate::contact::ToolKind;
 use crate::contact::config::ContactLaw;
+use crate::contact::instrument::ToolPose;
 use crate::contact::surface::adjacency::Adjacency;
 use crate::contact::surface::crossing::Crossing;
 use crate::contact::surface::index::SurfaceIndex;
-use crate::contact::tool::geometry::ToolPose;
 use crate::math::{Real, Vec3};
 
 /// The penalty tool's tip stops this fraction of its radius short of the

@@ -340,7 +340,7 @@ impl<S: Storage> Kernel<S> {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { super::avx2::run_part(self, inp, part) };
+            unsafe { avx2::run_part(self, inp, part) };
             return;
         }
         self.run_part_body(inp, part);
@@ -430,6 +430,8 @@ impl<S: Storage> Kernel<S> {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+pub(in crate::tensor_mass) mod avx2;
 mod rows;
 mod storage;
 

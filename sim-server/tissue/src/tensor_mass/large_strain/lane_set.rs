@@ -8,9 +8,9 @@ use super::super::corotational_lanes::{Q, corotational_block};
 use super::super::kernel::V3;
 #[cfg(target_arch = "x86_64")]
 use super::super::lanes::as_f32x8;
-use super::super::lanes::{Acc, L, LaneBlock, Scalar};
 #[cfg(target_arch = "x86_64")]
-use super::super::lanes_avx2;
+use super::super::lanes::avx2 as lanes_avx2;
+use super::super::lanes::{Acc, L, LaneBlock, Scalar};
 use super::super::stvk_lanes::stvk_block;
 use super::{Element, PassReport, element};
 use crate::material::MaterialModel;

@@ -19,7 +19,7 @@
 //! the cache at 1M tetrahedra, cost more than the elements). One task of
 //! eight f32 lanes on an AVX2 CPU skips the slots: each block's forces go
 //! straight to per-vertex accumulators in the same order (the same sums
-//! to the bit; `lanes_avx2`).
+//! to the bit; `lanes::avx2`).
 
 use super::corotational_lanes::Q;
 use super::element::{Geometry, TetElastic};

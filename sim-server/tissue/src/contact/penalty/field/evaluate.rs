@@ -3,11 +3,11 @@
 //! then the forces they exert ([`ContactField::apply`]). A part of
 //! [`super`], which owns the field and documents the law.
 
+use super::friction::{Stick, along_surface};
 use super::{
     Acting, CLEAR_MARGIN, CLEAR_MARGIN_M, ContactField, DAMPING_STABILITY, REPORT_WINDOW_S,
     SubStep, spring,
 };
-use crate::contact::penalty::friction::{Stick, along_surface};
 use crate::math::{Mat3, Real, Vec3, outer};
 
 impl ContactField {

@@ -38,11 +38,12 @@
 //! earlier three times better than at its own pose). The window still
 //! averages the stiff springs' sub-step ripple, as a 1 kHz step does.
 
-use crate::contact::penalty::friction::{Carried, Friction, Stick, point_key};
-use crate::contact::penalty::implicit::ImplicitSprings;
-use crate::contact::tool::geometry::Segment;
+use crate::contact::instrument::Friction;
+use crate::contact::instrument::Segment;
 use crate::math::{Mat3, Real, Vec3};
 use crate::tensor_mass::{ForcePoint, ForceTerm};
+use friction::{Carried, Stick, point_key};
+use implicit::ImplicitSprings;
 
 /// One contact point: a triangle's vertices, its barycentric weights, the
 /// tool part it faces and its stiffness.
@@ -497,6 +498,8 @@ impl ForceTerm for ContactField {
 }
 
 mod evaluate;
+mod friction;
+mod implicit;
 
 /// Test fixtures shared by the contact modules' unit tests.
 #[cfg(test)]

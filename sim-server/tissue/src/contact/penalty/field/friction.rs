@@ -29,56 +29,11 @@
 //! The state survives the re-selection of the contact points between steps:
 //! it is keyed by the point's triangle, lattice weights and tool part
 //! ([`point_key`]). A triangle stretched enough to change its lattice
-//! (see `sampling::subdivisions`) starts its new points unstuck.
+//! (see `penalty::sampling::subdivisions`) starts its new points unstuck.
 
-use crate::contact::penalty::field::{ContactPoint, PartSweep};
+use super::{ContactPoint, PartSweep};
+use crate::contact::instrument::Friction;
 use crate::math::{Real, Vec3};
-
-/// A tool's Coulomb coefficients (zero: frictionless, the default).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct Friction {
-    /// Static coefficient mu_s: a sticking point holds up to mu_s times
-    /// its normal force.
-    pub static_coefficient: Real,
-    /// Dynamic (kinetic) coefficient mu_d <= mu_s: a sliding point is
-    /// dragged with mu_d times its normal force.
-    pub dynamic_coefficient: Real,
-}
-
-impl Friction {
-    /// No friction at all.
-    pub const NONE: Self = Self {
-        static_coefficient: 0.0,
-        dynamic_coefficient: 0.0,
-    };
-
-    /// Whether this tool has friction.
-    pub fn is_active(&self) -> bool {
-        self.static_coefficient > 0.0
-    }
-
-    /// Why these coefficients cannot serve, if they cannot: both finite and
-    /// non-negative, static at least dynamic.
-    pub fn check(&self) -> Result<(), String> {
-        let (s, d) = (self.static_coefficient, self.dynamic_coefficient);
-        if !(s.is_finite() && s >= 0.0) {
-            return Err(format!(
-                "friction_static must be a finite number >= 0, got {s}"
-            ));
-        }
-        if !(d.is_finite() && d >= 0.0) {
-            return Err(format!(
-                "friction_dynamic must be a finite number >= 0, got {d}"
-            ));
-        }
-        if d > s {
-            return Err(format!(
-                "friction_dynamic ({d}) exceeds friction_static ({s}): a sliding contact cannot hold more than a sticking one"
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// One contact point's friction state.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

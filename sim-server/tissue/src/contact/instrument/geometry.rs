@@ -1,7 +1,7 @@
 //! Tool geometry: the shaft and tip segments of a posed tool, capsule
 //! distances, and the contact planes vertices are projected on.
 
-use crate::contact::ToolDecl;
+use super::ToolDecl;
 use crate::math::{Real, Vec3};
 
 /// Below this fulcrum-to-tip distance (m) the shaft direction is undefined

@@ -24,7 +24,7 @@
 //! turning of the normal around the tool stay explicit (the damping is
 //! bounded as before; the turning is soft).
 
-use crate::contact::penalty::field::{ContactField, ContactPoint};
+use super::{ContactField, ContactPoint};
 use crate::math::{Mat3, Real, Vec3};
 
 /// Iterations at most (the system's condition is about 1 + k_p / (m / h^2),
@@ -295,9 +295,9 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> Real {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::contact::instrument::Segment;
     use crate::contact::penalty::field::ONSET_OF_RADIUS;
     use crate::contact::penalty::field::fixtures::{add_point, whole_step};
-    use crate::contact::tool::geometry::Segment;
 
     /// Two triangles sharing an edge (four vertices), a point on each,
     /// both pressed by a flat-ish tool (a long shaft along x just below

@@ -32,9 +32,9 @@
 //! appearing or going (a tool withdrawn, a grip closing), a selection made
 //! within a step (long steps re-select every millisecond).
 
+use super::subdivisions;
+use crate::contact::instrument::Segment;
 use crate::contact::penalty::field::{ContactField, ContactPoint, PartSweep};
-use crate::contact::penalty::sampling::subdivisions;
-use crate::contact::tool::geometry::Segment;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 

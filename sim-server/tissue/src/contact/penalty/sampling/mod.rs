@@ -11,13 +11,15 @@
 
 use crate::backend::Backend;
 use crate::contact::penalty::field::{ContactField, ContactPoint, PartSweep};
-use crate::contact::penalty::selection::{REUSE_MARGIN_OF_RADIUS, SelectionCache};
 use crate::contact::surface::adjacency::Adjacency;
 use crate::contact::surface::faces::SurfaceFaces;
 use crate::contact::surface::index::SurfaceIndex;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::ElasticModel;
+use selection::{REUSE_MARGIN_OF_RADIUS, SelectionCache};
+
+mod selection;
 
 /// At most this many subdivisions per triangle edge (256 points): 32 gave
 /// the liver demo twice the p99 step time (stretched triangles around the
@@ -219,7 +221,7 @@ impl Sampler {
         // A triangle with a point within `keep_m` of the part at the end of
         // the step has a vertex within that plus its longest edge (1.5x the
         // longest rest edge: stretched tissue) of the sweep's box.
-        let query = crate::contact::tool::geometry::Segment {
+        let query = crate::contact::instrument::Segment {
             a_m: sweep
                 .from
                 .a_m
@@ -327,7 +329,7 @@ struct SegmentQuery {
 }
 
 impl SegmentQuery {
-    fn new(seg: &crate::contact::tool::geometry::Segment) -> Self {
+    fn new(seg: &crate::contact::instrument::Segment) -> Self {
         let d = seg.b_m - seg.a_m;
         let len2 = d.length_squared();
         Self {

@@ -16,6 +16,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::kernel::V3;
+
+#[cfg(target_arch = "x86_64")]
+pub(in crate::tensor_mass) mod avx2;
 use crate::math::Real;
 use std::ops::{Add, Div, Mul, Sub};
 
@@ -98,7 +101,7 @@ macro_rules! scalar {
         }
     };
 }
-scalar!(f64, 0.0, super::nonlinear::ROTATION_TOL_RAD);
+scalar!(f64, 0.0, crate::tensor_mass::nonlinear::ROTATION_TOL_RAD);
 scalar!(f32, 1e-12, 1e-4);
 
 /// A vertex's force sum `[x, y, z, 0]` (the AVX2 sweep), aligned so that a
@@ -353,7 +356,7 @@ pub fn as_f32x8<S: Scalar, const N: usize, T: 'static, U: 'static>(x: &T) -> Opt
 }
 
 /// du[k][c] = u_{k+1}[c] - u_0[c] per live lane (see [`gradient`]): with
-/// AVX2 for eight f32 lanes ([`super::lanes_avx2::corner_differences`],
+/// AVX2 for eight f32 lanes ([`avx2::corner_differences`],
 /// equal to the bit), else lane by lane.
 #[inline(always)]
 pub(super) fn corner_differences<S: Scalar, const N: usize>(
@@ -368,7 +371,7 @@ pub(super) fn corner_differences<S: Scalar, const N: usize>(
     ) && std::arch::is_x86_feature_detected!("avx2")
     {
         // SAFETY: AVX2 is present (checked just above).
-        let du = unsafe { super::lanes_avx2::corner_differences(vertices, *alive8, u) };
+        let du = unsafe { avx2::corner_differences(vertices, *alive8, u) };
         // SAFETY: S = f32 and N = 8 (`as_f32x8` returned them): the same type.
         return unsafe { std::mem::transmute_copy(&du) };
     }

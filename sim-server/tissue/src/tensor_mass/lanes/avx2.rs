@@ -2,7 +2,7 @@
 //! corners' displacement differences into lanes, and the lanes' corner
 //! forces added to their vertices.
 //!
-//! The portable forms ([`super::lanes::gradient`], `LaneSet::add_to_vertices`)
+//! The portable forms ([`super::gradient`], `LaneSet::add_to_vertices`)
 //! move one scalar at a time: nine differences per element inserted into
 //! lanes and twelve force components read back out, each a scalar load,
 //! convert and store, with the lane arrays assembled on the stack (a vector
@@ -19,9 +19,9 @@
 //! round to f32, flush below [`Scalar::FLUSH_BELOW_M`]; widen, add in element
 //! order), so the results are the same to the bit (tested).
 
-use super::avx2::load3;
-use super::kernel::V3;
-use super::lanes::{Acc, Scalar};
+use super::{Acc, Scalar};
+use crate::tensor_mass::kernel::V3;
+use crate::tensor_mass::kernel::avx2::load3;
 use std::arch::x86_64::*;
 
 /// Eight `[a, b, c, _]` (lane l in `rows[l]`) as three vectors of eight:
@@ -84,13 +84,13 @@ fn to_lanes(v: __m256) -> [f32; 8] {
 /// `du[k][c][lane]` = u[v_{k+1}][c] - u[v_0][c] of each live lane, taken in
 /// f64, rounded to f32 and flushed to zero below
 /// [`Scalar::FLUSH_BELOW_M`]; zero for a removed lane (as
-/// [`super::lanes::gradient`]).
+/// [`super::gradient`]).
 ///
 /// # Panics
 /// When a vertex index is out of `u` (as the portable form).
 #[inline]
 #[target_feature(enable = "avx2")]
-pub(super) fn corner_differences(
+pub(in crate::tensor_mass) fn corner_differences(
     vertices: &[[u32; 4]; 8],
     alive: [bool; 8],
     u: &[V3],
@@ -135,7 +135,7 @@ pub(super) fn corner_differences(
 /// When a vertex index is out of `acc`.
 #[inline]
 #[target_feature(enable = "avx2")]
-pub(super) fn add_block(
+pub(in crate::tensor_mass) fn add_block(
     vertices: &[[u32; 4]; 8],
     count: usize,
     forces: &[[[f32; 8]; 3]; 4],

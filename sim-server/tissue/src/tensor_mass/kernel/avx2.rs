@@ -13,14 +13,14 @@
 //!
 //! No shuffles in the edge loop.
 
-use super::kernel::{Kernel, Part, StepInputs, Storage, V3};
+use super::{Kernel, Part, StepInputs, Storage, V3};
 use std::arch::x86_64::*;
 
 /// [x0 x1 x2 0] from a 3-vector, without reading past it (also the
-/// nonlinear pass's corner loads, `lanes_avx2`).
+/// nonlinear pass's corner loads, `lanes::avx2`).
 #[inline]
 #[target_feature(enable = "avx2")]
-pub(super) fn load3(v: &V3) -> __m256d {
+pub(in crate::tensor_mass) fn load3(v: &V3) -> __m256d {
     // SAFETY: the mask reads v[0], v[1] and v[2] only; a masked-off lane
     // never faults.
     unsafe { _mm256_maskload_pd(v.as_ptr(), _mm256_set_epi64x(0, -1, -1, -1)) }

@@ -23,6 +23,9 @@ use crate::static_solve::{Dirichlet, Factorized, StaticError};
 use crate::tensor_mass::{CutChange, CutError, ElasticModel, ForceTerm};
 use std::path::{Path, PathBuf};
 
+mod contact;
+mod rows;
+
 const NONE: u32 = u32::MAX;
 
 /// Why the precomputation failed.
@@ -54,15 +57,15 @@ pub struct Precomputed {
     applied: Vec<(u32, Vec3)>,
     work: Vec<Vec3>,
     /// The penalty contact's forces on the vertices listed in
-    /// `contact_loaded` (zero elsewhere; [`super::precomputed_contact`]).
+    /// `contact_loaded` (zero elsewhere; [`contact`]).
     contact_n: Vec<Vec3>,
     contact_loaded: Vec<u32>,
     /// The loads' part of a contact step's solution ([`Precomputed::prepare_rows`]).
     u_ext: Vec<Vec3>,
     /// The contact solve's scratch.
-    pub(super) contact: super::precomputed_contact::ContactSolve,
+    contact: contact::ContactSolve,
     /// The responses at the contact step's rows ([`Precomputed::step_rows`]).
-    row_responses: super::precomputed_rows::RowResponses,
+    row_responses: rows::RowResponses,
     /// Whether the last load came from the disk cache.
     pub from_cache: bool,
 }

@@ -49,8 +49,8 @@
 //! (no velocity), and no friction (its springs need the motion between
 //! sub-steps; a scene asking for it here is refused).
 
-use super::Backend;
-use super::precomputed::Precomputed;
+use super::Precomputed;
+use crate::backend::Backend;
 use crate::dense_lu::DenseLu;
 use crate::math::{Mat3, Real, Vec3};
 use crate::tensor_mass::{ForcePoint, ForceTerm};
