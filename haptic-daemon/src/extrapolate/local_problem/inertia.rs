@@ -9,6 +9,133 @@ use super::dense::{cholesky, cholesky_inverse};
 use super::{HISTORY, LocalContactMsg, LocalProblem, LocalProblemError};
 use crate::math::{V3, ZERO, add, scale, sub};
 
+/// The tissue's inertia condensed on the problem's vertices (empty
+/// `m_red`: quasi-static).
+#[derive(Debug)]
+pub(super) struct Inertia {
+    /// The condensed mass M = S G S, row-major (3V)^2.
+    pub(super) m_red: Vec<f64>,
+    /// S + A(h) and its inverse for the haptic tick h (the problem's `s`
+    /// and `w` hold those of the step under way: the first step's, which
+    /// spans the sample's age, then these).
+    pub(super) s_tick: Vec<f64>,
+    pub(super) w_tick: Vec<f64>,
+    /// The damping (1/s).
+    pub(super) damping_per_s: f64,
+    /// The step under way (s), whether it is the first, and the haptic
+    /// tick (s).
+    pub(super) step_s: f64,
+    pub(super) first_step: bool,
+    pub(super) tick_s: f64,
+    /// The vertices' velocity, and delta before the step.
+    pub(super) vel: Vec<f64>,
+    pub(super) delta_prev: Vec<f64>,
+}
+
+impl Inertia {
+    /// No inertia, with room for `n` coordinates.
+    pub(super) fn with_capacity(n: usize) -> Self {
+        Self {
+            m_red: Vec::with_capacity(n * n),
+            s_tick: Vec::with_capacity(n * n),
+            w_tick: Vec::with_capacity(n * n),
+            damping_per_s: 0.0,
+            step_s: 0.0,
+            first_step: false,
+            tick_s: 0.0,
+            vel: Vec::with_capacity(n),
+            delta_prev: Vec::with_capacity(n),
+        }
+    }
+}
+
+impl Clone for Inertia {
+    fn clone(&self) -> Self {
+        let mut out = Self::with_capacity(0);
+        out.clone_from(self);
+        out
+    }
+
+    /// Into the existing allocations.
+    fn clone_from(&mut self, o: &Self) {
+        self.m_red.clone_from(&o.m_red);
+        self.s_tick.clone_from(&o.s_tick);
+        self.w_tick.clone_from(&o.w_tick);
+        self.damping_per_s = o.damping_per_s;
+        self.step_s = o.step_s;
+        self.first_step = o.first_step;
+        self.tick_s = o.tick_s;
+        self.vel.clone_from(&o.vel);
+        self.delta_prev.clone_from(&o.delta_prev);
+    }
+}
+
+/// With inertia: each tick's time (ns) and force change, oldest first from
+/// `next` on (a ring of [`HISTORY`]), `len` filled.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct ForceHistory {
+    t_ns: [u64; HISTORY],
+    change: [V3; HISTORY],
+    len: usize,
+    next: usize,
+}
+
+impl Default for ForceHistory {
+    fn default() -> Self {
+        Self {
+            t_ns: [0; HISTORY],
+            change: [ZERO; HISTORY],
+            len: 0,
+            next: 0,
+        }
+    }
+}
+
+impl ForceHistory {
+    /// Forgets every tick.
+    pub(super) fn clear(&mut self) {
+        self.len = 0;
+        self.next = 0;
+    }
+
+    /// Keeps a tick's force change.
+    pub(super) fn remember(&mut self, now_ns: u64, change: V3) {
+        self.t_ns[self.next] = now_ns;
+        self.change[self.next] = change;
+        self.next = (self.next + 1) % HISTORY;
+        self.len = (self.len + 1).min(HISTORY);
+    }
+
+    /// The problem's force change at `t_ns`, for a problem taken at
+    /// `problem_t_ns`: zero at its own step's time, each tick's after,
+    /// linear in between, the newest past it; `None` when the ticks kept
+    /// no longer reach back to it.
+    pub(super) fn change_at(&self, t_ns: u64, problem_t_ns: u64) -> Option<V3> {
+        let mut after: Option<(u64, V3)> = None;
+        for k in 0..self.len {
+            let i = (self.next + HISTORY - 1 - k) % HISTORY;
+            let (t, c) = (self.t_ns[i], self.change[i]);
+            if t <= t_ns {
+                return Some(match after {
+                    None => c,
+                    Some((ta, ca)) => lerp(t, c, ta, ca, t_ns),
+                });
+            }
+            after = Some((t, c));
+        }
+        // Before every tick kept: from the problem's own step (change
+        // zero), if the ring still holds its first tick.
+        if self.len == HISTORY {
+            return None;
+        }
+        Some(match after {
+            None => ZERO,
+            Some((ta, ca)) if t_ns > problem_t_ns => lerp(problem_t_ns, ZERO, ta, ca, t_ns),
+            Some(_) => ZERO,
+        })
+    }
+}
+
 impl LocalProblem {
     /// [`LocalProblem::set_inertia`] from the message the problem was set
     /// from ([`LocalProblem::set_from_wire`]); `Ok(false)` when it carries
@@ -35,7 +162,7 @@ impl LocalProblem {
 
     /// Whether the problem carries the tissue's inertia.
     pub fn has_inertia(&self) -> bool {
-        self.ready && !self.m_red.is_empty()
+        self.ready && !self.inertia.m_red.is_empty()
     }
 
     /// Gives the problem the tissue's inertia (after [`LocalProblem::set`]):
@@ -68,17 +195,17 @@ impl LocalProblem {
         }
         // M = S G S (two dense products; on the set-up side). S G goes in
         // the factor's scratch (n^2, overwritten by `stepped` below).
-        matmul_into(&self.s, column_mass, &mut self.w_factor, n);
-        matmul_into(&self.w_factor, &self.s, &mut self.m_red, n);
-        self.damping_per_s = damping_per_s;
+        matmul_into(&self.s, column_mass, &mut self.scratch.w_factor, n);
+        matmul_into(&self.scratch.w_factor, &self.s, &mut self.inertia.m_red, n);
+        self.inertia.damping_per_s = damping_per_s;
         // The tick's S + A and inverse, then the first step's in s and w.
         let static_s = std::mem::take(&mut self.s);
-        self.s_tick.clear();
-        self.s_tick.extend_from_slice(&static_s);
-        let mut s_tick = std::mem::take(&mut self.s_tick);
-        let mut w_tick = std::mem::take(&mut self.w_tick);
+        self.inertia.s_tick.clear();
+        self.inertia.s_tick.extend_from_slice(&static_s);
+        let mut s_tick = std::mem::take(&mut self.inertia.s_tick);
+        let mut w_tick = std::mem::take(&mut self.inertia.w_tick);
         let ok = self.stepped(&mut s_tick, &mut w_tick, tick_s);
-        (self.s_tick, self.w_tick) = (s_tick, w_tick);
+        (self.inertia.s_tick, self.inertia.w_tick) = (s_tick, w_tick);
         self.s = static_s;
         let mut s = std::mem::take(&mut self.s);
         let mut w = std::mem::take(&mut self.w);
@@ -86,25 +213,25 @@ impl LocalProblem {
         (self.s, self.w) = (s, w);
         if !ok {
             self.ready = false;
-            self.m_red.clear();
+            self.inertia.m_red.clear();
             return Err(LocalProblemError::NotDefinite);
         }
-        self.step_s = first_step_s;
-        self.first_step = true;
-        self.tick_s = tick_s;
-        self.vel.clear();
-        self.vel.extend(velocities_m_per_s.iter().flatten());
+        self.inertia.step_s = first_step_s;
+        self.inertia.first_step = true;
+        self.inertia.tick_s = tick_s;
+        self.inertia.vel.clear();
+        self.inertia.vel.extend(velocities_m_per_s.iter().flatten());
         Ok(())
     }
 
     /// After the first step (which spans the sample's age): a haptic tick
     /// per step from now on.
     pub(super) fn end_first_step(&mut self) {
-        if self.first_step {
-            self.first_step = false;
-            self.step_s = self.tick_s;
-            std::mem::swap(&mut self.s, &mut self.s_tick);
-            std::mem::swap(&mut self.w, &mut self.w_tick);
+        if self.inertia.first_step {
+            self.inertia.first_step = false;
+            self.inertia.step_s = self.inertia.tick_s;
+            std::mem::swap(&mut self.s, &mut self.inertia.s_tick);
+            std::mem::swap(&mut self.w, &mut self.inertia.w_tick);
         }
     }
 
@@ -112,16 +239,16 @@ impl LocalProblem {
     /// its inverse; false if not positive definite.
     fn stepped(&mut self, s: &mut [f64], w: &mut Vec<f64>, h_s: f64) -> bool {
         let n = self.delta.len();
-        let a = 1.0 / (h_s * h_s) + self.damping_per_s / h_s;
-        for (x, m) in s.iter_mut().zip(&self.m_red) {
+        let a = 1.0 / (h_s * h_s) + self.inertia.damping_per_s / h_s;
+        for (x, m) in s.iter_mut().zip(&self.inertia.m_red) {
             *x += a * m;
         }
-        self.w_factor.clear();
-        self.w_factor.extend_from_slice(s);
-        if !cholesky(&mut self.w_factor, n) {
+        self.scratch.w_factor.clear();
+        self.scratch.w_factor.extend_from_slice(s);
+        if !cholesky(&mut self.scratch.w_factor, n) {
             return false;
         }
-        cholesky_inverse(&self.w_factor, &mut self.m, w, n);
+        cholesky_inverse(&self.scratch.w_factor, &mut self.scratch.m, w, n);
         true
     }
 
@@ -138,51 +265,15 @@ impl LocalProblem {
         if !self.has_inertia() {
             return false;
         }
-        self.begin_solve(false);
-        self.track_tool(t_ns, tool_m);
+        self.budget.begin(false);
+        self.track.keep(t_ns, tool_m);
         match self.solve_within_budget(tool_m) {
             Some((change, _)) => {
-                self.remember(t_ns, change);
+                self.history.remember(t_ns, change);
                 true
             }
             None => false,
         }
-    }
-
-    /// Keeps a tick's force change (with inertia).
-    pub(super) fn remember(&mut self, now_ns: u64, change: V3) {
-        self.hist_t_ns[self.hist_next] = now_ns;
-        self.hist_change[self.hist_next] = change;
-        self.hist_next = (self.hist_next + 1) % HISTORY;
-        self.hist_len = (self.hist_len + 1).min(HISTORY);
-    }
-
-    /// The problem's force change at `t_ns` (with inertia): zero at its own
-    /// step's time, each tick's after, linear in between, the newest past
-    /// it; `None` when the ticks kept no longer reach back to it.
-    pub(super) fn change_at(&self, t_ns: u64) -> Option<V3> {
-        let mut after: Option<(u64, V3)> = None;
-        for k in 0..self.hist_len {
-            let i = (self.hist_next + HISTORY - 1 - k) % HISTORY;
-            let (t, c) = (self.hist_t_ns[i], self.hist_change[i]);
-            if t <= t_ns {
-                return Some(match after {
-                    None => c,
-                    Some((ta, ca)) => lerp(t, c, ta, ca, t_ns),
-                });
-            }
-            after = Some((t, c));
-        }
-        // Before every tick kept: from the problem's own step (change
-        // zero), if the ring still holds its first tick.
-        if self.hist_len == HISTORY {
-            return None;
-        }
-        Some(match after {
-            None => ZERO,
-            Some((ta, ca)) if t_ns > self.t_ns => lerp(self.t_ns, ZERO, ta, ca, t_ns),
-            Some(_) => ZERO,
-        })
     }
 }
 

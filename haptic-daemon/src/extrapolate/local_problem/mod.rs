@@ -47,6 +47,10 @@ mod newton;
 mod render;
 mod setup;
 
+use inertia::{ForceHistory, Inertia};
+use newton::{Budget, Scratch, Selection};
+use render::ToolTrack;
+
 use crate::math::{V3, ZERO, norm, sub};
 pub use shared::protocol::{
     LOCAL_MAX_PARTS as MAX_PARTS, LOCAL_MAX_POINTS as MAX_POINTS,
@@ -145,75 +149,19 @@ pub struct LocalProblem {
     s: Vec<f64>,
     /// W itself.
     w: Vec<f64>,
-    /// Per vertex: its slot among the touched vertices T (u16::MAX: not
-    /// touched), and T.
-    tslot: Vec<u16>,
-    tverts: Vec<u16>,
-    /// Scratch: the points' Hessian on T, I + G_T W_TT, W g, the T-sized
-    /// solve.
-    gt: Vec<f64>,
-    m: Vec<f64>,
-    /// Scratch: W_TT gathered.
-    wtt: Vec<f64>,
-    z: Vec<f64>,
-    y: Vec<f64>,
     /// Forces on V at the sample (N), 3V.
     f0: Vec<f64>,
     /// The points' force on the tool at the sample (N).
     tool_force0_n: V3,
     /// f0 less this tick's inertial term (f0 itself without inertia).
     f0_eff: Vec<f64>,
-    /// With inertia ([`LocalProblem::set_inertia`]): the condensed mass
-    /// M = S G S (empty: quasi-static), S + A(h) and its inverse for the
-    /// haptic tick h (`s` and `w` hold those of the step under way: the
-    /// first step's, which spans the sample's age, then these), the
-    /// damping (1/s), the step under way (s), the vertices' velocity and
-    /// delta before the step.
-    m_red: Vec<f64>,
-    s_tick: Vec<f64>,
-    w_tick: Vec<f64>,
-    damping_per_s: f64,
-    step_s: f64,
-    first_step: bool,
-    tick_s: f64,
-    vel: Vec<f64>,
-    delta_prev: Vec<f64>,
     /// The previous solution (warm start), 3V.
     delta: Vec<f64>,
-    // Scratch, 3V or (3V)^2.
-    grad: Vec<f64>,
-    /// Scratch of `set`: W's Cholesky factor.
-    w_factor: Vec<f64>,
-    step: Vec<f64>,
-    trial: Vec<f64>,
-    forces: Vec<f64>,
     /// The trust region: the most a vertex moves per iteration (m).
     max_move_m: f64,
-    /// The tool's last two positions given (renders and catch-up steps)
-    /// at distinct times (ns), the newer second.
-    tool_track: [Option<(u64, V3)>; 2],
-    /// The points that may touch in this solve (indices).
-    active: Vec<u16>,
-    /// delta at the start of the solve.
-    start: Vec<f64>,
-    /// S delta, S step, and S trial (kept so that no product with S is
-    /// needed inside the iterations: S W = I gives S step cheaply).
-    sd: Vec<f64>,
-    sstep: Vec<f64>,
-    trial_sd: Vec<f64>,
-    /// Newton iterations left in this render (bounds the RT thread's time).
-    budget: usize,
     /// The last Newton run: whether it converged, and its iterations.
     converged: bool,
     iterated: usize,
-    /// With a time budget ([`LocalProblem::set_time_budget`]): the most a
-    /// render may take, and when this one started.
-    time_budget: Option<std::time::Duration>,
-    render_started: Option<std::time::Instant>,
-    /// Whether `active` is a selection with the normal slack, and the tool
-    /// motion it was made for.
-    selected: bool,
-    selected_dx: V3,
     ready: bool,
     /// The force message `seq` of the step the problem was taken at.
     seq: u64,
@@ -222,12 +170,18 @@ pub struct LocalProblem {
     /// The latest sample rendered from: its `seq`, and the points' force
     /// on the tool at its position less that at the problem's own.
     base: Option<(u64, V3)>,
-    /// With inertia: each tick's time (ns) and force change, oldest first
-    /// from `hist_next` on (a ring of [`HISTORY`]), `hist_len` filled.
-    hist_t_ns: [u64; HISTORY],
-    hist_change: [V3; HISTORY],
-    hist_len: usize,
-    hist_next: usize,
+    /// The tissue's condensed mass and velocities (empty: quasi-static).
+    inertia: Inertia,
+    /// With inertia: each tick's force change.
+    history: ForceHistory,
+    /// What a render may still spend.
+    budget: Budget,
+    /// The tool's recent positions, for its speed.
+    track: ToolTrack,
+    /// The points that may touch in this solve.
+    selection: Selection,
+    /// The Newton iterations' buffers.
+    scratch: Scratch,
 }
 
 impl Clone for LocalProblem {
@@ -238,57 +192,30 @@ impl Clone for LocalProblem {
     }
 
     fn clone_from(&mut self, o: &Self) {
-        let copy = |d: &mut Vec<f64>, s: &Vec<f64>| {
-            d.clear();
-            d.extend_from_slice(s);
-        };
+        // Vec::clone_from copies into the existing allocation (the full
+        // capacity `new` made), so a clone allocates nothing.
         self.tool_m = o.tool_m;
         self.parts = o.parts;
         self.part_count = o.part_count;
-        self.x.clear();
-        self.x.extend_from_slice(&o.x);
-        self.points.clear();
-        self.points.extend_from_slice(&o.points);
-        copy(&mut self.s, &o.s);
-        copy(&mut self.w, &o.w);
-        self.tslot.clear();
-        self.tslot.extend_from_slice(&o.tslot);
-        self.tverts.clear();
-        self.tverts.extend_from_slice(&o.tverts);
-        copy(&mut self.f0, &o.f0);
-        copy(&mut self.f0_eff, &o.f0_eff);
-        copy(&mut self.m_red, &o.m_red);
-        copy(&mut self.s_tick, &o.s_tick);
-        copy(&mut self.w_tick, &o.w_tick);
-        self.damping_per_s = o.damping_per_s;
-        self.step_s = o.step_s;
-        self.first_step = o.first_step;
-        self.tick_s = o.tick_s;
-        copy(&mut self.vel, &o.vel);
-        copy(&mut self.delta_prev, &o.delta_prev);
+        self.x.clone_from(&o.x);
+        self.points.clone_from(&o.points);
+        self.s.clone_from(&o.s);
+        self.w.clone_from(&o.w);
+        self.f0.clone_from(&o.f0);
+        self.f0_eff.clone_from(&o.f0_eff);
         self.tool_force0_n = o.tool_force0_n;
-        copy(&mut self.delta, &o.delta);
-        copy(&mut self.grad, &o.grad);
-        copy(&mut self.w_factor, &o.w_factor);
-        copy(&mut self.step, &o.step);
-        copy(&mut self.trial, &o.trial);
-        copy(&mut self.forces, &o.forces);
+        self.delta.clone_from(&o.delta);
         self.max_move_m = o.max_move_m;
-        self.tool_track = o.tool_track;
-        self.time_budget = o.time_budget;
-        self.active.clear();
-        self.active.extend_from_slice(&o.active);
-        self.selected = o.selected;
-        self.selected_dx = o.selected_dx;
-        copy(&mut self.start, &o.start);
         self.ready = o.ready;
         self.seq = o.seq;
         self.t_ns = o.t_ns;
         self.base = o.base;
-        self.hist_t_ns = o.hist_t_ns;
-        self.hist_change = o.hist_change;
-        self.hist_len = o.hist_len;
-        self.hist_next = o.hist_next;
+        self.inertia.clone_from(&o.inertia);
+        self.history = o.history;
+        self.budget.time = o.budget.time;
+        self.track = o.track;
+        self.selection.clone_from(&o.selection);
+        self.scratch.carry_from(&o.scratch);
     }
 }
 
@@ -316,53 +243,23 @@ impl LocalProblem {
             points: Vec::with_capacity(MAX_POINTS),
             s: Vec::with_capacity(n * n),
             w: Vec::with_capacity(n * n),
-            tslot: Vec::with_capacity(MAX_VERTICES),
-            tverts: Vec::with_capacity(MAX_VERTICES),
-            gt: Vec::with_capacity(n * n),
-            m: Vec::with_capacity(n * n),
-            wtt: Vec::with_capacity(n * n),
-            z: Vec::with_capacity(n),
-            y: Vec::with_capacity(n),
             f0: Vec::with_capacity(n),
             tool_force0_n: ZERO,
             f0_eff: Vec::with_capacity(n),
-            m_red: Vec::with_capacity(n * n),
-            s_tick: Vec::with_capacity(n * n),
-            w_tick: Vec::with_capacity(n * n),
-            damping_per_s: 0.0,
-            step_s: 0.0,
-            first_step: false,
-            tick_s: 0.0,
-            vel: Vec::with_capacity(n),
-            delta_prev: Vec::with_capacity(n),
             delta: Vec::with_capacity(n),
-            grad: Vec::with_capacity(n),
-            w_factor: Vec::with_capacity(n * n),
-            step: Vec::with_capacity(n),
-            trial: Vec::with_capacity(n),
-            forces: Vec::with_capacity(n),
             max_move_m: 0.0,
-            tool_track: [None; 2],
-            active: Vec::with_capacity(MAX_POINTS),
-            start: Vec::with_capacity(n),
-            sd: Vec::with_capacity(n),
-            sstep: Vec::with_capacity(n),
-            trial_sd: Vec::with_capacity(n),
-            budget: 0,
             converged: false,
             iterated: 0,
-            time_budget: None,
-            render_started: None,
-            selected: false,
-            selected_dx: ZERO,
             ready: false,
             seq: 0,
             t_ns: 0,
             base: None,
-            hist_t_ns: [0; HISTORY],
-            hist_change: [ZERO; HISTORY],
-            hist_len: 0,
-            hist_next: 0,
+            inertia: Inertia::with_capacity(n),
+            history: ForceHistory::default(),
+            budget: Budget::default(),
+            track: ToolTrack::default(),
+            selection: Selection::with_capacity(MAX_POINTS),
+            scratch: Scratch::with_capacity(MAX_VERTICES),
         }
     }
 
@@ -381,48 +278,7 @@ impl LocalProblem {
     /// solve goes on from there at the next tick, as when the iterations
     /// run out). `None` (the default): iterations only, deterministic.
     pub fn set_time_budget(&mut self, budget: Option<std::time::Duration>) {
-        self.time_budget = budget;
-    }
-
-    /// A new solve's budgets: [`RENDER_ITERATIONS`] iterations and, if
-    /// `timed` and a time budget is set, the clock started.
-    pub(super) fn begin_solve(&mut self, timed: bool) {
-        self.budget = RENDER_ITERATIONS;
-        self.render_started = self
-            .time_budget
-            .filter(|_| timed)
-            .map(|_| std::time::Instant::now());
-    }
-
-    /// Whether this render's time budget is spent.
-    pub(super) fn out_of_time(&self) -> bool {
-        match (self.time_budget, self.render_started) {
-            (Some(b), Some(t0)) => t0.elapsed() >= b,
-            _ => false,
-        }
-    }
-
-    /// Keeps the tool's position at `t_ns` for its speed (one older than
-    /// the newest kept is not kept).
-    pub(super) fn track_tool(&mut self, t_ns: u64, tool_m: V3) {
-        match self.tool_track[1] {
-            Some((t, _)) if t == t_ns => self.tool_track[1] = Some((t, tool_m)),
-            Some((t, _)) if t > t_ns => {}
-            _ => self.tool_track = [self.tool_track[1], Some((t_ns, tool_m))],
-        }
-    }
-
-    /// Whether the tool at `tool_m` at `now_ns` moves faster than
-    /// [`MAX_TOOL_SPEED_M_S`] since the last position kept before then.
-    pub(super) fn too_fast(&self, now_ns: u64, tool_m: V3) -> bool {
-        let before = match self.tool_track {
-            [_, Some((t, x))] if t < now_ns => Some((t, x)),
-            [Some((t, x)), _] if t < now_ns => Some((t, x)),
-            _ => None,
-        };
-        before.is_some_and(|(t_ns, at_m)| {
-            norm(sub(tool_m, at_m)) > MAX_TOOL_SPEED_M_S * (now_ns - t_ns) as f64 * 1e-9
-        })
+        self.budget.time = budget;
     }
 
     /// The force message `seq` of the step the problem was taken at.
@@ -435,7 +291,7 @@ impl LocalProblem {
     /// solve fails (then the caller holds the sample). The second value
     /// says whether any point touches the tool there.
     pub fn solve(&mut self, tool_m: V3) -> Option<(V3, bool)> {
-        self.begin_solve(true);
+        self.budget.begin(true);
         self.solve_within_budget(tool_m)
     }
 
@@ -446,52 +302,52 @@ impl LocalProblem {
         }
         let n = self.delta.len();
         let dx = sub(tool_m, self.tool_m);
-        let inertia = !self.m_red.is_empty();
+        let inertia = !self.inertia.m_red.is_empty();
         if inertia {
             // This step's inertial load: M (a delta_k + v_k / h), a = 1/h^2
             // + c/h, moved to f0.
-            let h = self.step_s;
-            let a = 1.0 / (h * h) + self.damping_per_s / h;
-            for (r, row) in self.m_red.chunks_exact(n).enumerate() {
+            let h = self.inertia.step_s;
+            let a = 1.0 / (h * h) + self.inertia.damping_per_s / h;
+            for (r, row) in self.inertia.m_red.chunks_exact(n).enumerate() {
                 let b: f64 = row
                     .iter()
-                    .zip(self.delta.iter().zip(&self.vel))
+                    .zip(self.delta.iter().zip(&self.inertia.vel))
                     .map(|(m, (d, v))| m * (a * d + v / h))
                     .sum();
                 self.f0_eff[r] = self.f0[r] - b;
             }
-            self.delta_prev.clear();
-            self.delta_prev.extend_from_slice(&self.delta);
+            self.inertia.delta_prev.clear();
+            self.inertia.delta_prev.extend_from_slice(&self.delta);
         }
-        let mut forces = std::mem::take(&mut self.forces);
+        let mut forces = std::mem::take(&mut self.scratch.forces);
         forces.resize(n, 0.0);
         // Newton over the points near the tool; then a check over all that
         // no other point touches, else again with a wider selection. With
         // the iteration budget spent, the state reached stands (the next
         // tick goes on from it).
         let mut slack_m = CANDIDATE_SLACK_M;
-        self.start.clear();
-        self.start.extend_from_slice(&self.delta);
+        self.scratch.start.clear();
+        self.scratch.start.extend_from_slice(&self.delta);
         for round in 0..3 {
             if round > 0 {
                 // From the warm start again: a point the last round left
                 // out may have gone through the capsule.
-                self.delta.copy_from_slice(&self.start);
+                self.delta.copy_from_slice(&self.scratch.start);
             }
             // The selection of an earlier tick serves while the tool is
             // within half the slack of where it was made (points entering
             // anyway are caught below).
-            let moved = norm(sub(dx, self.selected_dx));
-            if round > 0 || !self.selected || moved > 0.5 * CANDIDATE_SLACK_M {
+            let moved = norm(sub(dx, self.selection.selected_dx));
+            if round > 0 || !self.selection.selected || moved > 0.5 * CANDIDATE_SLACK_M {
                 self.select(dx, slack_m);
-                self.selected = round == 0;
-                self.selected_dx = dx;
+                self.selection.selected = round == 0;
+                self.selection.selected_dx = dx;
             }
             if !self.newton(dx, &mut forces) {
                 // The state before this solve stays (the next tick starts
                 // from it, as when the others-touch check fails below).
-                self.delta.copy_from_slice(&self.start);
-                self.forces = forces;
+                self.delta.copy_from_slice(&self.scratch.start);
+                self.scratch.forces = forces;
                 if inertia {
                     self.end_first_step();
                 }
@@ -500,12 +356,12 @@ impl LocalProblem {
             if !self.others_touch(dx) {
                 break;
             }
-            if self.budget == 0 || round == 2 {
+            if self.budget.left == 0 || round == 2 {
                 // Points outside the iterations touch and no time is left
                 // to take them in: this tick says nothing (the caller
                 // falls back), the next starts where this one did.
-                self.delta.copy_from_slice(&self.start);
-                self.forces = forces;
+                self.delta.copy_from_slice(&self.scratch.start);
+                self.scratch.forces = forces;
                 if inertia {
                     self.end_first_step();
                 }
@@ -518,15 +374,21 @@ impl LocalProblem {
             // render that started late): committing the unmoved state
             // would stop every vertex (v = 0). This tick falls back; the
             // next takes the same step again.
-            self.delta.copy_from_slice(&self.start);
-            self.forces = forces;
+            self.delta.copy_from_slice(&self.scratch.start);
+            self.scratch.forces = forces;
             return None;
         }
         // No point outside the active ones touches: they are the force.
         let (_, tool, touching) = self.evaluate(&self.delta, dx, &mut forces, None);
         if inertia {
-            let h = self.step_s;
-            for ((v, d), p) in self.vel.iter_mut().zip(&self.delta).zip(&self.delta_prev) {
+            let h = self.inertia.step_s;
+            for ((v, d), p) in self
+                .inertia
+                .vel
+                .iter_mut()
+                .zip(&self.delta)
+                .zip(&self.inertia.delta_prev)
+            {
                 *v = (d - p) / h;
             }
             self.end_first_step();
@@ -536,7 +398,7 @@ impl LocalProblem {
             .iter()
             .all(|x| x.is_finite())
             .then_some((change, touching));
-        self.forces = forces;
+        self.scratch.forces = forces;
         out
     }
 }

@@ -4,17 +4,140 @@
 //! search.
 
 use super::dense::{cholesky, cholesky_solve, closest_on_segment, lu_solve, spring};
-use super::{Block, LocalProblem, Point, TOLERANCE_M, TOLERANCE_N};
+use super::{Block, LocalProblem, Point, RENDER_ITERATIONS, TOLERANCE_M, TOLERANCE_N};
 use crate::math::{V3, ZERO, add, norm, scale, sub};
+
+/// What a render may still spend: Newton iterations and, with a time
+/// budget ([`LocalProblem::set_time_budget`]), time.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Budget {
+    /// Newton iterations left in this render (bounds the RT thread's time).
+    pub(super) left: usize,
+    /// The most a render may take, and when this one started.
+    pub(super) time: Option<std::time::Duration>,
+    started: Option<std::time::Instant>,
+}
+
+impl Budget {
+    /// A new solve's budgets: [`RENDER_ITERATIONS`] iterations and, if
+    /// `timed` and a time budget is set, the clock started.
+    pub(super) fn begin(&mut self, timed: bool) {
+        self.left = RENDER_ITERATIONS;
+        self.started = self
+            .time
+            .filter(|_| timed)
+            .map(|_| std::time::Instant::now());
+    }
+
+    /// Whether this render's time budget is spent.
+    pub(super) fn out_of_time(&self) -> bool {
+        match (self.time, self.started) {
+            (Some(b), Some(t0)) => t0.elapsed() >= b,
+            _ => false,
+        }
+    }
+}
+
+/// The points that may touch in this solve, and the tool motion the
+/// selection was made for.
+#[derive(Clone, Debug)]
+pub(super) struct Selection {
+    /// Their indices.
+    pub(super) active: Vec<u16>,
+    /// Whether `active` is a selection with the normal slack, and the tool
+    /// motion it was made for.
+    pub(super) selected: bool,
+    pub(super) selected_dx: V3,
+}
+
+impl Selection {
+    /// None, with room for `points`.
+    pub(super) fn with_capacity(points: usize) -> Self {
+        Self {
+            active: Vec::with_capacity(points),
+            selected: false,
+            selected_dx: ZERO,
+        }
+    }
+}
+
+/// The Newton iterations' buffers (3V or (3V)^2, allocated once).
+#[derive(Debug)]
+pub(super) struct Scratch {
+    /// Per vertex: its slot among the touched vertices T (u16::MAX: not
+    /// touched), and T.
+    pub(super) tslot: Vec<u16>,
+    pub(super) tverts: Vec<u16>,
+    /// The points' Hessian on T, I + G_T W_TT, W_TT gathered, W g, the
+    /// T-sized solve.
+    pub(super) gt: Vec<f64>,
+    pub(super) m: Vec<f64>,
+    pub(super) wtt: Vec<f64>,
+    pub(super) z: Vec<f64>,
+    pub(super) y: Vec<f64>,
+    pub(super) grad: Vec<f64>,
+    pub(super) step: Vec<f64>,
+    pub(super) trial: Vec<f64>,
+    /// S delta, S step, and S trial (kept so that no product with S is
+    /// needed inside the iterations: S W = I gives S step cheaply).
+    pub(super) sd: Vec<f64>,
+    pub(super) sstep: Vec<f64>,
+    pub(super) trial_sd: Vec<f64>,
+    /// delta at the start of the solve.
+    pub(super) start: Vec<f64>,
+    /// Of `set`: W's Cholesky factor.
+    pub(super) w_factor: Vec<f64>,
+    pub(super) forces: Vec<f64>,
+}
+
+impl Scratch {
+    /// Room for `vertices`.
+    pub(super) fn with_capacity(vertices: usize) -> Self {
+        let n = 3 * vertices;
+        Self {
+            tslot: Vec::with_capacity(vertices),
+            tverts: Vec::with_capacity(vertices),
+            gt: Vec::with_capacity(n * n),
+            m: Vec::with_capacity(n * n),
+            wtt: Vec::with_capacity(n * n),
+            z: Vec::with_capacity(n),
+            y: Vec::with_capacity(n),
+            grad: Vec::with_capacity(n),
+            step: Vec::with_capacity(n),
+            trial: Vec::with_capacity(n),
+            sd: Vec::with_capacity(n),
+            sstep: Vec::with_capacity(n),
+            trial_sd: Vec::with_capacity(n),
+            start: Vec::with_capacity(n),
+            w_factor: Vec::with_capacity(n * n),
+            forces: Vec::with_capacity(n),
+        }
+    }
+
+    /// Copies what a clone of the problem carries (into the existing
+    /// allocations): the touched set, the factor and the last step; the
+    /// iterations' own products (`gt`, `m`, `wtt`, `z`, `y`, `sd`, `sstep`,
+    /// `trial_sd`) are rebuilt before they are read.
+    pub(super) fn carry_from(&mut self, o: &Self) {
+        self.tslot.clone_from(&o.tslot);
+        self.tverts.clone_from(&o.tverts);
+        self.grad.clone_from(&o.grad);
+        self.w_factor.clone_from(&o.w_factor);
+        self.step.clone_from(&o.step);
+        self.trial.clone_from(&o.trial);
+        self.forces.clone_from(&o.forces);
+        self.start.clone_from(&o.start);
+    }
+}
 
 impl LocalProblem {
     /// The active points: those within `slack_m` of touching the tool moved
     /// by `dx` at the current delta.
     pub(super) fn select(&mut self, dx: V3, slack_m: f64) {
-        self.active.clear();
+        self.selection.active.clear();
         for (i, p) in self.points.iter().enumerate() {
             if self.gap_m(p, &self.delta, dx) < slack_m {
-                self.active.push(i as u16);
+                self.selection.active.push(i as u16);
             }
         }
     }
@@ -23,7 +146,7 @@ impl LocalProblem {
     pub(super) fn others_touch(&self, dx: V3) -> bool {
         let mut k = 0;
         for (i, p) in self.points.iter().enumerate() {
-            if self.active.get(k) == Some(&(i as u16)) {
+            if self.selection.active.get(k) == Some(&(i as u16)) {
                 k += 1;
                 continue;
             }
@@ -66,29 +189,31 @@ impl LocalProblem {
         self.converged = false;
         self.iterated = 0;
         // S delta once, exactly; then kept up to date with S step.
-        self.sd.clear();
+        self.scratch.sd.clear();
         for row in self.s.chunks_exact(n) {
-            self.sd
+            self.scratch
+                .sd
                 .push(row.iter().zip(&self.delta).map(|(a, b)| a * b).sum());
         }
-        let mut energy = self.energy(&self.delta, &self.sd, dx, forces);
-        while self.budget > 0 {
-            if self.out_of_time() {
-                self.budget = 0;
+        let mut energy = self.energy(&self.delta, &self.scratch.sd, dx, forces);
+        while self.budget.left > 0 {
+            if self.budget.out_of_time() {
+                self.budget.left = 0;
                 break;
             }
-            self.budget -= 1;
+            self.budget.left -= 1;
             self.iterated += 1;
             // Gradient S delta + f0 - f(delta).
-            self.grad.clear();
-            self.grad.extend(
-                self.sd
+            self.scratch.grad.clear();
+            self.scratch.grad.extend(
+                self.scratch
+                    .sd
                     .iter()
                     .zip(&self.f0_eff)
                     .zip(forces.iter())
                     .map(|((s, f0), f)| s + f0 - f),
             );
-            if self.grad.iter().all(|g| g.abs() < TOLERANCE_N) {
+            if self.scratch.grad.iter().all(|g| g.abs() < TOLERANCE_N) {
                 self.converged = true;
                 break;
             }
@@ -99,27 +224,38 @@ impl LocalProblem {
                 return false;
             }
             self.trust_region();
-            let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
+            let slope: f64 = self
+                .scratch
+                .step
+                .iter()
+                .zip(&self.scratch.grad)
+                .map(|(a, b)| a * b)
+                .sum();
             // Backtracking on Pi (Armijo).
             let mut alpha = 1.0;
             let mut accepted = false;
             for _ in 0..30 {
-                self.trial.clear();
-                self.trial.extend(
+                self.scratch.trial.clear();
+                self.scratch.trial.extend(
                     self.delta
                         .iter()
-                        .zip(&self.step)
+                        .zip(&self.scratch.step)
                         .map(|(d, s)| d + alpha * s),
                 );
-                self.trial_sd.clear();
-                self.trial_sd
-                    .extend(self.sd.iter().zip(&self.sstep).map(|(d, s)| d + alpha * s));
+                self.scratch.trial_sd.clear();
+                self.scratch.trial_sd.extend(
+                    self.scratch
+                        .sd
+                        .iter()
+                        .zip(&self.scratch.sstep)
+                        .map(|(d, s)| d + alpha * s),
+                );
                 let (trial, trial_sd) = (
-                    std::mem::take(&mut self.trial),
-                    std::mem::take(&mut self.trial_sd),
+                    std::mem::take(&mut self.scratch.trial),
+                    std::mem::take(&mut self.scratch.trial_sd),
                 );
                 let e = self.energy(&trial, &trial_sd, dx, forces);
-                (self.trial, self.trial_sd) = (trial, trial_sd);
+                (self.scratch.trial, self.scratch.trial_sd) = (trial, trial_sd);
                 if e <= energy + 1e-4 * alpha * slope || slope >= 0.0 || slope.is_nan() {
                     energy = e;
                     accepted = true;
@@ -129,13 +265,13 @@ impl LocalProblem {
             }
             if !accepted {
                 // No descent left: a minimum to rounding.
-                self.energy(&self.delta, &self.sd, dx, forces);
+                self.energy(&self.delta, &self.scratch.sd, dx, forces);
                 self.converged = true;
                 return true;
             }
-            std::mem::swap(&mut self.delta, &mut self.trial);
-            std::mem::swap(&mut self.sd, &mut self.trial_sd);
-            let moved = self.step.iter().fold(0.0f64, |m, s| m.max(s.abs())) * alpha;
+            std::mem::swap(&mut self.delta, &mut self.scratch.trial);
+            std::mem::swap(&mut self.scratch.sd, &mut self.scratch.trial_sd);
+            let moved = self.scratch.step.iter().fold(0.0f64, |m, s| m.max(s.abs())) * alpha;
             if moved < TOLERANCE_M {
                 self.converged = true;
                 break;
@@ -166,8 +302,14 @@ impl LocalProblem {
                 return false;
             }
         }
-        let slope: f64 = self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum();
-        slope < 0.0 && self.step.iter().all(|x| x.is_finite())
+        let slope: f64 = self
+            .scratch
+            .step
+            .iter()
+            .zip(&self.scratch.grad)
+            .map(|(a, b)| a * b)
+            .sum();
+        slope < 0.0 && self.scratch.step.iter().all(|x| x.is_finite())
     }
 
     /// Before a step: T, z = W g, step = -z, S step = -g and the points'
@@ -175,36 +317,39 @@ impl LocalProblem {
     pub(super) fn prepare_step(&mut self, dx: V3, forces: &mut [f64], springs_only: bool) -> usize {
         let n = self.delta.len();
         // T.
-        for v in self.tverts.drain(..) {
-            self.tslot[v as usize] = u16::MAX;
+        for v in self.scratch.tverts.drain(..) {
+            self.scratch.tslot[v as usize] = u16::MAX;
         }
-        for &i in &self.active {
+        for &i in &self.selection.active {
             let p = &self.points[i as usize];
             if self.gap_m(p, &self.delta, dx) < 0.0 {
                 for &v in &p.slots {
-                    if self.tslot[v as usize] == u16::MAX {
-                        self.tslot[v as usize] = self.tverts.len() as u16;
-                        self.tverts.push(v);
+                    if self.scratch.tslot[v as usize] == u16::MAX {
+                        self.scratch.tslot[v as usize] = self.scratch.tverts.len() as u16;
+                        self.scratch.tverts.push(v);
                     }
                 }
             }
         }
-        let t = 3 * self.tverts.len();
+        let t = 3 * self.scratch.tverts.len();
         // z = W g.
-        self.z.clear();
+        self.scratch.z.clear();
         for row in self.w.chunks_exact(n) {
-            self.z
-                .push(row.iter().zip(&self.grad).map(|(a, b)| a * b).sum());
+            self.scratch
+                .z
+                .push(row.iter().zip(&self.scratch.grad).map(|(a, b)| a * b).sum());
         }
-        self.step.clear();
-        self.step.extend(self.z.iter().map(|z| -z));
+        self.scratch.step.clear();
+        self.scratch.step.extend(self.scratch.z.iter().map(|z| -z));
         // S step = -g + P_T^T y (S W = I).
-        self.sstep.clear();
-        self.sstep.extend(self.grad.iter().map(|g| -g));
+        self.scratch.sstep.clear();
+        self.scratch
+            .sstep
+            .extend(self.scratch.grad.iter().map(|g| -g));
         if t > 0 {
-            self.gt.clear();
-            self.gt.resize(t * t, 0.0);
-            let mut gt = std::mem::take(&mut self.gt);
+            self.scratch.gt.clear();
+            self.scratch.gt.resize(t * t, 0.0);
+            let mut gt = std::mem::take(&mut self.scratch.gt);
             self.evaluate(
                 &self.delta,
                 dx,
@@ -212,11 +357,11 @@ impl LocalProblem {
                 Some(Block {
                     h: &mut gt,
                     springs_only,
-                    slot: &self.tslot,
+                    slot: &self.scratch.tslot,
                     size: t,
                 }),
             );
-            self.gt = gt;
+            self.scratch.gt = gt;
         }
         t
     }
@@ -230,42 +375,43 @@ impl LocalProblem {
         let n = self.delta.len();
         let dof = |k: usize, tv: &[u16]| 3 * tv[k / 3] as usize + k % 3;
         // W_TT, contiguous, in `m`'s place for the moment: then the sum.
-        self.wtt.clear();
+        self.scratch.wtt.clear();
         for k in 0..t {
-            let r = dof(k, &self.tverts) * n;
-            self.wtt
-                .extend((0..t).map(|l| self.w[r + dof(l, &self.tverts)]));
+            let r = dof(k, &self.scratch.tverts) * n;
+            self.scratch
+                .wtt
+                .extend((0..t).map(|l| self.w[r + dof(l, &self.scratch.tverts)]));
         }
-        self.m.clear();
-        self.m.resize(t * t, 0.0);
-        self.y.clear();
+        self.scratch.m.clear();
+        self.scratch.m.resize(t * t, 0.0);
+        self.scratch.y.clear();
         for k in 0..t {
-            let row = &self.gt[k * t..(k + 1) * t];
-            let out = &mut self.m[k * t..(k + 1) * t];
+            let row = &self.scratch.gt[k * t..(k + 1) * t];
+            let out = &mut self.scratch.m[k * t..(k + 1) * t];
             let mut yk = 0.0;
             for (l, &g) in row.iter().enumerate() {
                 if g == 0.0 {
                     continue;
                 }
-                yk += g * self.z[dof(l, &self.tverts)];
-                for (o, w) in out.iter_mut().zip(&self.wtt[l * t..(l + 1) * t]) {
+                yk += g * self.scratch.z[dof(l, &self.scratch.tverts)];
+                for (o, w) in out.iter_mut().zip(&self.scratch.wtt[l * t..(l + 1) * t]) {
                     *o += g * w;
                 }
             }
             out[k] += 1.0;
-            self.y.push(yk);
+            self.scratch.y.push(yk);
         }
-        if !lu_solve(&mut self.m, &mut self.y, t) {
+        if !lu_solve(&mut self.scratch.m, &mut self.scratch.y, t) {
             return false;
         }
         for k in 0..t {
-            self.sstep[dof(k, &self.tverts)] += self.y[k];
+            self.scratch.sstep[dof(k, &self.scratch.tverts)] += self.scratch.y[k];
         }
         // step = -z + W_:T y.
-        for (r, out) in self.step.iter_mut().enumerate() {
+        for (r, out) in self.scratch.step.iter_mut().enumerate() {
             let row = &self.w[r * n..(r + 1) * n];
             *out += (0..t)
-                .map(|k| row[dof(k, &self.tverts)] * self.y[k])
+                .map(|k| row[dof(k, &self.scratch.tverts)] * self.scratch.y[k])
                 .sum::<f64>();
         }
         true
@@ -279,29 +425,31 @@ impl LocalProblem {
     pub(super) fn full_step(&mut self, t: usize) -> bool {
         let n = self.delta.len();
         let dof = |k: usize, tv: &[u16]| 3 * tv[k / 3] as usize + k % 3;
-        self.m.clear();
-        self.m.extend_from_slice(&self.s);
+        self.scratch.m.clear();
+        self.scratch.m.extend_from_slice(&self.s);
         for k in 0..t {
-            let r = dof(k, &self.tverts) * n;
+            let r = dof(k, &self.scratch.tverts) * n;
             for l in 0..t {
-                self.m[r + dof(l, &self.tverts)] += self.gt[k * t + l];
+                self.scratch.m[r + dof(l, &self.scratch.tverts)] += self.scratch.gt[k * t + l];
             }
         }
-        if !cholesky(&mut self.m, n) {
+        if !cholesky(&mut self.scratch.m, n) {
             return false;
         }
-        self.step.clear();
-        self.step.extend(self.grad.iter().map(|g| -g));
-        cholesky_solve(&self.m, &mut self.step, n);
+        self.scratch.step.clear();
+        self.scratch
+            .step
+            .extend(self.scratch.grad.iter().map(|g| -g));
+        cholesky_solve(&self.scratch.m, &mut self.scratch.step, n);
         // S step = -g - G step (H step = -g).
         for k in 0..t {
-            let row = &self.gt[k * t..(k + 1) * t];
+            let row = &self.scratch.gt[k * t..(k + 1) * t];
             let gs: f64 = row
                 .iter()
                 .enumerate()
-                .map(|(l, g)| g * self.step[dof(l, &self.tverts)])
+                .map(|(l, g)| g * self.scratch.step[dof(l, &self.scratch.tverts)])
                 .sum();
-            self.sstep[dof(k, &self.tverts)] -= gs;
+            self.scratch.sstep[dof(k, &self.scratch.tverts)] -= gs;
         }
         true
     }
@@ -312,14 +460,15 @@ impl LocalProblem {
     /// equilibrium).
     pub(super) fn trust_region(&mut self) {
         let longest = self
+            .scratch
             .step
             .chunks_exact(3)
             .map(|s| norm([s[0], s[1], s[2]]))
             .fold(0.0f64, f64::max);
         if longest > self.max_move_m {
             let k = self.max_move_m / longest;
-            self.step.iter_mut().for_each(|s| *s *= k);
-            self.sstep.iter_mut().for_each(|s| *s *= k);
+            self.scratch.step.iter_mut().for_each(|s| *s *= k);
+            self.scratch.sstep.iter_mut().for_each(|s| *s *= k);
         }
     }
 
@@ -349,7 +498,7 @@ impl LocalProblem {
         forces.iter_mut().for_each(|f| *f = 0.0);
         let mut energy = 0.0;
         let mut tool = ZERO;
-        for &i in &self.active {
+        for &i in &self.selection.active {
             let p = &self.points[i as usize];
             let y = self.point_position(p, delta);
             let c = &self.parts[p.part as usize];

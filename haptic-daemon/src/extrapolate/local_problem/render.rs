@@ -2,7 +2,7 @@
 //! and the problem solved (or stepped) for the tool's position, re-based
 //! on a sample newer than the problem, capped.
 
-use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS, RELEASE_SHARE};
+use super::{CHANGE_OF_STIFFNESS, LocalProblem, MAX_AGE_NS, MAX_TOOL_SPEED_M_S, RELEASE_SHARE};
 use crate::extrapolate::ForceSample;
 use crate::math::{V3, ZERO, add, dot, mat_vec, norm, scale, spectral_norm, sub};
 
@@ -23,6 +23,38 @@ fn hand_still_in_contact(latest: &ForceSample, tool_m: V3) -> bool {
         out_m < RELEASE_SHARE * f / k_n
     } else {
         out_m <= 0.0
+    }
+}
+
+/// The tool's last two positions given (renders and catch-up steps) at
+/// distinct times (ns), the newer second: its speed.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct ToolTrack {
+    positions: [Option<(u64, V3)>; 2],
+}
+
+impl ToolTrack {
+    /// Keeps the tool's position at `t_ns` (one older than the newest kept
+    /// is not kept).
+    pub(super) fn keep(&mut self, t_ns: u64, tool_m: V3) {
+        match self.positions[1] {
+            Some((t, _)) if t == t_ns => self.positions[1] = Some((t, tool_m)),
+            Some((t, _)) if t > t_ns => {}
+            _ => self.positions = [self.positions[1], Some((t_ns, tool_m))],
+        }
+    }
+
+    /// Whether the tool at `tool_m` at `now_ns` moves faster than
+    /// [`MAX_TOOL_SPEED_M_S`] since the last position kept before then.
+    pub(super) fn too_fast(&self, now_ns: u64, tool_m: V3) -> bool {
+        let before = match self.positions {
+            [_, Some((t, x))] if t < now_ns => Some((t, x)),
+            [Some((t, x)), _] if t < now_ns => Some((t, x)),
+            _ => None,
+        };
+        before.is_some_and(|(t_ns, at_m)| {
+            norm(sub(tool_m, at_m)) > MAX_TOOL_SPEED_M_S * (now_ns - t_ns) as f64 * 1e-9
+        })
     }
 }
 
@@ -66,13 +98,13 @@ impl LocalProblem {
         // (this tick's is rendered from the sample if it is too fast; the
         // problem is stepped all the same, so that it goes on from the
         // hand's path when the tool slows).
-        let too_fast = self.too_fast(now_ns, tool_m);
-        self.track_tool(now_ns, tool_m);
+        let too_fast = self.track.too_fast(now_ns, tool_m);
+        self.track.keep(now_ns, tool_m);
         // One budget for the whole tick.
-        self.begin_solve(true);
+        self.budget.begin(true);
         // Quasi-static, the base first (its solve moves the warm start);
         // with inertia after this tick's step, which the history then has.
-        let inertia = !self.m_red.is_empty();
+        let inertia = !self.inertia.m_red.is_empty();
         let early = if inertia {
             None
         } else {
@@ -80,7 +112,7 @@ impl LocalProblem {
         };
         let (change, touching) = self.solve_within_budget(tool_m)?;
         if inertia {
-            self.remember(now_ns, change);
+            self.history.remember(now_ns, change);
         }
         let base = match early {
             Some(base) => base,
@@ -132,10 +164,10 @@ impl LocalProblem {
         }
         let base = if latest.seq == self.seq {
             ZERO
-        } else if self.m_red.is_empty() {
+        } else if self.inertia.m_red.is_empty() {
             self.solve_within_budget(latest.position_m)?.0
         } else {
-            self.change_at(latest.t_ns)?
+            self.history.change_at(latest.t_ns, self.t_ns)?
         };
         self.base = Some((latest.seq, base));
         Some(base)

@@ -34,7 +34,7 @@ impl LocalProblem {
         self.seq = msg.seq;
         self.t_ns = msg.t_ns;
         // The tool's first position is the problem's own.
-        self.track_tool(msg.t_ns, msg.tool_position_m);
+        self.track.keep(msg.t_ns, msg.tool_position_m);
         Ok(())
     }
 
@@ -90,9 +90,8 @@ impl LocalProblem {
             .fold(f64::INFINITY, f64::min)
             * TRUST_OF_RADIUS;
         self.base = None;
-        self.tool_track = [None; 2];
-        self.hist_len = 0;
-        self.hist_next = 0;
+        self.track = super::ToolTrack::default();
+        self.history.clear();
         self.seq = 0;
         self.t_ns = 0;
         self.x.clear();
@@ -102,29 +101,29 @@ impl LocalProblem {
         // S = W^-1 from W's Cholesky factor.
         self.w.clear();
         self.w.extend_from_slice(w);
-        self.tslot.clear();
-        self.tslot.resize(nv, u16::MAX);
-        self.tverts.clear();
-        self.w_factor.clear();
-        self.w_factor.extend_from_slice(w);
-        if !cholesky(&mut self.w_factor, n) {
+        self.scratch.tslot.clear();
+        self.scratch.tslot.resize(nv, u16::MAX);
+        self.scratch.tverts.clear();
+        self.scratch.w_factor.clear();
+        self.scratch.w_factor.extend_from_slice(w);
+        if !cholesky(&mut self.scratch.w_factor, n) {
             return Err(LocalProblemError::NotDefinite);
         }
-        cholesky_inverse(&self.w_factor, &mut self.m, &mut self.s, n);
+        cholesky_inverse(&self.scratch.w_factor, &mut self.scratch.m, &mut self.s, n);
         self.delta.clear();
         self.delta.resize(n, 0.0);
         self.f0.clear();
         self.f0.resize(n, 0.0);
-        self.active.clear();
-        self.active.extend(0..points.len() as u16);
-        self.selected = false;
+        self.selection.active.clear();
+        self.selection.active.extend(0..points.len() as u16);
+        self.selection.selected = false;
         let mut f0 = std::mem::take(&mut self.f0);
         self.tool_force0_n = self.evaluate(&self.delta, ZERO, &mut f0, None).1;
         self.f0 = f0;
         self.f0_eff.clear();
         self.f0_eff.extend_from_slice(&self.f0);
         // Quasi-static until set_inertia.
-        self.m_red.clear();
+        self.inertia.m_red.clear();
         // No surface near the tool: nothing to solve (the caller's
         // fallback renders the sample).
         self.ready = n > 0 && !points.is_empty();

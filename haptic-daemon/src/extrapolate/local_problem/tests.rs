@@ -419,27 +419,27 @@ fn the_push_through_and_the_full_factorisation_take_the_same_step() {
     let mut forces = vec![0.0; n];
     let delta = p.delta.clone();
     p.evaluate(&delta, dx, &mut forces, None);
-    p.grad = (0..n).map(|i| p.f0_eff[i] - forces[i]).collect();
+    p.scratch.grad = (0..n).map(|i| p.f0_eff[i] - forces[i]).collect();
     for springs_only in [false, true] {
         let t = p.prepare_step(dx, &mut forces, springs_only);
         assert_eq!(t, 9, "the first triangle's vertices");
         assert!(p.pushed_through_step(t));
-        let (step, sstep) = (p.step.clone(), p.sstep.clone());
+        let (step, sstep) = (p.scratch.step.clone(), p.scratch.sstep.clone());
         p.prepare_step(dx, &mut forces, springs_only);
         assert!(p.full_step(t));
         let size = step.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(size > 1e-6, "{step:?}");
         for i in 0..n {
             assert!(
-                (step[i] - p.step[i]).abs() < 1e-9 * size,
+                (step[i] - p.scratch.step[i]).abs() < 1e-9 * size,
                 "{step:?} {:?}",
-                p.step
+                p.scratch.step
             );
             let ss = sstep.iter().fold(0.0f64, |m, x| m.max(x.abs()));
             assert!(
-                (sstep[i] - p.sstep[i]).abs() < 1e-9 * ss,
+                (sstep[i] - p.scratch.sstep[i]).abs() < 1e-9 * ss,
                 "{sstep:?} {:?}",
-                p.sstep
+                p.scratch.sstep
             );
         }
     }

@@ -121,10 +121,10 @@ fn with_inertia_a_step_without_a_single_iteration_is_not_committed() {
     let (mut p, centre) = with_inertia(0.01, 10.0, 1e-3);
     let mut twin = p.clone();
     let down = [centre[0], centre[1], centre[2] - 2e-4];
-    let (vel, delta) = (p.vel.clone(), p.delta.clone());
+    let (vel, delta) = (p.inertia.vel.clone(), p.delta.clone());
     p.set_time_budget(Some(std::time::Duration::ZERO));
     assert!(p.solve(down).is_none());
-    assert_eq!((&p.vel, &p.delta), (&vel, &delta));
+    assert_eq!((&p.inertia.vel, &p.delta), (&vel, &delta));
     p.set_time_budget(None);
     let (a, b) = (p.solve(down).unwrap().0, twin.solve(down).unwrap().0);
     assert!(norm(sub(a, b)) < 1e-12, "{a:?} vs {b:?}");

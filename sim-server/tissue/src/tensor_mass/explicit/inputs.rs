@@ -22,14 +22,14 @@ impl<S: Storage> Explicit<S> {
         self.constraint[v.idx()] = kind::PRESCRIBED;
         self.target[v.idx()] = d_m.to_array();
         self.refresh_vertex(v.idx());
-        self.prediction.touch(v.idx());
+        self.ahead.prediction.touch(v.idx());
     }
 
     /// Frees vertex `v` (its current displacement and velocity are kept).
     pub fn release(&mut self, v: VertexId) {
         self.constraint[v.idx()] = kind::FREE;
         self.refresh_vertex(v.idx());
-        self.prediction.touch(v.idx());
+        self.ahead.prediction.touch(v.idx());
     }
 
     /// Sets the external force (N) on vertex `v`. The first call allocates the
@@ -39,7 +39,7 @@ impl<S: Storage> Explicit<S> {
             self.fext = huge_vec(self.u.len(), [0.0; 3]);
         }
         self.fext[v.idx()] = f_n.to_array();
-        self.prediction.touch(v.idx());
+        self.ahead.prediction.touch(v.idx());
     }
 
     /// Removes all external forces.
@@ -120,11 +120,11 @@ impl<S: Storage> Explicit<S> {
         // element's four rows read its tensors (its edges join only those
         // vertices) and their masses, so they are recomputed like rows
         // whose hold changed.
-        self.ku_ready = false;
+        self.ahead.ku_ready = false;
         self.kernel.update(&self.model, change);
         for v in change.vertices {
             self.refresh_vertex(v.idx());
-            self.prediction.touch(v.idx());
+            self.ahead.prediction.touch(v.idx());
         }
     }
 
@@ -168,7 +168,7 @@ impl<S: Storage> Explicit<S> {
     /// them and waits) and returns how many: none on one thread, where
     /// the caller's thread steps.
     pub fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
-        match &self.pool {
+        match &self.parts.pool {
             Some(pool) => pool.broadcast(|_| f()).len(),
             None => 0,
         }
@@ -182,17 +182,17 @@ impl<S: Storage> Explicit<S> {
 
     /// The enforced stability bound.
     pub fn stable_step(&self) -> StableStep {
-        self.stable
+        self.size.stable
     }
 
     /// Sub-steps per step (1 when dt is under the bound).
     pub fn substeps(&self) -> usize {
-        self.substeps
+        self.size.substeps
     }
 
     /// The step (s).
     pub fn dt_s(&self) -> Real {
-        self.dt_s
+        self.size.dt_s
     }
 
     /// Steps taken.
@@ -202,14 +202,14 @@ impl<S: Storage> Explicit<S> {
 
     /// Velocity of `v` (m/s): the last sub-step's backward difference.
     pub fn velocity(&self, v: VertexId) -> Vec3 {
-        let h = self.dt_s / self.substeps as Real;
+        let h = self.size.dt_s / self.size.substeps as Real;
         (Vec3::from_array(self.u[v.idx()]) - Vec3::from_array(self.next[v.idx()])) / h
     }
 
     /// Kinetic plus elastic energy (J), velocities by the centred difference
     /// of the last two states (for tests and diagnostics; allocates).
     pub fn energy_j(&self) -> Real {
-        let h = self.dt_s / self.substeps as Real;
+        let h = self.size.dt_s / self.size.substeps as Real;
         let u: Vec<Vec3> = self.u.iter().map(|a| Vec3::from_array(*a)).collect();
         let kinetic: Real = self
             .u
@@ -239,6 +239,6 @@ impl<S: Storage> Explicit<S> {
 
     /// The number of parts a step is split into.
     pub fn parts(&self) -> usize {
-        self.plans.len()
+        self.parts.plans.len()
     }
 }

@@ -27,6 +27,53 @@ struct Pass<'a, S: Storage> {
     ku_ahead: &'a mut [V3],
 }
 
+/// The thread parts of a kernel pass: how the vertices are split, each
+/// part's buffers, and the pool that runs them (`None`: one thread).
+struct Parts {
+    threads: usize,
+    plans: Vec<PartPlan>,
+    buffers: Vec<PartBuffers>,
+    pool: Option<rayon::ThreadPool>,
+}
+
+/// The step size and its sub-steps, with the bounds they follow.
+struct StepSize {
+    /// The contact springs' share of omega_max^2 ([`Explicit::set_contact_bound`]).
+    contact_omega2: Real,
+    /// The nonlinear elements' tangent bound the sub-steps follow: the
+    /// largest recent one, decaying by [`step_size::TANGENT_DECAY_PER_STEP`].
+    tangent_lambda: Real,
+    stable: StableStep,
+    /// The bound of the elastic model alone (before contact springs).
+    elastic_stable: StableStep,
+    policy: DtPolicy,
+    dt_s: Real,
+    substeps: usize,
+    /// Sub-steps the elastic model alone needs.
+    elastic_substeps: usize,
+    /// Every step's sub-steps are multiplied by this
+    /// ([`Explicit::set_substep_factor`]).
+    substep_factor: usize,
+    /// Times the sub-step count changed.
+    resubsteps: u64,
+}
+
+/// What is computed ahead of the next step while the loop waits for a pose.
+struct Ahead {
+    /// K U(t) of the next step's first sub-step, computed by
+    /// [`Explicit::prepare_step`] (valid while `ku_ready`).
+    ku_ahead: Vec<V3>,
+    ku_ready: bool,
+    /// The whole next step computed without the tools, where every row is
+    /// the linear kernel's (see `tensor_mass/explicit/predicted/`).
+    prediction: Prediction,
+    /// Steps finished from a prediction.
+    predicted_steps: u64,
+    /// The contact field's re-selection period of the last contact step
+    /// (a prediction is not made for steps it would split).
+    resample_every_s: Option<Real>,
+}
+
 /// The explicit tensor-mass simulation, generic over the kernel's storage precision.
 pub struct Explicit<S: Storage> {
     model: ElasticModel,
@@ -46,48 +93,19 @@ pub struct Explicit<S: Storage> {
     /// when every element is nonlinear (none and empty in a linear scene).
     large: Option<LargeStrain>,
     fnl: Vec<V3>,
-    threads: usize,
-    /// The contact springs' share of omega_max^2 ([`Explicit::set_contact_bound`]).
-    contact_omega2: Real,
-    /// The nonlinear elements' tangent bound the sub-steps follow: the
-    /// largest recent one, decaying by [`step_size::TANGENT_DECAY_PER_STEP`].
-    tangent_lambda: Real,
-    plans: Vec<PartPlan>,
-    buffers: Vec<PartBuffers>,
-    pool: Option<rayon::ThreadPool>,
-    stable: StableStep,
-    /// The bound of the elastic model alone (before contact springs).
-    elastic_stable: StableStep,
-    policy: DtPolicy,
-    dt_s: Real,
-    substeps: usize,
-    /// Sub-steps the elastic model alone needs.
-    elastic_substeps: usize,
-    /// Every step's sub-steps are multiplied by this
-    /// ([`Explicit::set_substep_factor`]).
-    substep_factor: usize,
-    /// Times the sub-step count changed.
-    resubsteps: u64,
+    /// The thread parts of a pass.
+    parts: Parts,
+    /// The step, its sub-steps and the bounds they follow.
+    size: StepSize,
     steps: u64,
-    /// K U(t) of the next step's first sub-step, computed ahead by
-    /// [`Explicit::prepare_step`] while the loop waits for a pose (valid
-    /// while `ku_ready`).
-    ku_ahead: Vec<V3>,
-    ku_ready: bool,
-    /// The whole next step computed ahead without the tools, where every
-    /// row is the linear kernel's (see `tensor_mass/explicit/predicted/`).
-    prediction: Prediction,
-    /// Steps finished from a prediction.
-    predicted_steps: u64,
-    /// The contact field's re-selection period of the last contact step
-    /// (a prediction is not made for steps it would split).
-    resample_every_s: Option<Real>,
+    /// What is computed ahead of the next step while the loop waits.
+    ahead: Ahead,
 }
 
 impl<S: Storage> Explicit<S> {
     /// Recomputes the integration coefficients and kind of vertex `v`.
     fn refresh_vertex(&mut self, v: usize) {
-        let h = self.dt_s / self.substeps as Real;
+        let h = self.size.dt_s / self.size.substeps as Real;
         let m = self.model.masses_kg()[v];
         let c = self.model.damping_kg_s()[v];
         if m > 0.0 {
@@ -104,12 +122,12 @@ impl<S: Storage> Explicit<S> {
 
     /// Advances by `dt_s` (in `substeps()` equal sub-steps).
     pub fn step(&mut self) {
-        if self.prediction.ready(self.substeps) {
+        if self.ahead.prediction.ready(self.size.substeps) {
             self.finish_predicted(None::<&mut NoForce>);
             return;
         }
         let mut k = 0;
-        while k < self.substeps {
+        while k < self.size.substeps {
             self.membrane_step();
             k *= self.large_strain_pass();
             self.kernel_step();
@@ -129,8 +147,8 @@ impl<S: Storage> Explicit<S> {
         };
         let u = &self.u;
         let fnl = &mut self.fnl;
-        match &self.pool {
-            Some(pool) => pool.install(|| large.pass(u, fnl, self.threads)),
+        match &self.parts.pool {
+            Some(pool) => pool.install(|| large.pass(u, fnl, self.parts.threads)),
             None => large.pass(u, fnl, 1),
         }
         self.refine_mid_step()
@@ -152,15 +170,15 @@ impl<S: Storage> Explicit<S> {
             return 1;
         }
         let needed = self.needed_substeps(now);
-        if needed <= self.substeps {
+        if needed <= self.size.substeps {
             return 1;
         }
         let factor = needed
-            .div_ceil(self.substeps)
-            .min(MAX_SUBSTEPS / self.substeps)
+            .div_ceil(self.size.substeps)
+            .min(MAX_SUBSTEPS / self.size.substeps)
             .max(1);
-        self.tangent_lambda = self.tangent_lambda.max(now);
-        self.resubstep(self.substeps * factor);
+        self.size.tangent_lambda = self.size.tangent_lambda.max(now);
+        self.resubstep(self.size.substeps * factor);
         factor
     }
 
@@ -182,36 +200,36 @@ impl<S: Storage> Explicit<S> {
         if self.fmem.len() != self.u.len() {
             self.fmem = huge_vec(self.u.len(), [0.0; 3]);
         }
-        let mut h = self.dt_s / self.substeps as Real;
+        let mut h = self.size.dt_s / self.size.substeps as Real;
         let mut every = ((resample_every_s / h).floor() as usize).max(1);
-        self.resample_every_s = Some(resample_every_s);
-        if self.prediction.ready(self.substeps) {
+        self.ahead.resample_every_s = Some(resample_every_s);
+        if self.ahead.prediction.ready(self.size.substeps) {
             // The prediction cannot re-select points inside the step.
-            if every >= self.substeps {
+            if every >= self.size.substeps {
                 self.finish_predicted(Some(field));
                 return;
             }
             self.forget_prepared();
         }
         let mut k = 0;
-        while k < self.substeps {
+        while k < self.size.substeps {
             if k > 0 && k % every == 0 {
                 resample(self, field);
             }
             let factor = self.large_strain_pass();
             if factor > 1 {
                 k *= factor;
-                h = self.dt_s / self.substeps as Real;
+                h = self.size.dt_s / self.size.substeps as Real;
                 every = ((resample_every_s / h).floor() as usize).max(1);
             }
             // Before the membrane (which zeroes and writes its own vertices).
             field.zero(&mut self.fmem);
             self.membrane_step();
-            let s = (k + 1) as Real / self.substeps as Real;
+            let s = (k + 1) as Real / self.size.substeps as Real;
             let rest = self.model.mesh().positions_m();
             let at = SubStep {
                 h_s: h,
-                step_s: self.dt_s,
+                step_s: self.size.dt_s,
                 s,
                 masses_kg: self.model.masses_kg(),
             };
@@ -239,20 +257,20 @@ impl<S: Storage> Explicit<S> {
     /// How many times the sub-step count changed (contact springs coming
     /// and going).
     pub fn resubsteps(&self) -> u64 {
-        self.resubsteps
+        self.size.resubsteps
     }
 
     /// How many steps were finished from the prediction
     /// [`Explicit::prepare_step`] made (the rest ran in full).
     pub fn predicted_steps(&self) -> u64 {
-        self.predicted_steps
+        self.ahead.predicted_steps
     }
 
     /// Rows the predicted steps recomputed, summed over their sub-steps
     /// (against `predicted_steps() * substeps() * vertex count` for full
     /// passes): how local the correction was.
     pub fn predicted_rows(&self) -> u64 {
-        self.prediction.rows_total()
+        self.ahead.prediction.rows_total()
     }
 
     fn membrane_step(&mut self) {
@@ -278,28 +296,29 @@ impl<S: Storage> Explicit<S> {
     /// sub-step count, cleared loads or [`Explicit::set_state`] discard it.
     /// The first call allocates its arrays.
     pub fn prepare_step(&mut self) {
-        if self.plans.len() != 1 || self.ku_ready {
+        if self.parts.plans.len() != 1 || self.ahead.ku_ready {
             return;
         }
         // A whole step ahead where the correction can use it: linear rows,
         // few sub-steps (an array each), and no re-selection of contact
         // points inside the step (the last contact step's period says).
-        let h = self.dt_s / self.substeps as Real;
+        let h = self.size.dt_s / self.size.substeps as Real;
         let resamples = self
+            .ahead
             .resample_every_s
-            .is_some_and(|r| ((r / h).floor() as usize).max(1) < self.substeps);
+            .is_some_and(|r| ((r / h).floor() as usize).max(1) < self.size.substeps);
         if self.large.is_none()
             && self.capsule_vertices.is_empty()
             && self.kernel.is_elastic()
-            && self.substeps <= PREDICTED_SUBSTEPS_MAX
+            && self.size.substeps <= PREDICTED_SUBSTEPS_MAX
             && !resamples
         {
             self.predict();
             return;
         }
         let n = self.u.len();
-        if self.ku_ahead.len() != n {
-            self.ku_ahead = huge_vec(n, [0.0; 3]);
+        if self.ahead.ku_ahead.len() != n {
+            self.ahead.ku_ahead = huge_vec(n, [0.0; 3]);
         }
         let pass = self.pass();
         let b = &mut pass.buffers[0];
@@ -317,14 +336,14 @@ impl<S: Storage> Explicit<S> {
                 spill: &mut b.spill,
             },
         );
-        self.ku_ready = true;
+        self.ahead.ku_ready = true;
     }
 
     /// Drops what [`Explicit::prepare_step`] computed (the state or the
     /// model changed under it).
     fn forget_prepared(&mut self) {
-        self.ku_ready = false;
-        self.prediction.forget();
+        self.ahead.ku_ready = false;
+        self.ahead.prediction.forget();
     }
 
     /// The step's inputs, borrowed beside what a kernel pass writes.
@@ -339,10 +358,14 @@ impl<S: Storage> Explicit<S> {
             fext,
             fmem,
             fnl,
-            plans,
-            buffers,
-            pool,
-            ku_ahead,
+            parts:
+                Parts {
+                    plans,
+                    buffers,
+                    pool,
+                    ..
+                },
+            ahead: Ahead { ku_ahead, .. },
             ..
         } = self;
         Pass {
@@ -365,7 +388,7 @@ impl<S: Storage> Explicit<S> {
     }
 
     fn kernel_step(&mut self) {
-        let ahead = std::mem::take(&mut self.ku_ready);
+        let ahead = std::mem::take(&mut self.ahead.ku_ready);
         let Pass {
             inputs,
             kernel,

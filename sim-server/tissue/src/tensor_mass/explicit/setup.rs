@@ -6,7 +6,9 @@
 
 use super::partition::{PartBuffers, plan_parts};
 use super::predicted::Prediction;
-use super::{Explicit, ExplicitConfig, ExplicitError, MAX_THREADS, substeps_for};
+use super::{
+    Ahead, Explicit, ExplicitConfig, ExplicitError, MAX_THREADS, Parts, StepSize, substeps_for,
+};
 use crate::tensor_mass::huge_pages::huge_vec;
 use crate::tensor_mass::kernel::{Kernel, Storage, kind};
 use crate::tensor_mass::large_strain::LargeStrain;
@@ -137,26 +139,32 @@ impl<S: Storage> Explicit<S> {
             capsule_vertices,
             large,
             fnl,
-            threads,
-            contact_omega2: 0.0,
-            tangent_lambda: 0.0,
-            plans,
-            buffers,
-            pool,
-            stable,
-            elastic_stable: stable,
-            policy: config.policy,
-            dt_s,
-            substeps,
-            elastic_substeps: substeps,
-            substep_factor: 1,
-            resubsteps: 0,
+            parts: Parts {
+                threads,
+                plans,
+                buffers,
+                pool,
+            },
+            size: StepSize {
+                contact_omega2: 0.0,
+                tangent_lambda: 0.0,
+                stable,
+                elastic_stable: stable,
+                policy: config.policy,
+                dt_s,
+                substeps,
+                elastic_substeps: substeps,
+                substep_factor: 1,
+                resubsteps: 0,
+            },
             steps: 0,
-            ku_ahead: Vec::new(),
-            ku_ready: false,
-            prediction: Prediction::default(),
-            predicted_steps: 0,
-            resample_every_s: None,
+            ahead: Ahead {
+                ku_ahead: Vec::new(),
+                ku_ready: false,
+                prediction: Prediction::default(),
+                predicted_steps: 0,
+                resample_every_s: None,
+            },
             model,
         };
         for v in 0..n {

@@ -154,7 +154,7 @@ impl<S: Storage> Explicit<S> {
     /// the sub-step count changes the velocity is kept (U(t-1) rescaled),
     /// an O(n) pass.
     pub fn set_contact_bound(&mut self, omega2: Real) {
-        self.contact_omega2 = omega2.max(0.0);
+        self.size.contact_omega2 = omega2.max(0.0);
         self.update_bound();
     }
 
@@ -170,14 +170,14 @@ impl<S: Storage> Explicit<S> {
                 // save it, and the caller's divergence check reports it.
                 return;
             }
-            self.tangent_lambda = now.max(self.tangent_lambda * TANGENT_DECAY_PER_STEP);
+            self.size.tangent_lambda = now.max(self.size.tangent_lambda * TANGENT_DECAY_PER_STEP);
             self.update_bound();
         }
     }
 
     pub(super) fn update_bound(&mut self) {
-        let needed = self.needed_substeps(self.tangent_lambda);
-        self.stable = self.stable_for(self.tangent_lambda);
+        let needed = self.needed_substeps(self.size.tangent_lambda);
+        self.size.stable = self.stable_for(self.size.tangent_lambda);
         // Keeping the larger count for a while after the springs ease was
         // tried (to save the O(n) re-plans): the 250 Hz box stroke then
         // showed force steps of 0.07 N that the exact count does not.
@@ -187,22 +187,22 @@ impl<S: Storage> Explicit<S> {
     /// The step bound with the nonlinear tangent at `tangent` (1/s^2) and
     /// the contact springs.
     pub(super) fn stable_for(&self, tangent: Real) -> StableStep {
-        let rest = self.elastic_stable.omega_max_rad_s.powi(2);
-        let lambda = rest.max(tangent) + self.contact_omega2;
-        StableStep::from_lambda(lambda, self.elastic_stable.method)
+        let rest = self.size.elastic_stable.omega_max_rad_s.powi(2);
+        let lambda = rest.max(tangent) + self.size.contact_omega2;
+        StableStep::from_lambda(lambda, self.size.elastic_stable.method)
     }
 
     /// Sub-steps per step that bound needs (sub-stepping whatever the
     /// policy, except `unchecked`), at most [`MAX_SUBSTEPS`].
     pub(super) fn needed_substeps(&self, tangent: Real) -> usize {
-        let policy = match self.policy {
+        let policy = match self.size.policy {
             DtPolicy::Unchecked => DtPolicy::Unchecked,
             _ => DtPolicy::Substep,
         };
-        (substeps_for(self.dt_s, &self.stable_for(tangent), policy)
-            .unwrap_or(self.substeps)
-            .max(self.elastic_substeps)
-            * self.substep_factor)
+        (substeps_for(self.size.dt_s, &self.stable_for(tangent), policy)
+            .unwrap_or(self.size.substeps)
+            .max(self.size.elastic_substeps)
+            * self.size.substep_factor)
             .min(MAX_SUBSTEPS)
     }
 
@@ -211,25 +211,25 @@ impl<S: Storage> Explicit<S> {
     /// against a finer integration.
     pub fn set_substep_factor(&mut self, factor: usize) {
         let factor = factor.max(1);
-        let base = self.substeps / self.substep_factor;
-        self.substep_factor = factor;
+        let base = self.size.substeps / self.size.substep_factor;
+        self.size.substep_factor = factor;
         self.resubstep(base * factor);
     }
 
     /// Sets the sub-step count, keeping the velocity (U(t) - U(t-1)) / h.
     pub(super) fn resubstep(&mut self, n: usize) {
-        if n == self.substeps {
+        if n == self.size.substeps {
             return;
         }
         self.forget_prepared();
-        let ratio = self.substeps as Real / n as Real;
+        let ratio = self.size.substeps as Real / n as Real;
         for (now, before) in self.u.iter().zip(self.next.iter_mut()) {
             for k in 0..3 {
                 before[k] = now[k] - (now[k] - before[k]) * ratio;
             }
         }
-        self.substeps = n;
-        self.resubsteps += 1;
+        self.size.substeps = n;
+        self.size.resubsteps += 1;
         for v in 0..self.u.len() {
             self.refresh_vertex(v);
         }

@@ -34,7 +34,7 @@
 //! field's resampling period). Otherwise the first sub-step's K U alone is
 //! computed ahead, as before.
 
-use super::Explicit;
+use super::{Ahead, Explicit, Parts, StepSize};
 use crate::math::Real;
 use crate::tensor_mass::force_term::{ForcePoint, ForceTerm, SubStep};
 use crate::tensor_mass::huge_pages::huge_vec;
@@ -287,7 +287,7 @@ impl<S: Storage> Explicit<S> {
     /// [`Explicit::prepare_step`] where every row's force is the linear
     /// kernel's: the whole step without the tools (this module).
     pub(super) fn predict(&mut self) {
-        if self.prediction.ready(self.substeps) {
+        if self.ahead.prediction.ready(self.size.substeps) {
             return;
         }
         let Self {
@@ -298,9 +298,9 @@ impl<S: Storage> Explicit<S> {
             kind,
             target,
             fext,
-            buffers,
-            prediction,
-            substeps,
+            parts: Parts { buffers, .. },
+            ahead: Ahead { prediction, .. },
+            size: StepSize { substeps, .. },
             ..
         } = self;
         let ring = &mut buffers[0].ring;
@@ -322,8 +322,8 @@ impl<S: Storage> Explicit<S> {
     /// any) at every sub-step, and the rows they and the changed vertices
     /// reach recomputed (the same arithmetic as the plain step).
     pub(super) fn finish_predicted<F: ForceTerm>(&mut self, mut field: Option<&mut F>) {
-        let substeps = self.substeps;
-        let h = self.dt_s / substeps as Real;
+        let substeps = self.size.substeps;
+        let h = self.size.dt_s / substeps as Real;
         let Self {
             kernel,
             u,
@@ -333,10 +333,10 @@ impl<S: Storage> Explicit<S> {
             target,
             fext,
             fmem,
-            prediction,
+            ahead: Ahead { prediction, .. },
             model,
-            dt_s,
-            buffers,
+            size: StepSize { dt_s, .. },
+            parts: Parts { buffers, .. },
             ..
         } = self;
         let contact = field
@@ -378,7 +378,7 @@ impl<S: Storage> Explicit<S> {
             }
         }
         prediction.end(next, u);
-        self.predicted_steps += 1;
+        self.ahead.predicted_steps += 1;
         self.steps += 1;
         self.follow_tangent();
     }
