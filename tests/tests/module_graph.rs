@@ -142,7 +142,7 @@ fn module_of(src: &Path, file: &Path) -> Vec<String> {
 /// path they are named by (`module::C`) -> the path they come from.
 fn reexports(module: &[String], line: &str, out: &mut BTreeMap<Vec<String>, Vec<String>>) {
     let Some(at) = line.find("use ") else { return };
-    if !line.starts_with("pub") || !line[..at].trim_end().ends_with(|c| c == 'b' || c == ')') {
+    if !line.starts_with("pub") || !line[..at].trim_end().ends_with(['b', ')']) {
         return;
     }
     let text = line[at + 4..].trim_end_matches(';').trim();
