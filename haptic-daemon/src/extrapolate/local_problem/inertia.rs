@@ -51,7 +51,7 @@ impl Inertia {
 
 impl Clone for Inertia {
     fn clone(&self) -> Self {
-        let mut out = Self::with_capacity(0);
+        let mut out = Self::with_capacity(self.vel.capacity());
         out.clone_from(self);
         out
     }

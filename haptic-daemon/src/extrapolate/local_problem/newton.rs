@@ -40,7 +40,7 @@ impl Budget {
 
 /// The points that may touch in this solve, and the tool motion the
 /// selection was made for.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub(super) struct Selection {
     /// Their indices.
     pub(super) active: Vec<u16>,
@@ -58,6 +58,23 @@ impl Selection {
             selected: false,
             selected_dx: ZERO,
         }
+    }
+}
+
+impl Clone for Selection {
+    fn clone(&self) -> Self {
+        let mut out = Self::with_capacity(super::MAX_POINTS);
+        out.clone_from(self);
+        out
+    }
+
+    /// Into the existing allocation: a derived `clone_from` would replace
+    /// `active` by a vector only as long as the source's, and the RT
+    /// thread's next selection would grow it.
+    fn clone_from(&mut self, o: &Self) {
+        self.active.clone_from(&o.active);
+        self.selected = o.selected;
+        self.selected_dx = o.selected_dx;
     }
 }
 

@@ -282,6 +282,14 @@ fn a_clone_keeps_the_problem_and_its_capacity() {
     let mut q = p.clone();
     assert!(q.s.capacity() >= 9 * MAX_VERTICES * MAX_VERTICES);
     assert!(q.points.capacity() >= MAX_POINTS);
+    // Copied into a problem made before (as the triple buffer does): every
+    // buffer the RT thread fills keeps its full capacity.
+    let mut r = LocalProblem::new();
+    r.clone_from(&p);
+    assert!(r.selection.active.capacity() >= MAX_POINTS);
+    assert!(r.inertia.vel.capacity() >= 3 * MAX_VERTICES);
+    assert!(r.scratch.gt.capacity() >= 9 * MAX_VERTICES * MAX_VERTICES);
+    assert!(q.selection.active.capacity() >= MAX_POINTS);
     let (mut p, _) = (p, ());
     let down = [centre[0], centre[1], centre[2] - 2e-4];
     assert_eq!(p.solve(down), q.solve(down));
