@@ -169,7 +169,7 @@ fn press_all<B: Backend>(a: &Args, p: &mut Prepared<B>) -> Result<()> {
         a.refine_cell_m.map(|h| h * 1e3),
         p.sim.model().mesh().tet_count(),
         a.law,
-        p.sim.name()
+        p.sim.capabilities().name
     );
     let top = HEIGHT_M + RADIUS_M;
     let mut press = |depth_m: f64| {

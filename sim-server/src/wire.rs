@@ -171,7 +171,7 @@ pub fn local_contact_into<B: Backend>(
     tool: usize,
     lc: &mut LocalContact,
 ) -> bool {
-    tools.local_contact(sim, local_spec(tool, sim.dynamic()), lc)
+    tools.local_contact(sim, local_spec(tool, sim.capabilities().dynamic), lc)
 }
 
 #[cfg(test)]

@@ -147,7 +147,7 @@ fn static_equilibrium_agrees_with_the_static_solver(kind: Kind) {
     assert!(
         err < 1e-3 * scale,
         "{}: {err} m from the static solution (scale {scale} m)",
-        sim.name()
+        sim.capabilities().name
     );
 }
 
@@ -174,7 +174,7 @@ fn energy_decays_with_damping_once_the_load_is_gone(kind: Kind) {
     assert!(
         energies[9] <= 0.05 * energies[0],
         "{}: energy {:e} J -> {:e} J",
-        sim.name(),
+        sim.capabilities().name,
         energies[0],
         energies[9]
     );
@@ -224,8 +224,8 @@ fn pressed_reaction(kind: Kind) -> (String, Vec3) {
         sim.step();
     }
     let f = tools.reaction(0, sim.as_ref()).force_n;
-    assert!(f.z > 0.01, "{}: {f}", sim.name());
-    (sim.name().to_string(), f)
+    assert!(f.z > 0.01, "{}: {f}", sim.capabilities().name);
+    (sim.capabilities().name.to_string(), f)
 }
 
 /// The explicit backend's pressed reaction, the reference every backend's
@@ -307,7 +307,7 @@ fn precomputed_responses_are_cached_and_cutting_is_refused() {
         sim.step();
     }
     assert_eq!(first.displacements(), second.displacements());
-    assert!(!second.can_cut(TetId(0)) && !second.dynamic());
+    assert!(!second.can_cut(TetId(0)) && !second.capabilities().dynamic);
     let err = second.remove_tet(TetId(0)).unwrap_err().to_string();
     assert!(
         err.contains("precomputed") && err.contains("cannot cut"),
@@ -376,7 +376,7 @@ fn holds_that_begin_move_and_end_match_the_static_solver(kind: Kind) {
             .unwrap()
             .displacement_m;
         let scale = reference.iter().map(|u| u.length()).fold(0.0, f64::max);
-        let settle_s = if sim.dynamic() { 3.0 } else { 0.0 };
+        let settle_s = if sim.capabilities().dynamic { 3.0 } else { 0.0 };
         run_for(sim.as_mut(), settle_s);
         sim.step();
         let err = (0..n)
@@ -385,7 +385,7 @@ fn holds_that_begin_move_and_end_match_the_static_solver(kind: Kind) {
         assert!(
             err < 1e-3 * scale,
             "{} at stage {stage:?}: {err} m from the static solution (scale {scale} m)",
-            sim.name()
+            sim.capabilities().name
         );
     }
 }

@@ -124,7 +124,7 @@ fn two_hundred_steps_of_each_backend_allocate_nothing() {
         assert!(
             allocations <= allowed,
             "{}: {allocations} allocations in 200 steps (at most {allowed})",
-            sim.name()
+            sim.capabilities().name
         );
         assert!(sim.displacement(held).z < -1e-4);
     }

@@ -303,9 +303,9 @@ fn measure<B: Backend>(mut sim: B, case: &Case, duration_s: f64) -> Result<Point
     }
     let wall_s = start.elapsed().as_secs_f64().max(1e-9);
     let u = sim.displacement(case.probe);
-    anyhow::ensure!(u.is_finite(), "{} diverged", sim.name());
+    anyhow::ensure!(u.is_finite(), "{} diverged", sim.capabilities().name);
     Ok(Point {
-        backend: sim.name().to_string(),
+        backend: sim.capabilities().name.to_string(),
         cell_m: case.cell_m,
         tets: sim.model().mesh().tet_count(),
         dt_s: sim.dt_s(),

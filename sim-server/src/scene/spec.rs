@@ -460,7 +460,7 @@ pub enum BackendName {
 
 impl BackendName {
     /// The name as scenes and `--backend` spell it (and the backend's own
-    /// `Backend::name`).
+    /// `Capabilities::name`).
     pub fn as_str(self) -> &'static str {
         match self {
             BackendName::TensorMass => "tensor-mass",

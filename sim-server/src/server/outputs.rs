@@ -175,8 +175,8 @@ pub(super) fn announce<B: Backend>(sim: &B) {
     let (cut, live) = sim_server::backend::cuttable(sim);
     eprintln!(
         "sim-server: {} backend, {}, cuts {}",
-        sim.name(),
-        if sim.dynamic() {
+        sim.capabilities().name,
+        if sim.capabilities().dynamic {
             "dynamic"
         } else {
             "quasi-static"

@@ -113,7 +113,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             });
         }
         let force_pub = services::publisher(&force_service)?;
-        let local_out = LocalOut::new(&node, &cfg.session, sim.dynamic())?;
+        let local_out = LocalOut::new(&node, &cfg.session, sim.capabilities().dynamic)?;
         let n = sim.model().vertex_count();
         let max_tris = 4 * sim.model().mesh().tet_count();
         let recorder = match &cfg.save_frames {
@@ -246,7 +246,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 self.told.cut_refusal = true;
                 eprintln!(
                     "sim-server: tool {i} tried to cut, but the {} backend refused: {why}",
-                    self.sim.name()
+                    self.sim.capabilities().name
                 );
             }
             if report.held_outside {
@@ -456,7 +456,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         {
             // A backend stable at any step has a remedy to name for steps
             // that take longer than they simulate.
-            let hint = if self.sim.stable_at_any_step() {
+            let hint = if self.sim.capabilities().stable_at_any_step {
                 "; this backend is stable at any step: a longer --dt-s (e.g. 0.004) lets it keep real time"
             } else {
                 ""

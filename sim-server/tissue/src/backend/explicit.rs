@@ -1,13 +1,17 @@
 //! The tensor-mass explicit integrator as a [`Backend`].
 
-use super::Backend;
+use super::{Backend, Capabilities};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::tensor_mass::{CutChange, CutError, ElasticModel, Explicit, ForceTerm, Storage};
 
 impl<S: Storage> Backend for Explicit<S> {
-    fn name(&self) -> &'static str {
-        "tensor-mass"
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            integrates_contact: true,
+            corotational_region: true,
+            ..Capabilities::dynamic("tensor-mass")
+        }
     }
     fn model(&self) -> &ElasticModel {
         Explicit::model(self)
@@ -48,9 +52,8 @@ impl<S: Storage> Backend for Explicit<S> {
     fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
         Explicit::remove_tet(self, t)
     }
-    fn set_corotational_region(&mut self, corotational: &[bool]) -> bool {
+    fn set_corotational_region(&mut self, corotational: &[bool]) {
         Explicit::set_corotational_region(self, corotational);
-        true
     }
     fn large_strain(&self) -> Option<crate::tensor_mass::large_strain::PassReport> {
         Explicit::large_strain(self).map(|l| l.last())
@@ -63,9 +66,6 @@ impl<S: Storage> Backend for Explicit<S> {
     }
     fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
         Explicit::on_step_workers(self, f)
-    }
-    fn integrates_contact(&self) -> bool {
-        true
     }
     fn set_contact_bound(&mut self, omega2: Real) {
         Explicit::set_contact_bound(self, omega2);

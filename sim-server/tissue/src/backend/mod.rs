@@ -21,6 +21,7 @@
 //! ```
 
 mod cache;
+mod capabilities;
 mod explicit;
 mod holds;
 mod hybrid;
@@ -28,6 +29,7 @@ mod implicit;
 mod precomputed;
 
 pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
+pub use capabilities::Capabilities;
 pub use hybrid::{Hybrid, HybridConfig, HybridError};
 pub use implicit::{Implicit, ImplicitConfig, ImplicitError, Preconditioner};
 pub use precomputed::{Precomputed, PrecomputedError};
@@ -38,8 +40,8 @@ use crate::tensor_mass::{CutChange, CutError, ElasticModel, ForceTerm};
 
 /// A deformable-body simulation the tools can act on.
 pub trait Backend {
-    /// The backend's name (`tensor-mass`, `implicit`).
-    fn name(&self) -> &'static str;
+    /// What the backend can do (its name, dynamics, contact, regions).
+    fn capabilities(&self) -> Capabilities;
     /// The model (mesh, topology, tensors).
     fn model(&self) -> &ElasticModel;
     /// Advances one step.
@@ -100,16 +102,6 @@ pub trait Backend {
     fn linear_solve(&self) -> Option<SolveReport> {
         None
     }
-    /// Whether the backend is stable at any step (implicit integration),
-    /// so that a step longer than the real-time one is a remedy for steps
-    /// that take longer than they simulate.
-    fn stable_at_any_step(&self) -> bool {
-        false
-    }
-    /// Whether the backend integrates inertia (false: quasi-static).
-    fn dynamic(&self) -> bool {
-        true
-    }
     /// Runs `f` once on each worker thread a step waits for (the explicit
     /// integrator's pool with `threads` above 1), and returns how many;
     /// none for a backend that steps on the calling thread alone. For the
@@ -119,12 +111,6 @@ pub trait Backend {
     fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
         let _ = f;
         0
-    }
-    /// Whether [`Backend::step_with_contact`] evaluates the penalty contact
-    /// (the penalty law needs it): at every sub-step of a dynamic backend,
-    /// or as each step's equilibrium on a static one.
-    fn integrates_contact(&self) -> bool {
-        false
     }
     /// Does now what the next step can do before its tools are known (the
     /// explicit backend: the whole step without the tools on a linear
@@ -142,12 +128,11 @@ pub trait Backend {
     /// Makes the linear tetrahedra flagged in `corotational` corotational
     /// (and the others linear) from the next step on: the region that
     /// follows the tools (the scene's `[contact] corotational_radius_m`).
-    /// Returns false for a backend that cannot (its model is fixed when it
-    /// starts: implicit, precomputed, hybrid), which the contact set-up
-    /// refuses with the reason. Cold: called when the region changes.
-    fn set_corotational_region(&mut self, corotational: &[bool]) -> bool {
+    /// Nothing for a backend without [`Capabilities::corotational_region`],
+    /// which the contact set-up refuses with the reason. Cold: called when
+    /// the region changes.
+    fn set_corotational_region(&mut self, corotational: &[bool]) {
         let _ = corotational;
-        false
     }
     /// Makes the coming steps stable with contact springs adding up to
     /// `omega2` (rad^2/s^2) to omega_max^2 (sub-stepping as needed).

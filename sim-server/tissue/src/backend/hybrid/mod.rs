@@ -40,7 +40,7 @@
 
 mod static_part;
 
-use super::Backend;
+use super::{Backend, Capabilities};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::membrane::MembraneModel;
@@ -342,8 +342,8 @@ impl Hybrid {
 }
 
 impl Backend for Hybrid {
-    fn name(&self) -> &'static str {
-        "hybrid"
+    fn capabilities(&self) -> Capabilities {
+        Capabilities::dynamic("hybrid")
     }
     fn on_step_workers(&self, f: &(dyn Fn() + Sync)) -> usize {
         self.tm.on_step_workers(f)

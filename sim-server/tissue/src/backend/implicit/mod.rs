@@ -61,7 +61,7 @@ mod config;
 mod factor;
 mod rebuild;
 
-use super::Backend;
+use super::{Backend, Capabilities};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::membrane::MembraneModel;
@@ -332,17 +332,17 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> Real {
 }
 
 impl Backend for Implicit {
-    fn name(&self) -> &'static str {
-        "implicit"
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            stable_at_any_step: true,
+            ..Capabilities::dynamic("implicit")
+        }
     }
     fn model(&self) -> &ElasticModel {
         &self.model
     }
     fn dt_s(&self) -> Real {
         self.cfg.dt_s
-    }
-    fn stable_at_any_step(&self) -> bool {
-        true
     }
     fn linear_solve(&self) -> Option<super::SolveReport> {
         Some(super::SolveReport {

@@ -14,9 +14,9 @@
 //! they were computed on. The responses are cached on disk, keyed by a hash
 //! of the mesh, the tensors (hence materials) and the fixed set.
 
-use super::Backend;
 use super::cache::{key, read_cache, write_cache};
 use super::holds::Holds;
+use super::{Backend, Capabilities};
 use crate::ids::{TetId, VertexId};
 use crate::math::{Real, Vec3};
 use crate::static_solve::{Dirichlet, Factorized, StaticError};
@@ -416,8 +416,12 @@ fn response(responses: &[Vec3], n: usize, s: u32, a: usize) -> &[Vec3] {
 }
 
 impl Backend for Precomputed {
-    fn name(&self) -> &'static str {
-        "precomputed"
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            dynamic: false,
+            integrates_contact: true,
+            ..Capabilities::dynamic("precomputed")
+        }
     }
     fn model(&self) -> &ElasticModel {
         &self.model
@@ -429,10 +433,6 @@ impl Backend for Precomputed {
     fn step(&mut self) {
         self.clear_contact_forces();
         self.step_static();
-    }
-
-    fn integrates_contact(&self) -> bool {
-        true
     }
 
     /// The penalty law's Newton iterations (0 without contact or under the
@@ -477,9 +477,6 @@ impl Backend for Precomputed {
         self.fext[v.idx()] = f_n;
     }
     fn can_cut(&self, _t: TetId) -> bool {
-        false
-    }
-    fn dynamic(&self) -> bool {
         false
     }
     fn remove_tet(&mut self, _t: TetId) -> Result<CutChange, CutError> {

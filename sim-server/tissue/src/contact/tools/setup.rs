@@ -77,11 +77,10 @@ impl Tools {
                     why,
                 })?;
         }
+        let caps = sim.capabilities();
         let law = match config.law {
-            Some(ContactLaw::Penalty) if !sim.integrates_contact() => {
-                return Err(ContactError::PenaltyUnsupported {
-                    backend: sim.name(),
-                });
+            Some(ContactLaw::Penalty) if !caps.integrates_contact => {
+                return Err(ContactError::PenaltyUnsupported { backend: caps.name });
             }
             Some(law) => law,
             // Every backend that can integrate the penalty law takes it:
@@ -90,7 +89,7 @@ impl Tools {
             // projection law over-states the force on fine meshes and
             // misses the organ between vertices on coarse ones (docs/design/contact.md,
             // the two laws against an analytic indentation); `law = "projection"` keeps the cheap one.
-            None if sim.integrates_contact() && !decls.is_empty() => ContactLaw::Penalty,
+            None if caps.integrates_contact && !decls.is_empty() => ContactLaw::Penalty,
             None => ContactLaw::Projection,
         };
         // The penalty law's springs only (the projection law reads no factor).
@@ -107,13 +106,13 @@ impl Tools {
             if law == ContactLaw::Projection {
                 return Err(ContactError::FrictionUnsupported {
                     tool: d.name.clone(),
-                    backend: sim.name(),
+                    backend: caps.name,
                 });
             }
-            if !sim.dynamic() {
+            if !caps.dynamic {
                 return Err(ContactError::FrictionStatic {
                     tool: d.name.clone(),
-                    backend: sim.name(),
+                    backend: caps.name,
                 });
             }
         }
@@ -137,10 +136,8 @@ impl Tools {
                     range: "positive",
                 });
             }
-            if !sim.set_corotational_region(&[]) {
-                return Err(ContactError::CorotationalRegionUnsupported {
-                    backend: sim.name(),
-                });
+            if !caps.corotational_region {
+                return Err(ContactError::CorotationalRegionUnsupported { backend: caps.name });
             }
             tools.follow = Some(crate::contact::follow_region::FollowRegion::new(
                 r,
