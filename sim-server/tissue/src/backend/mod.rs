@@ -22,6 +22,7 @@
 
 mod cache;
 mod capabilities;
+mod compliance;
 mod explicit;
 mod holds;
 mod hybrid;
@@ -30,6 +31,7 @@ mod precomputed;
 
 pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
 pub use capabilities::Capabilities;
+pub use compliance::Compliance;
 pub use hybrid::{Hybrid, HybridConfig, HybridError};
 pub use implicit::{Implicit, ImplicitConfig, ImplicitError, Preconditioner};
 pub use precomputed::{Precomputed, PrecomputedError};

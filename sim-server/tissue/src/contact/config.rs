@@ -65,7 +65,7 @@ pub struct ContactConfig {
     /// jump) enters the tissue at this speed, not at the speed limit.
     pub entry_speed_m_s: Real,
     /// The penalty springs are integrated linearly implicitly at the end
-    /// of each sub-step ([`crate::contact::penalty::implicit`]) instead of explicitly with
+    /// of each sub-step (`contact::penalty::field::implicit`) instead of explicitly with
     /// the tissue's forces (which makes them size the sub-steps).
     pub implicit_springs: bool,
     /// The linear tetrahedra within this distance of a tool's tip (at

@@ -15,6 +15,7 @@
 //! of the mesh, the tensors (hence materials) and the fixed set.
 
 use super::cache::{key, read_cache, write_cache};
+use super::compliance::{Compliance, penalty};
 use super::holds::Holds;
 use super::{Backend, Capabilities};
 use crate::ids::{TetId, VertexId};
@@ -23,7 +24,6 @@ use crate::static_solve::{Dirichlet, Factorized, StaticError};
 use crate::tensor_mass::{CutChange, CutError, ElasticModel, ForceTerm};
 use std::path::{Path, PathBuf};
 
-mod contact;
 mod rows;
 
 const NONE: u32 = u32::MAX;
@@ -57,13 +57,13 @@ pub struct Precomputed {
     applied: Vec<(u32, Vec3)>,
     work: Vec<Vec3>,
     /// The penalty contact's forces on the vertices listed in
-    /// `contact_loaded` (zero elsewhere; [`contact`]).
+    /// `contact_loaded` (zero elsewhere; the penalty solve in `backend::compliance::penalty`).
     contact_n: Vec<Vec3>,
     contact_loaded: Vec<u32>,
     /// The loads' part of a contact step's solution ([`Precomputed::prepare_rows`]).
     u_ext: Vec<Vec3>,
     /// The contact solve's scratch.
-    contact: contact::ContactSolve,
+    contact: penalty::ContactSolve,
     /// The responses at the contact step's rows ([`Precomputed::step_rows`]).
     row_responses: rows::RowResponses,
     /// Whether the last load came from the disk cache.
@@ -176,46 +176,46 @@ impl Precomputed {
         response(&self.responses, self.u.len(), s, a)
     }
 
-    pub(super) fn vertex_len(&self) -> usize {
+    fn refresh_holds(&mut self) {
+        if self.holds.is_dirty() {
+            let n = self.u.len();
+            let (surface, responses, slot) = (&self.surface, &self.responses, &self.slot);
+            let held = (self.held.iter().enumerate())
+                .filter(|(v, h)| h.is_some() && slot[*v] != NONE)
+                .map(|(v, _)| slot[v]);
+            self.holds.refresh(held, |i, j, b| {
+                response(responses, n, j, b)[surface[i as usize].idx()]
+            });
+        }
+    }
+}
+
+impl Compliance for Precomputed {
+    fn vertex_len(&self) -> usize {
         self.u.len()
     }
-
-    /// Whether a force on vertex `v` is represented and it is not held.
-    pub(super) fn loadable(&self, v: usize) -> bool {
+    fn loadable(&self, v: usize) -> bool {
         self.slot[v] != NONE && self.held[v].is_none()
     }
-
-    /// The responses of every vertex to a unit force along `a` on the
-    /// loadable vertex `v`.
-    pub(super) fn response_of(&self, v: u32, a: usize) -> &[Vec3] {
+    fn response_of(&self, v: u32, a: usize) -> &[Vec3] {
         self.response(self.slot[v as usize], a)
     }
-
-    pub(super) fn displacement_of(&self, v: u32) -> Vec3 {
+    fn displacement_of(&self, v: u32) -> Vec3 {
         Vec3::from_array(self.u[v as usize])
     }
-
-    pub(super) fn set_displacement(&mut self, v: u32, d_m: Vec3) {
+    fn set_displacement(&mut self, v: u32, d_m: Vec3) {
         self.u[v as usize] = d_m.to_array();
     }
-
-    pub(super) fn clear_contact_forces(&mut self) {
+    fn clear_contact_forces(&mut self) {
         for &v in &self.contact_loaded {
             self.contact_n[v as usize] = Vec3::ZERO;
         }
         self.contact_loaded.clear();
     }
-
-    /// Held surface vertices (hold sources) now.
-    pub(super) fn hold_count(&self) -> usize {
+    fn hold_count(&self) -> usize {
         self.holds.len()
     }
-
-    /// The holding forces ((surface index, force) into `out`) that keep
-    /// the held vertices in place under a unit force along `a` on the
-    /// loadable vertex `v`: with them, its response is the one the holds
-    /// allow (nothing without holds).
-    pub(super) fn holding_response(&mut self, v: u32, a: usize, out: &mut Vec<(u32, Vec3)>) {
+    fn holding_response(&mut self, v: u32, a: usize, out: &mut Vec<(u32, Vec3)>) {
         out.clear();
         let n = self.u.len();
         let (responses, surface) = (&self.responses, &self.surface);
@@ -225,32 +225,20 @@ impl Precomputed {
             |s, f| out.push((s, f)),
         );
     }
-
-    /// The responses of every vertex to a unit force along `a` on surface
-    /// vertex (source) `s`.
-    pub(super) fn source_response(&self, s: u32, a: usize) -> &[Vec3] {
+    fn source_response(&self, s: u32, a: usize) -> &[Vec3] {
         self.response(s, a)
     }
-
-    /// The contact forces of the last solve, (vertex, force).
-    pub(super) fn contact_forces(&self) -> impl Iterator<Item = (u32, Vec3)> + '_ {
+    fn contact_forces(&self) -> impl Iterator<Item = (u32, Vec3)> + '_ {
         (self.contact_loaded.iter()).map(|&v| (v, self.contact_n[v as usize]))
     }
-
-    /// The contact forces `force` on `vertices` (loadable ones) for the
-    /// next [`Precomputed::step_static`].
-    pub(super) fn set_contact_forces(&mut self, vertices: &[u32], force: &[[Real; 3]]) {
+    fn set_contact_forces(&mut self, vertices: &[u32], force: &[[Real; 3]]) {
         self.clear_contact_forces();
         for &v in vertices {
             self.contact_n[v as usize] = Vec3::from_array(force[v as usize]);
             self.contact_loaded.push(v);
         }
     }
-
-    /// The external loads' part of the solution (all vertices), for
-    /// [`Precomputed::step_rows`] through this step, and the holds'
-    /// factorisation brought up to date.
-    pub(super) fn prepare_rows(&mut self) {
+    fn prepare_rows(&mut self) {
         let n = self.u.len();
         self.u_ext.clear();
         self.u_ext.resize(n, Vec3::ZERO);
@@ -263,11 +251,7 @@ impl Precomputed {
         );
         self.refresh_holds();
     }
-
-    /// [`Precomputed::step_static`] at `rows` only (the other vertices keep
-    /// their displacements): the loads of [`Precomputed::prepare_rows`],
-    /// the contact forces and the holds, the holds' forces solved exactly.
-    pub(super) fn step_rows(&mut self, rows: &[u32]) {
+    fn step_rows(&mut self, rows: &[u32]) {
         let n = self.u.len();
         let (responses, slot, surface) = (&self.responses, &self.slot, &self.surface);
         let (contact_n, loaded, u_ext) = (&self.contact_n, &self.contact_loaded, &self.u_ext);
@@ -302,22 +286,7 @@ impl Precomputed {
             self.u[v] = u.to_array();
         }
     }
-
-    fn refresh_holds(&mut self) {
-        if self.holds.is_dirty() {
-            let n = self.u.len();
-            let (surface, responses, slot) = (&self.surface, &self.responses, &self.slot);
-            let held = (self.held.iter().enumerate())
-                .filter(|(v, h)| h.is_some() && slot[*v] != NONE)
-                .map(|(v, _)| slot[v]);
-            self.holds.refresh(held, |i, j, b| {
-                response(responses, n, j, b)[surface[i as usize].idx()]
-            });
-        }
-    }
-
-    /// The static solution for the loads, the contact forces and the holds.
-    pub(super) fn step_static(&mut self) {
+    fn step_static(&mut self) {
         let n = self.u.len();
         let mut u = std::mem::take(&mut self.work);
         u.clear();
@@ -452,7 +421,9 @@ impl Backend for Precomputed {
         _resample: &mut dyn FnMut(&Self, &mut F),
     ) {
         // Static: one solve a step, nothing to re-select within it.
-        self.step_with_penalty(field);
+        let mut scratch = std::mem::take(&mut self.contact);
+        penalty::step_with_penalty(self, field, &mut scratch);
+        self.contact = scratch;
     }
 
     fn displacement(&self, v: VertexId) -> Vec3 {

@@ -1,6 +1,6 @@
 //! The responses of a contact step's rows (the vertices its springs read)
 //! to the loaded contact vertices, gathered once and kept while the rows
-//! stay the same, for [`super::precomputed::Precomputed::step_rows`].
+//! stay the same, for [`Compliance::step_rows`](crate::backend::Compliance::step_rows).
 //!
 //! Each Newton direction of the penalty contact applies the precomputed
 //! map at the rows: for every loaded vertex and axis, one response column

@@ -20,7 +20,7 @@
 //! is clamped to [0, 2]: the damping never pulls and never more than
 //! doubles the spring), and frictionless (along n only) unless the tool
 //! has Coulomb friction: then each point also carries a tangential
-//! stick-slip spring of stiffness k_p, |f_t| <= mu f ([`crate::contact::penalty::friction`]).
+//! stick-slip spring of stiffness k_p, |f_t| <= mu f (`contact::penalty::field::friction`).
 //! The point
 //! stiffness is k_p = kappa a_p, a foundation modulus times the point's
 //! share of the rest area, so the total over a surface does not depend on
@@ -191,7 +191,7 @@ pub struct ContactField {
     sticks: Vec<Stick>,
     /// The friction states of the points dropped last.
     carried: Carried,
-    /// Springs integrated implicitly ([`crate::contact::penalty::implicit`]), if so.
+    /// Springs integrated implicitly (`contact::penalty::field::implicit`), if so.
     implicit: Option<Box<ImplicitSprings>>,
     /// Whether the last evaluation was in the report window.
     last_reported: bool,
@@ -214,7 +214,7 @@ impl ContactField {
     }
 
     /// The same with the springs integrated implicitly (`true`) or
-    /// explicitly (see [`crate::contact::penalty::implicit`]).
+    /// explicitly (see `contact::penalty::field::implicit`).
     pub fn with_implicit_springs(mut self, implicit: bool) -> Self {
         self.implicit = implicit.then(Box::default);
         self
@@ -227,7 +227,7 @@ impl ContactField {
 
     /// Corrects the explicit sub-step `u_new` (from `u_old`) for the
     /// springs of the last evaluation taken at its end (linearly implicit;
-    /// see [`crate::contact::penalty::implicit`]), `inverse_d(i)` being a free vertex's
+    /// see `contact::penalty::field::implicit`), `inverse_d(i)` being a free vertex's
     /// integration coefficient h^2 / m' (`None`: its motion is imposed).
     /// The tools' reported forces include the change. Does nothing when
     /// the springs are explicit. Returns the solver's iterations.
