@@ -47,6 +47,8 @@ pub mod mesh;
 pub mod static_newton;
 pub mod static_solve;
 pub mod tensor_mass;
+#[cfg(feature = "test-support")]
+pub mod test_support;
 pub mod topology;
 
 /// The types most programs need.

@@ -4,11 +4,11 @@
 //! limit, a step just under it stays bounded for 1e5 steps while one above it
 //! is refused or sub-stepped, and cutting never breaks the enforced bound.
 
-mod common;
+use tissue::test_support as common;
 
 use common::*;
-use sim_server::prelude::*;
-use sim_server::tensor_mass::{ExplicitError, element_bound, power_iteration};
+use tissue::prelude::*;
+use tissue::tensor_mass::{ExplicitError, element_bound, power_iteration};
 
 fn model(cells: [usize; 3], damping: f64) -> ElasticModel {
     let mesh = box_mesh(cells, 0.01, 0.1, 3);
@@ -464,7 +464,7 @@ fn bad_dt_is_refused() {
 /// one-thread integrator steps on the caller's and has none.
 #[test]
 fn the_step_workers_are_each_reached_once() {
-    use sim_server::backend::Backend;
+    use tissue::backend::Backend;
     let names = std::sync::Mutex::new(Vec::new());
     let record = || {
         let name = std::thread::current().name().unwrap_or("").to_string();

@@ -3,11 +3,11 @@
 //! body, rigid motions produce no force, and the hot kernel reproduces the
 //! double-precision model.
 
-mod common;
+use tissue::test_support as common;
 
 use common::*;
-use sim_server::prelude::*;
-use sim_server::tensor_mass::Kernel;
+use tissue::prelude::*;
+use tissue::tensor_mass::Kernel;
 
 fn all_models() -> Vec<(String, ElasticModel)> {
     let mesh = || box_mesh([3, 2, 2], 0.01, 0.15, 7);
@@ -104,7 +104,7 @@ fn rigid_motions_give_zero_force() {
             * model
                 .vertex_tensors()
                 .iter()
-                .map(sim_server::math::max_abs)
+                .map(tissue::math::max_abs)
                 .fold(0.0, f64::max);
         for _ in 0..3 {
             let t = rng.vec3() * 1e-3;
@@ -131,8 +131,8 @@ fn block_transpose_pairs_and_kernel_matches_model() {
                 for j in 0..4 {
                     let d = el.block(&g, i, j) - el.block(&g, j, i).transpose();
                     assert!(
-                        sim_server::math::max_abs(&d)
-                            < 1e-12 * sim_server::math::max_abs(&el.block(&g, i, i))
+                        tissue::math::max_abs(&d)
+                            < 1e-12 * tissue::math::max_abs(&el.block(&g, i, i))
                     );
                 }
             }

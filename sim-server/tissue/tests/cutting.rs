@@ -2,12 +2,12 @@
 //! rebuilding the model without them, and adding them back restores every
 //! tensor; the explicit simulation keeps stepping through cuts.
 
-mod common;
+use tissue::test_support as common;
 
 use common::*;
-use sim_server::prelude::*;
-use sim_server::tensor_mass::CutError;
 use std::collections::HashMap;
+use tissue::prelude::*;
+use tissue::tensor_mass::CutError;
 
 fn assert_same(name: &str, cut: &ElasticModel, fresh: &ElasticModel) {
     let tol = 1e-12 * max_entry(fresh.vertex_tensors()).max(max_entry(cut.vertex_tensors()));
@@ -17,7 +17,7 @@ fn assert_same(name: &str, cut: &ElasticModel, fresh: &ElasticModel) {
         .zip(fresh.vertex_tensors())
         .enumerate()
     {
-        let d = sim_server::math::max_abs(&(*a - *b));
+        let d = tissue::math::max_abs(&(*a - *b));
         assert!(d <= tol, "{name}: vertex {v} tensor differs by {d}");
     }
     let mass_tol = 1e-12 * fresh.masses_kg().iter().fold(0.0f64, |a, m| a.max(*m));
@@ -35,7 +35,7 @@ fn assert_same(name: &str, cut: &ElasticModel, fresh: &ElasticModel) {
     for (e, k) in cut.topology().edges().iter().zip(cut.edge_tensors()) {
         match fresh_edges.get(e) {
             Some(f) => {
-                let d = sim_server::math::max_abs(&(*k - **f));
+                let d = tissue::math::max_abs(&(*k - **f));
                 assert!(d <= tol, "{name}: edge {e:?} differs by {d}");
             }
             None => assert_eq!(*k, Mat3::ZERO, "{name}: orphaned edge {e:?} not zeroed"),

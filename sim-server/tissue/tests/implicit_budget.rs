@@ -7,10 +7,10 @@
 //! tolerance, to which the run returns; a step with nothing to solve takes no
 //! iteration at all.
 
-mod common;
+use tissue::test_support as common;
 
-use sim_server::backend::{Backend, Implicit, ImplicitConfig};
-use sim_server::prelude::*;
+use tissue::backend::{Backend, Implicit, ImplicitConfig};
+use tissue::prelude::*;
 
 const SIZE: [f64; 3] = common::BLOCK_M;
 const STEPS: usize = 200;

@@ -1,17 +1,17 @@
 //! Implicit-shape generators: volumes converge, the surface is on the shape,
 //! the meshes are valid, manifold, in one piece, and bad inputs are refused.
 
-use sim_server::ids::TetId;
-use sim_server::math::{Real, Vec3};
-use sim_server::mesh::quality::{QualityReport, quality_report};
-use sim_server::mesh::shapes::{
-    LIVER_BOUNDS_M, LIVER_CELL_M_8K, Lattice, SNAP_MIN_DIHEDRAL_DEG, ellipsoid, implicit_mesh,
-    liver, liver_signed_distance,
-};
-use sim_server::mesh::{GenerateError, TET_FACES, TetMesh};
 use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::time::Instant;
+use tissue::ids::TetId;
+use tissue::math::{Real, Vec3};
+use tissue::mesh::quality::{QualityReport, quality_report};
+use tissue::mesh::shapes::{
+    LIVER_BOUNDS_M, LIVER_CELL_M_8K, Lattice, SNAP_MIN_DIHEDRAL_DEG, ellipsoid, implicit_mesh,
+    liver, liver_signed_distance,
+};
+use tissue::mesh::{GenerateError, TET_FACES, TetMesh};
 
 fn volume(mesh: &TetMesh) -> Real {
     (0..mesh.tet_count())

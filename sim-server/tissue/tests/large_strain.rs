@@ -5,13 +5,13 @@
 //! depend on the thread count, the stable step follows the stretch, and
 //! the backends that cannot run a nonlinear model refuse it.
 
-mod common;
+use tissue::test_support as common;
 
-use sim_server::backend::{Implicit, ImplicitConfig, Precomputed};
-use sim_server::material::MaterialModel;
-use sim_server::prelude::*;
-use sim_server::static_solve::StaticError;
-use sim_server::tensor_mass::element_bound;
+use tissue::backend::{Implicit, ImplicitConfig, Precomputed};
+use tissue::material::MaterialModel;
+use tissue::prelude::*;
+use tissue::static_solve::StaticError;
+use tissue::tensor_mass::element_bound;
 
 fn model_with(model: MaterialModel, damping_per_s: f64, anisotropic: bool) -> ElasticModel {
     let mesh = common::box_mesh([4, 2, 2], 0.005, 0.15, 7);

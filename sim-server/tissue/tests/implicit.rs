@@ -6,12 +6,12 @@
 //! backend's worker thread, it gives the same trajectory, a step never waits
 //! for it, and the worker ends with the backend.
 
-mod common;
+use tissue::test_support as common;
 
-use sim_server::backend::{Backend, Implicit, ImplicitConfig, Preconditioner};
-use sim_server::prelude::*;
 use std::sync::mpsc;
 use std::time::Duration;
+use tissue::backend::{Backend, Implicit, ImplicitConfig, Preconditioner};
+use tissue::prelude::*;
 
 const SIZE: [f64; 3] = common::BLOCK_M;
 const STEPS: usize = 170;

@@ -14,11 +14,11 @@
 //! construction, and swapping the new factor in moves it (the worker thread
 //! builds it and frees the old one, outside the count).
 
-mod common;
+use tissue::test_support as common;
 
 use shared::alloc_count::{Counting, count};
-use sim_server::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
-use sim_server::prelude::*;
+use tissue::backend::{Backend, Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
+use tissue::prelude::*;
 
 #[global_allocator]
 static ALLOCATOR: Counting = Counting;
@@ -47,7 +47,7 @@ fn two_hundred_steps_of_each_backend_allocate_nothing() {
             .find(|&v| (p[v] - Vec3::new(0.015, 0.01, SIZE[2])).length() < 1e-9)
             .unwrap(),
     );
-    let bound = sim_server::tensor_mass::element_bound(&m).dt_max_s;
+    let bound = tissue::tensor_mass::element_bound(&m).dt_max_s;
     let cuttable: Vec<TetId> = (0..m.mesh().tet_count())
         .map(TetId::from)
         .filter(|t| m.mesh().tet_points(*t).iter().all(|q| q.x >= 0.02))
@@ -58,7 +58,7 @@ fn two_hundred_steps_of_each_backend_allocate_nothing() {
     let stvk = {
         let mat = *m.materials().material(TetId(0));
         let mats = TetMaterials::uniform(
-            mat.with_model(sim_server::material::MaterialModel::Stvk),
+            mat.with_model(tissue::material::MaterialModel::Stvk),
             m.mesh().tet_count(),
         );
         ElasticModel::new(m.mesh().clone(), mats).unwrap()
@@ -154,7 +154,7 @@ fn background_rebuilds(budget: Option<usize>) {
                 .unwrap(),
         )
     };
-    let bound = sim_server::tensor_mass::element_bound(&m).dt_max_s;
+    let bound = tissue::tensor_mass::element_bound(&m).dt_max_s;
     let cuttable = TetId::from(
         (0..m.mesh().tet_count())
             .find(|&t| {

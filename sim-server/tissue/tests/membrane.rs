@@ -4,13 +4,13 @@
 //! removed tissue only and restoring gives it back, and the stability bound
 //! still holds with a stiff capsule.
 
-mod common;
+use tissue::test_support as common;
 
 use common::*;
-use sim_server::membrane::MembraneModel;
-use sim_server::prelude::*;
-use sim_server::tensor_mass::element_bound;
 use std::collections::HashMap;
+use tissue::membrane::MembraneModel;
+use tissue::prelude::*;
+use tissue::tensor_mass::element_bound;
 
 const ALPHA: f64 = 2.0e5; // N/m^2
 
@@ -131,10 +131,10 @@ fn cutting_removes_the_capsule_of_removed_tissue_and_restoring_gives_it_back() {
         }
         let tol = 1e-12 * max_entry(original.vertex_tensors());
         for (x, y) in cut.vertex_tensors().iter().zip(original.vertex_tensors()) {
-            assert!(sim_server::math::max_abs(&(*x - *y)) <= tol);
+            assert!(tissue::math::max_abs(&(*x - *y)) <= tol);
         }
         for (x, y) in cut.edge_tensors().iter().zip(original.edge_tensors()) {
-            assert!(sim_server::math::max_abs(&(*x - *y)) <= tol);
+            assert!(tissue::math::max_abs(&(*x - *y)) <= tol);
         }
     }
 }
