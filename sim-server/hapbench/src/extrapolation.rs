@@ -22,6 +22,7 @@ use shared::protocol::MAX_TOOLS;
 use sim_server::contact::{StiffnessSolves, ToolInput};
 use sim_server::math::Vec3;
 use sim_server::prepare::prepare;
+use sim_server::scene::spec::BackendName;
 use sim_server::scene::{SceneSource, build_scene};
 use sim_server::wire::{force_sample, tool_flags};
 use std::collections::BTreeMap;
@@ -166,6 +167,15 @@ fn simulate(
         !scene.tools.is_empty(),
         "the scene {} has no [[tool]]",
         src.name
+    );
+    // The truth and its check are explicit sub-steps (the check halves
+    // them): a scene on another backend would be measured on a backend it
+    // did not ask for, so it is refused rather than silently swapped.
+    anyhow::ensure!(
+        scene.settings.backend == BackendName::TensorMass,
+        "{}: `[simulation] backend = \"{}\"`: hapbench extrapolation measures against the tensor-mass backend's haptic-rate truth (its check halves the explicit sub-steps); run it with `backend = \"tensor-mass\"`, or compare backends with `hapbench tradeoff`",
+        src.name,
+        scene.settings.backend.as_str()
     );
     let mut p = prepare::<f64>(scene, Some(dt_s))?;
     p.sim.set_substep_factor(substep_factor);

@@ -414,11 +414,23 @@ fn hapbench_tradeoff_runs_every_backend_on_a_scene() {
 }
 
 #[test]
-fn hapbench_extrapolation_refuses_runs_no_memory_holds() {
+fn hapbench_extrapolation_refuses_runs_no_memory_holds_and_other_backends() {
     let dir = scratch_dir("hapbench-extrapolation-limits");
     let long = dir.join("days.csv");
     std::fs::write(&long, "t_s,x_m,y_m,z_m\n0,0,0,0.05\n1e9,0,0,0.05\n").unwrap();
+    // A scene on another backend is refused, not measured on tensor-mass.
+    let implicit = dir.join("box-implicit.toml");
+    let data = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/data/box-probe.toml"
+    );
+    let text = std::fs::read_to_string(data).unwrap();
+    std::fs::write(&implicit, format!("{text}backend = \"implicit\"\n")).unwrap();
     for (args, needle) in [
+        (
+            vec!["extrapolation", "--scene", implicit.to_str().unwrap()],
+            "`[simulation] backend = \"implicit\"`: hapbench extrapolation measures against the tensor-mass",
+        ),
         (
             vec!["extrapolation", "--haptic-rate", "1e12"],
             "at most 10000 Hz",
