@@ -29,6 +29,7 @@ pub mod bench;
 pub mod frames;
 pub mod input_file;
 pub mod prepare;
+pub mod provenance;
 pub mod scene;
 pub mod step_time;
 pub mod wire;

@@ -225,9 +225,7 @@ fn main() -> Result<()> {
             .context("benchmark failed")?;
             print_report(&report);
             if let Some(path) = json {
-                let text = serde_json::to_string_pretty(&report)?;
-                std::fs::write(&path, text + "\n")
-                    .with_context(|| format!("cannot write {}", path.display()))?;
+                sim_server::provenance::write_stamped(&path, &report)?;
             }
         }
     }

@@ -597,8 +597,7 @@ pub fn run(args: &Args) -> Result<()> {
         report.truth_check.rms_difference_n
     );
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)? + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        sim_server::provenance::write_stamped(path, &report)?;
     }
     if let Some(path) = &args.series {
         write_series(path, h, &hand, &truth_f, &rendered_all)?;

@@ -10,6 +10,7 @@ mod local_render;
 mod phases;
 mod plot;
 mod progress;
+mod report;
 mod stability;
 mod tradeoff;
 mod tradeoff_large;
@@ -46,6 +47,9 @@ enum Command {
     /// steps, with the Pareto front.
     #[command(allow_negative_numbers = true)]
     Tradeoff(tradeoff::Args),
+    /// Renders benchmark JSON files (`--json`) as Markdown results pages
+    /// with their date, commit and machine (docs/results/measured/).
+    Report(report::Args),
     /// The latency baseline's publisher process (started by `latency`).
     #[command(hide = true)]
     #[command(allow_negative_numbers = true)]
@@ -58,6 +62,7 @@ fn main() -> Result<()> {
         Command::Stability(args) => stability::run(&args),
         Command::Latency(args) => latency::run(&args),
         Command::Tradeoff(args) => tradeoff::run(&args),
+        Command::Report(args) => report::run(&args),
         Command::Probe(args) => latency_probe::probe(&args),
     }
 }

@@ -426,9 +426,7 @@ pub fn run(args: &Args) -> Result<()> {
         plot(dir, &cases)?;
     }
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&serde_json::json!({ "cases": cases }))?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        sim_server::provenance::write_stamped(path, &serde_json::json!({ "cases": cases }))?;
     }
     Ok(())
 }

@@ -334,8 +334,7 @@ pub fn run(args: &Args) -> Result<()> {
                 "reference_displacement_m": u_ref.to_array(),
                 "models": points,
             });
-            std::fs::write(path, serde_json::to_string_pretty(&v)? + "\n")
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            sim_server::provenance::write_stamped(path, &v)?;
         }
         return Ok(());
     }
@@ -409,8 +408,7 @@ pub fn run(args: &Args) -> Result<()> {
             "backends": backends,
             "sweep": points,
         });
-        std::fs::write(path, serde_json::to_string_pretty(&v)? + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        sim_server::provenance::write_stamped(path, &v)?;
     }
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;

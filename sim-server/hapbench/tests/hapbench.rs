@@ -74,6 +74,78 @@ fn hapbench_extrapolation_errors_shrink_as_the_simulation_rate_grows() {
         assert!(rb < ra, "{m}: rms error {ra} N at 50 Hz, {rb} N at 500 Hz");
     }
     assert!(dir.join("extrapolation.svg").exists());
+    results_page_names_what_was_measured(&dir.join("ex50.json"), &slow);
+}
+
+/// `hapbench report` renders a bench's JSON as a results page: its
+/// provenance (date, commit, the machine's CPU and cores, the command),
+/// the scalar figures, and a row per method with its figures, each the
+/// JSON's to six digits.
+fn results_page_names_what_was_measured(json: &Path, v: &serde_json::Value) {
+    let p = &v["provenance"];
+    assert!(p["date_utc"].as_str().unwrap().ends_with('Z'), "{p}");
+    assert!(p["machine"]["cores"].as_u64().unwrap() >= 1, "{p}");
+    assert!(
+        p["command"].as_str().unwrap().contains("--sim-rate 50"),
+        "{p}"
+    );
+    let out_dir = json.parent().unwrap().join("pages");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"))
+        .args(["report", json.to_str().unwrap(), "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run hapbench report");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let page = std::fs::read_to_string(out_dir.join("ex50.md")).unwrap();
+    for needle in [
+        format!("| date (UTC) | {} |", p["date_utc"].as_str().unwrap()),
+        format!("| commit | `{}` |", p["commit"].as_str().unwrap()),
+        format!(
+            "{} x {}",
+            p["machine"]["cores"],
+            p["machine"]["cpu"].as_str().unwrap()
+        ),
+        format!("| `sim_rate_hz` | {} |", v["sim_rate_hz"].as_f64().unwrap()),
+        "## methods".to_string(),
+    ] {
+        assert!(page.contains(&needle), "{needle} not in:\n{page}");
+    }
+    // A row per method, its RMS error the first figure column.
+    let header = (page.lines())
+        .find(|l| l.starts_with("| methods |"))
+        .expect("a methods table");
+    let col = header
+        .split('|')
+        .position(|c| c.trim() == "`rms_error_n`")
+        .expect("an rms_error_n column");
+    for (name, m) in v["methods"].as_object().unwrap() {
+        let row = (page.lines())
+            .find(|l| l.starts_with(&format!("| {name} |")))
+            .unwrap_or_else(|| panic!("no row for {name}"));
+        let shown: f64 = row.split('|').nth(col).unwrap().trim().parse().unwrap();
+        let rms = m["rms_error_n"].as_f64().unwrap();
+        assert!(
+            (shown - rms).abs() <= 1e-5 * rms.abs().max(1e-12),
+            "{name}: {shown} vs {rms}"
+        );
+    }
+    // A JSON without its provenance is refused, naming the file.
+    let bare = json.with_file_name("bare.json");
+    std::fs::write(&bare, r#"{"steps_per_s": 1.0}"#).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"))
+        .args(["report", bare.to_str().unwrap(), "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("bare.json") && err.contains("no `provenance`"),
+        "{err}"
+    );
 }
 
 /// Reads a CSV with a header into rows of numbers.
