@@ -70,11 +70,11 @@ impl<S: Storage> Backend for Explicit<S> {
     fn set_contact_bound(&mut self, omega2: Real) {
         Explicit::set_contact_bound(self, omega2);
     }
-    fn step_with_contact<F: ForceTerm>(
+    fn step_with_contact<F: ForceTerm, R: FnMut(&Self, &mut F)>(
         &mut self,
         field: &mut F,
         resample_every_s: Real,
-        resample: &mut dyn FnMut(&Self, &mut F),
+        resample: &mut R,
     ) {
         Explicit::step_with_contact(self, field, resample_every_s, resample);
     }

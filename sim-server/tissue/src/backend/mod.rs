@@ -145,12 +145,13 @@ pub trait Backend {
     /// One step with the penalty contact `field`, calling `resample` to
     /// select its points again every `resample_every_s` of simulated time
     /// within the step; a backend that does not integrate contact steps
-    /// without it.
-    fn step_with_contact<F: ForceTerm>(
+    /// without it. `resample` is generic, not `dyn`: it runs inside the
+    /// step, in the hot path.
+    fn step_with_contact<F: ForceTerm, R: FnMut(&Self, &mut F)>(
         &mut self,
         field: &mut F,
         resample_every_s: Real,
-        resample: &mut dyn FnMut(&Self, &mut F),
+        resample: &mut R,
     ) where
         Self: Sized,
     {

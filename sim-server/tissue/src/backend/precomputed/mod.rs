@@ -414,11 +414,11 @@ impl Backend for Precomputed {
         })
     }
 
-    fn step_with_contact<F: ForceTerm>(
+    fn step_with_contact<F: ForceTerm, R: FnMut(&Self, &mut F)>(
         &mut self,
         field: &mut F,
         _resample_every_s: Real,
-        _resample: &mut dyn FnMut(&Self, &mut F),
+        _resample: &mut R,
     ) {
         // Static: one solve a step, nothing to re-select within it.
         let mut scratch = std::mem::take(&mut self.contact);

@@ -187,11 +187,11 @@ impl<S: Storage> Explicit<S> {
     /// to the elastic ones; `resample` selects the field's points again
     /// every `resample_every_s` of simulated time within the step. The
     /// first contact allocates one force array.
-    pub fn step_with_contact<F: ForceTerm>(
+    pub fn step_with_contact<F: ForceTerm, R: FnMut(&Self, &mut F)>(
         &mut self,
         field: &mut F,
         resample_every_s: Real,
-        resample: &mut dyn FnMut(&Self, &mut F),
+        resample: &mut R,
     ) {
         if field.is_idle() {
             self.step();
