@@ -94,6 +94,14 @@ fn a_corotational_region_following_the_probe_holds_it_steady_deep() {
     let (mean, sd, max, zeros) = stats(&press_and_hold(&mut p, 0.015));
     let (region, changes) = p.tools.corotational_region().unwrap();
     let tets = region.iter().filter(|r| **r).count();
+    // The run summary's figures: the region's changes, and at least the
+    // tetrahedra it holds now as its largest.
+    let seen = p.tools.corotational_region_stats().unwrap();
+    assert_eq!(seen.rebuilds, changes);
+    assert!(
+        seen.largest_tets >= tets && tets > 0,
+        "{seen:?}, {tets} now"
+    );
     eprintln!(
         "region {tets} tetrahedra ({changes} changes): mean {mean:.4} N, sd {sd:.5} N, max {max:.4} N, zero steps {zeros}"
     );

@@ -187,6 +187,14 @@ pub fn run(args: RunArgs) -> Result<()> {
             }
         );
     }
+    if summary.corotational_region_rebuilds > 0 {
+        println!(
+            "{}: the corotational region that follows the tools held at most {} tetrahedra and changed {} times",
+            src.name,
+            summary.corotational_region_largest_tets,
+            summary.corotational_region_rebuilds
+        );
+    }
     if summary.nonlinear_tets > 0 {
         println!(
             "{}: {} nonlinear tetrahedra; at most {} StVK elements squeezed below half their volume at once (their volume barrier acted)",

@@ -217,6 +217,11 @@ pub struct RunSummary {
     /// With `--save-frames`: frames not written because the disk was
     /// behind (the step is never delayed for them).
     pub frames_dropped: u64,
+    /// With `[contact] corotational_radius_m`: the most tetrahedra the
+    /// corotational region that follows the tools held at once (0 without).
+    pub corotational_region_largest_tets: usize,
+    /// See `corotational_region_largest_tets`: times the region changed.
+    pub corotational_region_rebuilds: u64,
 }
 
 /// Why a run failed.

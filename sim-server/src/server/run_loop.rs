@@ -548,6 +548,10 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             self.solve_iterations as Real / (summary.steps.max(1)) as Real;
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
+        if let Some(r) = self.contacts.corotational_region_stats() {
+            summary.corotational_region_largest_tets = r.largest_tets;
+            summary.corotational_region_rebuilds = r.rebuilds;
+        }
         summary.local_problems = self.local_out.published;
         summary.local_problems_dropped = self.local_out.dropped;
         if let Some((counts, error)) = self.mesh_out.finish() {

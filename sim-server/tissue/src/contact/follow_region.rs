@@ -33,6 +33,16 @@ const LEAVE_RADII: Real = 1.5;
 const MOVE_FRACTION: Real = 0.25;
 
 /// The region and its scratch, sized once.
+/// What the corotational region that follows the tools did over a run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RegionStats {
+    /// Times it changed (a tip moved a quarter of the radius and the set
+    /// of tetrahedra within it changed).
+    pub rebuilds: u64,
+    /// The most tetrahedra it held at once.
+    pub largest_tets: usize,
+}
+
 #[derive(Clone, Debug)]
 pub(crate) struct FollowRegion {
     radius_m: Real,
@@ -44,6 +54,8 @@ pub(crate) struct FollowRegion {
     region: Vec<bool>,
     next: Vec<bool>,
     rebuilds: u64,
+    /// Most tetrahedra in the region at once (counted when it changes).
+    largest: usize,
 }
 
 impl FollowRegion {
@@ -55,6 +67,15 @@ impl FollowRegion {
             region: vec![false; model.mesh().tet_count()],
             next: vec![false; model.mesh().tet_count()],
             rebuilds: 0,
+            largest: 0,
+        }
+    }
+
+    /// Times the region changed, and the most tetrahedra it held at once.
+    pub(crate) fn stats(&self) -> RegionStats {
+        RegionStats {
+            rebuilds: self.rebuilds,
+            largest_tets: self.largest,
         }
     }
 
@@ -106,6 +127,10 @@ impl FollowRegion {
         if self.next != self.region {
             std::mem::swap(&mut self.next, &mut self.region);
             self.rebuilds += 1;
+            // Cold: only when the region changes (a tip moved a quarter
+            // of the radius).
+            let now = self.region.iter().filter(|r| **r).count();
+            self.largest = self.largest.max(now);
             sim.set_corotational_region(&self.region);
         }
     }

@@ -113,6 +113,7 @@ mod tool;
 mod tools;
 
 pub use config::{ContactConfig, ContactLaw, MAX_IMPLICIT_STIFFNESS_FACTOR};
+pub use follow_region::RegionStats;
 pub use instrument::{Friction, Plane, Segment, ToolDecl, ToolKind, ToolPose};
 pub use local::{LocalContact, LocalPart, LocalPoint};
 pub use penalty::field::ContactField;

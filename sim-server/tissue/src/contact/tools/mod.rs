@@ -465,6 +465,12 @@ impl Tools {
         self.follow.as_ref().map(|f| f.state())
     }
 
+    /// What the corotational region that follows the tools did so far
+    /// (`None` without `corotational_radius_m`).
+    pub fn corotational_region_stats(&self) -> Option<crate::contact::RegionStats> {
+        self.follow.as_ref().map(|f| f.stats())
+    }
+
     /// The force on tool `i` and its contact stiffness after the step.
     pub fn reaction<B: Backend + ?Sized>(&self, i: usize, sim: &B) -> Reaction {
         self.tools[i].reaction(sim, &self.adjacency, &self.field, self.stiffness_n_per_m[i])
