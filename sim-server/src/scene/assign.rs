@@ -2,9 +2,9 @@
 //! `[[region]]`s in order, then its `[[vessel]]`s (fibres along the vessel),
 //! each checked at its own line.
 
-use super::build::{SceneReport, positive};
 use super::materials::resolve;
 use super::ranges;
+use super::report::{SceneReport, positive};
 use super::select::{Region, Tags, distance_to_segment, segment_crosses_tet};
 use super::spec::{MaterialKeys, SceneSpec};
 use super::{SceneError, SceneSource};

@@ -5,72 +5,19 @@
 use super::assign::tet_materials;
 use super::loads::loads;
 use super::mesh_load::{LoadedMesh, load_mesh};
+use super::report::SceneReport;
 use super::select::Region;
-use super::settings::{backend_runs_models, contact_config, settings};
-use super::spec::{BackendName, MembraneModelName, SceneSpec};
+use super::settings::{SimSettings, backend_runs_models, contact_config, settings};
+use super::spec::{MembraneModelName, SceneSpec};
 use super::tool_decls::tool_decls;
 use super::{SceneError, SceneSource};
 use crate::ids::{TetId, VertexId};
-use crate::math::{Real, Vec3};
+use crate::math::Vec3;
 use crate::membrane::MembraneModel;
 
-use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
-use serde::Serialize;
+use crate::tensor_mass::ElasticModel;
 
 pub use crate::contact::ToolDecl;
-
-/// Simulation settings with defaults applied.
-#[derive(Clone, Debug)]
-pub struct SimSettings {
-    /// Requested step (s); `None` = 90% of the stable step.
-    pub dt_s: Option<Real>,
-    /// Target rate (Hz) for real-time runs.
-    pub rate_hz: Option<Real>,
-    /// Worker threads.
-    pub threads: usize,
-    /// f32 (true) or f64 tensor storage.
-    pub single_precision: bool,
-    /// Refuse or sub-step.
-    pub policy: DtPolicy,
-    /// Which bound.
-    pub bound: BoundMethod,
-    /// Which backend (default tensor-mass).
-    pub backend: BackendName,
-}
-
-/// What the scene made, for `check` and logs.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct SceneReport {
-    /// Where the mesh came from.
-    pub mesh_source: String,
-    /// Importer and builder warnings.
-    pub warnings: Vec<String>,
-    /// (name, tetrahedra, material) per region, in order.
-    pub regions: Vec<(String, usize, String)>,
-    /// (name, tetrahedra made anisotropic) per vessel.
-    pub vessels: Vec<(String, usize)>,
-    /// Tetrahedra with an anisotropic material.
-    pub anisotropic_tets: usize,
-    /// The default material.
-    pub default_material: String,
-    /// Membrane: alpha and model, if any.
-    pub membrane: Option<(Real, String)>,
-    /// Vertices held fixed.
-    pub fixed_vertices: usize,
-    /// Vertices with an imposed displacement.
-    pub prescribed_vertices: usize,
-    /// Vertices carrying a force.
-    pub loaded_vertices: usize,
-    /// Tetrahedra of the hybrid's tensor-mass part, when `[hybrid]` is given.
-    pub hybrid_tets: Option<usize>,
-    /// What each `[[refine]]` did, in order.
-    pub refined: Vec<super::refine::RefineReport>,
-    /// The values past their usual range that shorten the explicit stable
-    /// step (`poisson 0.4999 at line 8`), named by the real-time warning
-    /// ([`super::real_time::RealTime`]).
-    #[serde(skip)]
-    pub step_notes: Vec<String>,
-}
 
 /// A built scene.
 pub struct BuiltScene {
@@ -96,23 +43,6 @@ pub struct BuiltScene {
     /// scene renumbered the vertices (RCM, `[mesh] reorder`): outputs write
     /// it as the `original_id` point array. `None`: the file's order kept.
     pub original_vertex_ids: Option<Vec<u32>>,
-}
-
-/// A scene value that must be a positive finite number, or its error.
-pub(super) fn positive(
-    src: &SceneSource,
-    v: &toml::Spanned<Real>,
-    what: &str,
-) -> Result<Real, SceneError> {
-    let x = *v.get_ref();
-    if x.is_finite() && x > 0.0 {
-        Ok(x)
-    } else {
-        Err(src.error(
-            v.span(),
-            format!("{what} must be a positive finite number, got {x}"),
-        ))
-    }
 }
 
 /// Builds everything `spec` declares.

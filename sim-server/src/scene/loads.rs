@@ -2,8 +2,8 @@
 //! rigid `rotate` of the selection) and forces (`force_n` shared by the
 //! selected vertices, `traction_pa` over the surface triangles they close).
 
-use super::build::SceneReport;
 use super::ranges::{self, KeyRange};
+use super::report::SceneReport;
 use super::select::{Region, Tags};
 use super::spec::SceneSpec;
 use super::{SceneError, SceneSource};

@@ -1,8 +1,8 @@
 //! Turning a table's material keys into a validated [`Material`], with
 //! errors placed on the offending value.
 
-use super::build::SceneReport;
 use super::ranges::{self, KeyRange};
+use super::report::SceneReport;
 use super::spec::{MaterialKeys, MaterialModelName, TermName};
 use super::{SceneError, SceneSource};
 use crate::material::{

@@ -2,7 +2,7 @@
 //! generated, scaled to metres as `scale` or `units` asks, and renumbered
 //! for the kernel (RCM) with each vertex's original index kept.
 
-use super::build::{SceneReport, positive};
+use super::report::{SceneReport, positive};
 use super::select::Tags;
 use super::spec::{LatticeKind, SceneSpec, ShapeKind};
 use super::{SceneError, SceneSource};

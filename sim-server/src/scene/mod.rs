@@ -12,13 +12,15 @@ mod mesh_load;
 pub mod ranges;
 pub mod real_time;
 pub mod refine;
+mod report;
 mod select;
 mod settings;
 pub mod spec;
 mod tool_decls;
 
-pub use build::{BuiltScene, SceneReport, SimSettings, ToolDecl, build_scene};
-pub use settings::{HYBRID_NEEDS_SPLIT, MAX_DT_S, MIN_DT_S, check_step};
+pub use build::{BuiltScene, ToolDecl, build_scene};
+pub use report::SceneReport;
+pub use settings::{HYBRID_NEEDS_SPLIT, MAX_DT_S, MIN_DT_S, SimSettings, check_step};
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};

@@ -3,8 +3,8 @@
 //! `warn_min ..= warn_max` is accepted with a warning (a lab may mean it).
 //! docs/guide/scenes.md lists the same table.
 
-use super::build::SceneReport;
-use super::real_time::thousands;
+use super::report::SceneReport;
+use super::report::thousands;
 use super::{SceneError, SceneSource};
 use crate::math::Real;
 use toml::Spanned;

@@ -4,6 +4,7 @@
 //! that shortened the step ([`super::ranges`] notes them).
 
 use super::build::BuiltScene;
+use super::report::thousands;
 use crate::math::Real;
 
 /// The explicit kernel's time per edge and sub-step (s), rounded up from
@@ -74,22 +75,6 @@ impl RealTime {
             EDGE_SUBSTEP_S * 1e9,
         ))
     }
-}
-
-/// 106383 as "106,383".
-pub(super) fn thousands(x: Real) -> String {
-    if x >= 1e15 {
-        return format!("{x:.1e}");
-    }
-    let digits = format!("{x:.0}");
-    let mut out = String::new();
-    for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i).is_multiple_of(3) {
-            out.push(',');
-        }
-        out.push(c);
-    }
-    out
 }
 
 /// A duration in the unit that reads best: 1 ms, 1.104 s, 12.5 us.

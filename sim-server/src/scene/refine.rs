@@ -5,35 +5,20 @@
 //! parent's physical tag; tagged surface triangles are split with the faces
 //! they became.
 
-use super::build::{SceneReport, positive};
+pub use super::report::RefineReport;
+use super::report::{SceneReport, positive};
 use super::select::{Region, Tags};
 use super::spec::SceneSpec;
 use super::{SceneError, SceneSource};
 use crate::ids::{TetId, VertexId};
-use crate::math::{Real, Vec3};
+use crate::math::Vec3;
 use crate::mesh::TetMesh;
 use crate::mesh::refine::refine;
-use serde::Serialize;
 
 /// The element budget of a `[[refine]]` without `max_tets`: what a core
 /// steps in real time at a few sub-steps a millisecond is far below it, and
 /// it bounds the memory a mistaken `cell_m` can take (about 0.5 GB).
 pub const DEFAULT_MAX_TETS: usize = 300_000;
-
-/// What one `[[refine]]` did, for `check` and the run's report.
-#[derive(Clone, Debug, Serialize)]
-pub struct RefineReport {
-    /// Its name (or `refine N`).
-    pub name: String,
-    /// The cell size asked for (m).
-    pub cell_m: Real,
-    /// Tetrahedra before and after.
-    pub tets_before: usize,
-    /// Tetrahedra after.
-    pub tets_after: usize,
-    /// Whether it stopped at its element budget.
-    pub stopped_at_budget: bool,
-}
 
 /// Whether a tetrahedron with corners `p` touches `region` (its bounding
 /// box does: a tetrahedron straddling the region's edge is refined too).

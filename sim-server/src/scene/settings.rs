@@ -2,8 +2,8 @@
 //! `[contact]` law and its limits, and whether the chosen backend can run
 //! the scene's material models.
 
-use super::build::{SceneReport, SimSettings, positive};
 use super::ranges::{self, KeyRange};
+use super::report::{SceneReport, positive};
 use super::spec::{
     BackendName, BoundName, DtPolicyName, MaterialModelName, PrecisionName, SceneSpec,
 };
@@ -12,6 +12,25 @@ use crate::ids::TetId;
 use crate::math::Real;
 use crate::tensor_mass::{BoundMethod, DtPolicy, ElasticModel};
 use toml::Spanned;
+
+/// Simulation settings with defaults applied.
+#[derive(Clone, Debug)]
+pub struct SimSettings {
+    /// Requested step (s); `None` = 90% of the stable step.
+    pub dt_s: Option<Real>,
+    /// Target rate (Hz) for real-time runs.
+    pub rate_hz: Option<Real>,
+    /// Worker threads.
+    pub threads: usize,
+    /// f32 (true) or f64 tensor storage.
+    pub single_precision: bool,
+    /// Refuse or sub-step.
+    pub policy: DtPolicy,
+    /// Which bound.
+    pub bound: BoundMethod,
+    /// Which backend (default tensor-mass).
+    pub backend: BackendName,
+}
 
 /// The longest step a scene or `--dt-s` may ask for (s): longer, a live
 /// run would sleep through its stop signal and its duration.

@@ -1,8 +1,8 @@
 //! The scene's `[[tool]]`s: at most the protocol's four, unique names, a fulcrum outside the organ, a
 //! positive length, radius and tip no longer than the tool, friction.
 
-use super::build::{SceneReport, positive};
 use super::ranges;
+use super::report::{SceneReport, positive};
 use super::spec::SceneSpec;
 use super::{SceneError, SceneSource};
 use crate::contact::{Friction, ToolDecl};
