@@ -1,7 +1,6 @@
 //! The devices `haptic-daemon run` drives, a closed set made from the
 //! `--device` argument, and the real-time loop run on the one chosen.
 
-use crate::run_cmd::Lateness;
 use anyhow::{Result, bail};
 use haptic_daemon::daemon::{ChainConfig, RtLoop, Shared};
 use haptic_daemon::device::{
@@ -11,6 +10,8 @@ use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::rt::Pacer;
 use haptic_daemon::safety::{SafetyConfig, SafetyState};
+use serde::Serialize;
+use shared::loop_stats::LoopHistogram;
 use shared::monotonic_ns;
 use shared::protocol::ForceMsg;
 use shared::source::Source;
@@ -175,4 +176,24 @@ pub(crate) fn run_loop<D: Device>(
         overruns: pacer.overruns(),
         render_us: rt.render_times().map(Lateness::of),
     })
+}
+
+/// Percentiles of a loop histogram (us), as the summaries write them.
+#[derive(Serialize)]
+pub(crate) struct Lateness {
+    pub(crate) p50: f64,
+    pub(crate) p99: f64,
+    pub(crate) p999: f64,
+    pub(crate) max: f64,
+}
+
+impl Lateness {
+    pub(crate) fn of(h: &LoopHistogram) -> Self {
+        Self {
+            p50: h.quantile_us(0.5),
+            p99: h.quantile_us(0.99),
+            p999: h.quantile_us(0.999),
+            max: h.max_us(),
+        }
+    }
 }

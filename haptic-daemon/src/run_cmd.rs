@@ -3,7 +3,7 @@
 //! status line a second, and at the end joins them and reports.
 
 use crate::device_choice::{DeviceChoice, SIMULATED_DEVICE_MAX_FORCE_N, make_device};
-use crate::device_choice::{LoopConfig, RtEnd};
+use crate::device_choice::{Lateness, LoopConfig, RtEnd};
 use crate::run_args::RunArgs;
 use anyhow::{Context, Result, bail};
 use haptic_daemon::daemon::Shared;
@@ -16,31 +16,11 @@ use haptic_daemon::rt::{RtReport, lock_memory, pin_to_cpu, set_fifo};
 use haptic_daemon::safety::SafetyConfig;
 use haptic_daemon::transport::Transport;
 use serde::Serialize;
-use shared::loop_stats::LoopHistogram;
 use shared::{SessionName, services};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-
-#[derive(Serialize)]
-pub(crate) struct Lateness {
-    p50: f64,
-    p99: f64,
-    p999: f64,
-    max: f64,
-}
-
-impl Lateness {
-    pub(crate) fn of(h: &LoopHistogram) -> Self {
-        Self {
-            p50: h.quantile_us(0.5),
-            p99: h.quantile_us(0.99),
-            p999: h.quantile_us(0.999),
-            max: h.max_us(),
-        }
-    }
-}
 
 /// `--workspace-*` as the summary says them.
 #[derive(Serialize)]

@@ -2,7 +2,6 @@
 //! through the wire as the server sends them, set up as the daemon's set-up
 //! thread does, rendered at the haptic ticks as its RT thread does.
 
-use crate::extrapolation::Sample;
 use haptic_daemon::extrapolate::local_problem::{LocalContactMsg, LocalProblem};
 use haptic_daemon::extrapolate::{Extrapolator, ForceSample, Method};
 use haptic_daemon::local_setup::{MAX_CATCH_UP, catch_up};
@@ -76,7 +75,7 @@ impl<'a> LocalRender<'a> {
     pub(crate) fn after_step<B: sim_server::backend::Backend>(
         &mut self,
         j: usize,
-        sample: &Sample,
+        sample: &ForceSample,
         tools: &mut sim_server::contact::Tools,
         sim: &B,
     ) {
