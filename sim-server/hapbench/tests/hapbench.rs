@@ -90,11 +90,16 @@ fn results_page_names_what_was_measured(json: &Path, v: &serde_json::Value) {
         "{p}"
     );
     let out_dir = json.parent().unwrap().join("pages");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"))
-        .args(["report", json.to_str().unwrap(), "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("run hapbench report");
+    let report = |json: &Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"))
+            .arg("report")
+            .arg(json)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .expect("run hapbench report")
+    };
+    let out = report(json);
     assert!(
         out.status.success(),
         "{}",
@@ -136,11 +141,7 @@ fn results_page_names_what_was_measured(json: &Path, v: &serde_json::Value) {
     // A JSON without its provenance is refused, naming the file.
     let bare = json.with_file_name("bare.json");
     std::fs::write(&bare, r#"{"steps_per_s": 1.0}"#).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hapbench"))
-        .args(["report", bare.to_str().unwrap(), "--out"])
-        .arg(&out_dir)
-        .output()
-        .unwrap();
+    let out = report(&bare);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && err.contains("bare.json") && err.contains("no `provenance`"),
