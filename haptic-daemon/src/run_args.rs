@@ -43,6 +43,11 @@ pub(crate) struct RunArgs {
     /// device's x, then y, then z axis, `RX,RY,RZ`.
     #[arg(long, value_name = "RX,RY,RZ", value_parser = parse_v3, default_value = "0,0,0")]
     pub workspace_rotate_deg: [f64; 3],
+    /// The workspace placement from a file (TOML: `offset_m`, `scale`,
+    /// `rotate_deg`, a `device` note), instead of the three
+    /// `--workspace-*` flags (`haptic-daemon/workspaces/` has examples).
+    #[arg(long, value_name = "FILE.toml", conflicts_with_all = ["workspace_offset_m", "workspace_scale", "workspace_rotate_deg"])]
+    pub workspace: Option<PathBuf>,
     /// The daemon's checks (pose plausibility, live samples, stiffness
     /// cap, passivity).
     #[command(flatten)]

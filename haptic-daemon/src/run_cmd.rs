@@ -7,7 +7,7 @@ use crate::device_choice::{Lateness, LoopConfig, RtEnd};
 use crate::run_args::RunArgs;
 use anyhow::{Context, Result, bail};
 use haptic_daemon::daemon::Shared;
-use haptic_daemon::device::WorkspaceMap;
+use haptic_daemon::device::WorkspaceSpec;
 use haptic_daemon::extrapolate::Method;
 use haptic_daemon::extrapolate::local_problem::LocalProblem;
 use haptic_daemon::io::{IoConfig, IoSpin, Stats, run_io};
@@ -96,12 +96,17 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
     } else {
         (None, None)
     };
-    let map = WorkspaceMap::new(
-        args.workspace_offset_m,
-        args.workspace_scale,
-        args.workspace_rotate_deg,
-    )
-    .map_err(|e| anyhow::anyhow!("--workspace-*: {e}"))?;
+    let placement = match &args.workspace {
+        Some(path) => WorkspaceSpec::read(path)?,
+        None => WorkspaceSpec {
+            offset_m: args.workspace_offset_m,
+            scale: args.workspace_scale,
+            rotate_deg: args.workspace_rotate_deg,
+        },
+    };
+    let map = placement
+        .map()
+        .map_err(|e| anyhow::anyhow!("--workspace-*: {e}"))?;
     let device = make_device(&args.device, SIMULATED_DEVICE_MAX_FORCE_N, poke, map)?;
     let device_max = device.specs().max_force_n;
     let limit = force_limit(args.max_force, device_max)?;
@@ -117,7 +122,7 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
         .unwrap_or(device.specs().max_stiffness_n_per_m);
     if !map.is_identity() && !args.quiet {
         let [x, y, z] = map.offset_m.map(|v| v * 1e3);
-        let [rx, ry, rz] = args.workspace_rotate_deg;
+        let [rx, ry, rz] = placement.rotate_deg;
         say!(
             "workspace: the device's origin at ({x:.1}, {y:.1}, {z:.1}) mm in the scene, scale {}, turned ({rx}, {ry}, {rz}) deg; stiffness cap {stiffness_cap:.0} N/m in the scene, {:.0} N/m at the hand",
             map.scale,
@@ -235,9 +240,9 @@ pub(crate) fn run_main(args: RunArgs) -> Result<()> {
         device: args.device.clone(),
         max_stiffness_n_per_m: stiffness_cap,
         workspace: WorkspaceSummary {
-            offset_m: args.workspace_offset_m,
+            offset_m: placement.offset_m,
             scale: map.scale,
-            rotate_deg: args.workspace_rotate_deg,
+            rotate_deg: placement.rotate_deg,
             hand_max_stiffness_n_per_m: map.stiffness_at_hand(stiffness_cap),
         },
         samples_received: shared.samples.load(Ordering::Relaxed),

@@ -86,18 +86,34 @@ fn a_placed_workspace_holds_the_same_force_at_the_same_scene_point() {
             "90,0,0",
         ],
     );
+    // The same placement from a file (`--workspace FILE.toml`).
+    let file = dir.join("device.toml");
+    std::fs::write(
+        &file,
+        "device = \"test\"\noffset_m = [0.03, 0.02, 0.04]\nscale = 2.0\nrotate_deg = [90.0, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    let (file_json, from_file) = run(
+        "device-frame-file",
+        press_csv(to_device),
+        &["--workspace", file.to_str().unwrap()],
+    );
     let _ = sim.kill();
     let _ = sim.wait();
+    assert_eq!(
+        file_json["workspace"], placed_json["workspace"],
+        "the file and the flags place the device alike"
+    );
     // The hold's last 0.5 s.
     let hold = |f: &[f64]| {
         let tail = &f[f.len().saturating_sub(500)..];
         tail.iter().sum::<f64>() / tail.len() as f64
     };
-    let (a, b) = (hold(&plain), hold(&placed));
+    let (a, b, c) = (hold(&plain), hold(&placed), hold(&from_file));
     assert!(a > 1.0, "the probe does not press: {a} N");
     assert!(
-        (a - b).abs() <= 0.05 * a,
-        "scene frame {a:.3} N, device frame {b:.3} N"
+        (a - b).abs() <= 0.05 * a && (a - c).abs() <= 0.05 * a,
+        "scene frame {a:.3} N, device frame {b:.3} N, from the file {c:.3} N"
     );
     let ws = &placed_json["workspace"];
     assert_eq!(ws["scale"], 2.0, "{placed_json}");
@@ -148,4 +164,53 @@ fn the_simulated_poke_reaches_the_organ_through_a_map() {
         v["max_force_n"].as_f64().unwrap() > 0.5,
         "the poke missed the box: {v}"
     );
+}
+
+/// A workspace file with a misspelt key or a value out of range is
+/// refused before the loop starts, naming the file and the line or the
+/// range; a file and the flags together are refused too.
+#[test]
+fn a_bad_workspace_file_is_refused_with_its_line() {
+    let dir = scratch_dir("workspace-file");
+    let hand = dir.join("hand.csv");
+    std::fs::write(&hand, "t_s,x_m,y_m,z_m\n0,0,0,0.1\n1,0,0,0.1\n").unwrap();
+    let session = format!("wsfile{}", std::process::id());
+    for (name, text, extra, needles) in [
+        (
+            "misspelt.toml",
+            "scale = 2.0\nrotate = [90.0, 0.0, 0.0]\n",
+            &[][..],
+            &["misspelt.toml", "line 2", "unknown field `rotate`"][..],
+        ),
+        (
+            "huge.toml",
+            "scale = 1000.0\n",
+            &[][..],
+            &["huge.toml", "scale must lie in"][..],
+        ),
+        (
+            "both.toml",
+            "scale = 2.0\n",
+            &["--workspace-scale", "2"][..],
+            &["cannot be used with"][..],
+        ),
+    ] {
+        let file = dir.join(name);
+        std::fs::write(&file, text).unwrap();
+        let out = daemon_run(&session)
+            .args(["--duration-s", "0.5", "--device"])
+            .arg(format!("replay:{}", hand.display()))
+            .arg("--workspace")
+            .arg(&file)
+            .args(extra)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name}: accepted");
+        for n in needles {
+            assert!(err.contains(n), "{name}: {n:?} not in {err}");
+        }
+        assert!(!err.contains("Caused by"), "{name}: said twice: {err}");
+    }
 }

@@ -11,6 +11,7 @@ mod replay;
 mod simulated;
 mod trajectory;
 mod workspace;
+mod workspace_file;
 
 pub use haply::{Haply, HaplyError, INVERSE3_MAX_FORCE_N, force_command, parse_state};
 pub use plugin::{ABI_VERSION, Plugin, PluginError};
@@ -18,6 +19,7 @@ pub use replay::Replay;
 pub use simulated::{HandModel, Path, Simulated};
 pub use trajectory::{Trajectory, TrajectoryError};
 pub use workspace::{Mapped, WorkspaceError, WorkspaceMap};
+pub use workspace_file::{WorkspaceFileError, WorkspaceSpec};
 
 use crate::math::V3;
 use thiserror::Error;
