@@ -140,24 +140,26 @@ pub fn stamp(value: serde_json::Value) -> serde_json::Value {
 /// Why a stamped report could not be written.
 #[derive(Debug, Error)]
 pub enum WriteError {
-    /// The report did not serialise.
+    /// The report did not serialise (the reason in the message, not a
+    /// separate cause, so that it is said once).
     #[error("cannot serialise the report: {0}")]
-    Serialise(#[from] serde_json::Error),
+    Serialise(serde_json::Error),
     /// The file could not be written.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {reason}")]
     Io {
         /// The file.
         path: String,
         /// The system's reason.
-        source: std::io::Error,
+        reason: std::io::Error,
     },
 }
 
 /// Writes `report` to `path` as pretty JSON with its provenance.
 pub fn write_stamped(path: &Path, report: &impl Serialize) -> Result<(), WriteError> {
-    let text = serde_json::to_string_pretty(&stamp(serde_json::to_value(report)?))?;
-    std::fs::write(path, text + "\n").map_err(|source| WriteError::Io {
+    let value = serde_json::to_value(report).map_err(WriteError::Serialise)?;
+    let text = serde_json::to_string_pretty(&stamp(value)).map_err(WriteError::Serialise)?;
+    std::fs::write(path, text + "\n").map_err(|reason| WriteError::Io {
         path: path.display().to_string(),
-        source,
+        reason,
     })
 }
