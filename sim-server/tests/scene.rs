@@ -1044,3 +1044,38 @@ fn five_thousand_mutated_scenes_are_errors_or_scenes_never_panics() {
         "{built} built, {refused} refused"
     );
 }
+
+/// A tool whose tip cannot reach the organ is declared, moved and never
+/// felt (a run gave 0 contact steps and no word): the build warns, at the
+/// fulcrum's line, with the reach and the distance; a tool that reaches
+/// gives no such warning.
+#[test]
+fn a_tool_that_cannot_reach_the_organ_is_named() {
+    let tool = |length_m: f64| {
+        format!(
+            "{BASE}\n[[tool]]\nname = \"probe\"\nkind = \"hook\"\nfulcrum_m = [0.03, 0.01, 0.3]\nlength_m = {length_m}\nradius_m = 0.0025\ntip_length_m = 0.01\n"
+        )
+    };
+    // The box's top is at z = 0.02: 280 mm below the fulcrum.
+    let short = build(&tool(0.08)).unwrap();
+    let warning = (short.report.warnings.iter())
+        .find(|w| w.contains("cannot reach the organ"))
+        .unwrap_or_else(|| panic!("no warning: {:?}", short.report.warnings));
+    assert!(
+        warning.contains("[[tool]] \"probe\"")
+            && warning.contains("82.5 mm from fulcrum_m")
+            && warning.contains("280.0 mm")
+            && warning.starts_with("test.toml:13:13: "),
+        "{warning}"
+    );
+    let reaches = build(&tool(0.3)).unwrap();
+    assert!(
+        !reaches
+            .report
+            .warnings
+            .iter()
+            .any(|w| w.contains("cannot reach")),
+        "{:?}",
+        reaches.report.warnings
+    );
+}

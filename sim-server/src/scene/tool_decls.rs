@@ -70,6 +70,21 @@ pub(super) fn tool_decls(
             ));
         }
         let friction = tool_friction(src, t, &what, report)?;
+        // A tool whose tip cannot reach the organ is declared, moved and
+        // never felt: a run gave 0 contact steps and no word.
+        if let Some(nearest) = nearest_distance_m(model.mesh(), fulcrum)
+            && nearest > length + radius
+        {
+            let (line, column) = src.line_col(t.fulcrum_m.span().start);
+            report.warnings.push(format!(
+                "{}:{line}:{column}: {what} cannot reach the organ: its tip reaches {:.1} mm from fulcrum_m (length_m {:.1} mm, radius {:.1} mm), the organ's nearest vertex is {:.1} mm from it; move fulcrum_m closer or lengthen length_m",
+                src.name,
+                (length + radius) * 1e3,
+                length * 1e3,
+                radius * 1e3,
+                nearest * 1e3
+            ));
+        }
         tools.push(ToolDecl {
             name,
             kind: t.kind,
@@ -124,6 +139,15 @@ fn tool_friction(
         (Err(why), Some(d)) => Err(src.error(d.span(), format!("{what} {why}"))),
         _ => Ok(friction),
     }
+}
+
+/// The distance from `p` to the nearest vertex of `mesh` that a
+/// tetrahedron uses (m), if it has one.
+fn nearest_distance_m(mesh: &crate::mesh::TetMesh, p: Vec3) -> Option<Real> {
+    let x = mesh.positions_m();
+    (mesh.tets().iter().flatten())
+        .map(|v| x[v.idx()].distance(p))
+        .min_by(Real::total_cmp)
 }
 
 /// The first tetrahedron of `mesh` containing `p` (all four barycentric
