@@ -9,8 +9,12 @@ use sim_server::mesh::io::read_mesh;
 use sim_server::mesh::quality::{QualityReport, quality_report};
 use sim_server::scene::BuiltScene;
 use sim_server::scene::real_time::RealTime;
-use sim_server::tensor_mass::{element_bound, power_iteration};
+use sim_server::tensor_mass::{element_bound, power_iteration, step_outliers};
 use std::path::Path;
+
+/// An element whose own stable step is below the median element's over
+/// this is named by `check` (it costs that many times the sub-steps).
+const SLIVER_FACTOR: f64 = 4.0;
 
 /// The machine-readable form of the check.
 #[derive(Serialize)]
@@ -216,6 +220,23 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
         power.iterations,
         power.step.dt_max_s / element.dt_max_s
     );
+    // Slivers that set the step: what each costs, by name (a mesher's
+    // 3-degree sliver once cut the step to a tenth without a word).
+    let slivers = step_outliers(model, SLIVER_FACTOR, 5).map(|o| {
+        let names: Vec<String> = (o.shortest.iter())
+            .map(|(t, dt)| format!("{} ({dt:.3e} s)", t.0))
+            .collect();
+        let w = format!(
+            "{} tetrahedra allow less than 1/{SLIVER_FACTOR} of the median element's stable step ({:.3e} s); the shortest make every step take {:.0}x the sub-steps the median element needs: tetrahedra {}{} (indices as in the quality line and the frames' tet_id; remesh or improve them)",
+            o.count,
+            o.median_dt_s,
+            (o.median_dt_s / o.shortest[0].1).ceil(),
+            names.join(", "),
+            if o.count > o.shortest.len() { ", ..." } else { "" }
+        );
+        println!("warning: {w}");
+        w
+    });
     if let Some(dt) = b.settings.dt_s {
         let verdict = if dt <= element.dt_max_s {
             "under the bound".to_string()
@@ -362,6 +383,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 warnings: (r.warnings.iter().cloned())
                     .chain(units)
                     .chain(real_time)
+                    .chain(slivers)
                     .collect(),
                 bounds_m: [extent.min_m.to_array(), extent.max_m.to_array()],
                 median_edge_m: extent.median_edge_m,

@@ -479,3 +479,47 @@ fn the_step_workers_are_each_reached_once() {
     assert_eq!(Backend::on_step_workers(&one, &record), 0);
     assert_eq!(names.lock().unwrap().len(), 2);
 }
+
+/// A sliver sets the explicit step: moving the centre vertex of a 2 x 2 x 2
+/// box of cubes 85% of the way to a face flattens the tetrahedra between
+/// them, and `step_outliers` names exactly tetrahedra that use it, shortest
+/// first, each below a quarter of the median element's step, the shortest
+/// being the whole model's bound; the regular box has none.
+#[test]
+fn step_outliers_name_the_slivers_that_set_the_step() {
+    use tissue::tensor_mass::step_outliers;
+    let regular = BoxSpec::new(Vec3::splat(0.02), CellSize::EdgeM(0.01))
+        .generate()
+        .unwrap();
+    let model_of = |mesh: TetMesh| {
+        let n = mesh.tet_count();
+        ElasticModel::new(mesh, TetMaterials::uniform(iso_material(), n)).unwrap()
+    };
+    assert_eq!(step_outliers(&model_of(regular.clone()), 4.0, 5), None);
+    let centre = (regular.positions_m().iter())
+        .position(|p| p.distance(Vec3::splat(0.01)) < 1e-9)
+        .expect("a centre vertex");
+    let mut positions = regular.positions_m().to_vec();
+    positions[centre].x += 0.0085;
+    let tets = regular.tets().iter().map(|t| t.map(|v| v.0)).collect();
+    let model = model_of(TetMesh::new(positions, tets).unwrap());
+    let o = step_outliers(&model, 4.0, 5).expect("slivers");
+    assert!(o.count > 0 && o.shortest.len() == o.count.min(5), "{o:?}");
+    for w in o.shortest.windows(2) {
+        assert!(w[0].1 <= w[1].1, "shortest first: {o:?}");
+    }
+    for (t, dt) in &o.shortest {
+        let uses = model.mesh().tets()[t.idx()]
+            .iter()
+            .any(|v| v.idx() == centre);
+        assert!(
+            uses && 4.0 * dt < o.median_dt_s,
+            "tetrahedron {t:?}: {dt} s, {o:?}"
+        );
+    }
+    let bound = element_bound(&model).dt_max_s;
+    assert!(
+        (o.shortest[0].1 - bound).abs() <= 1e-12 * bound,
+        "{bound} vs {o:?}"
+    );
+}

@@ -22,5 +22,8 @@ pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError, substeps_f
 pub use force_term::{ForcePoint, ForceTerm, NoForce, SubStep};
 pub use kernel::{Kernel, Storage};
 pub use model::{CutChange, CutError, ElasticModel, LinearOnly, ModelError};
-pub use stability::{BoundMethod, PowerEstimate, StableStep, element_bound, power_iteration};
+pub use stability::{
+    BoundMethod, PowerEstimate, StableStep, StepOutliers, element_bound, power_iteration,
+    step_outliers,
+};
 pub use submodel::{Submodel, SubmodelError};

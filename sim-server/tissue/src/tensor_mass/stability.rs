@@ -134,6 +134,50 @@ pub fn element_bound(model: &ElasticModel) -> StableStep {
     StableStep::from_lambda(lambda, BoundMethod::Element)
 }
 
+/// The live tetrahedra whose own stable step is far below the median
+/// element's ([`step_outliers`]): slivers that set the whole organ's
+/// explicit step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepOutliers {
+    /// The median live element's own stable step (s).
+    pub median_dt_s: Real,
+    /// How many live elements lie below the threshold.
+    pub count: usize,
+    /// The shortest ones, (tetrahedron, its own stable step in s),
+    /// shortest first.
+    pub shortest: Vec<(TetId, Real)>,
+}
+
+/// The live tetrahedra of `model` whose own stable step (Irons' element
+/// bound, [`ElasticModel::element_lambdas`]) is below the median live
+/// element's divided by `factor`, the `list` shortest of them named;
+/// `None` when there are none. Each element's step is what it alone
+/// allows: the explicit step is the shortest, so one sliver at a tenth of
+/// the median makes the whole organ take ten times the sub-steps.
+pub fn step_outliers(model: &ElasticModel, factor: Real, list: usize) -> Option<StepOutliers> {
+    let lambdas = model.element_lambdas();
+    let dt = |l: Real| StableStep::from_lambda(l, BoundMethod::Element).dt_max_s;
+    let mut live: Vec<(TetId, Real)> = (0..lambdas.len())
+        .map(TetId::from)
+        .filter(|t| model.topology().is_alive(*t) && lambdas[t.idx()] > 0.0)
+        .map(|t| (t, dt(lambdas[t.idx()])))
+        .collect();
+    if live.is_empty() {
+        return None;
+    }
+    live.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let median_dt_s = live[live.len() / 2].1;
+    let count = live
+        .iter()
+        .take_while(|(_, d)| *d * factor < median_dt_s)
+        .count();
+    (count > 0).then(|| StepOutliers {
+        median_dt_s,
+        count,
+        shortest: live[..count.min(list)].to_vec(),
+    })
+}
+
 /// The result of [`power_iteration`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PowerEstimate {
