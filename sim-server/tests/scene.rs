@@ -653,8 +653,16 @@ fn a_mesh_file_in_millimetres_is_scaled_into_metres() {
             "{key}"
         );
     }
-    let unscaled = scene("").unwrap();
-    assert!(unscaled.model.mesh().bounds_m().1.x > 39.0);
+    // Read as metres, the body is 79 m across: refused at the file's line,
+    // with the scale to set (it ran before, untouchable, without a word).
+    let Err(e) = scene("") else {
+        panic!("a 79 m body accepted")
+    };
+    let e = e.to_string();
+    assert!(
+        e.starts_with("mm.toml:2:") && e.contains("79.4 m across") && e.contains("scale = 0.001"),
+        "{e}"
+    );
     for (key, needle) in [
         ("units = \"km\"", "units must be \"m\", \"cm\" or \"mm\""),
         ("scale = -1.0", "scale must be a positive finite number"),

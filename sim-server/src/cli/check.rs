@@ -49,8 +49,9 @@ struct CheckJson {
 }
 
 /// Prints where the mesh is, its typical edge and a warning when that is
-/// not plausibly metres; returns the extent and the warning.
-fn print_extent(mesh: &TetMesh) -> (Extent, Option<String>) {
+/// not plausibly metres (unless `said` already has it: a scene's build
+/// reports it among its warnings); returns the extent and the warning.
+fn print_extent(mesh: &TetMesh, said: &[String]) -> (Extent, Option<String>) {
     let e = Extent::of(mesh);
     let (lo, hi) = (e.min_m, e.max_m);
     println!(
@@ -66,7 +67,7 @@ fn print_extent(mesh: &TetMesh) -> (Extent, Option<String>) {
         hi.z - lo.z,
         e.median_edge_m
     );
-    let warning = e.units_warning();
+    let warning = e.units_warning().filter(|w| !said.contains(w));
     if let Some(w) = &warning {
         println!("warning: {w}");
     }
@@ -112,7 +113,7 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
         for w in &imported.warnings {
             println!("warning: {w}");
         }
-        let (extent, units) = print_extent(&imported.mesh);
+        let (extent, units) = print_extent(&imported.mesh, &[]);
         let tags = tag_counts(&imported.tet_physical);
         let listed: Vec<String> = tags.iter().map(|(t, n)| format!("{t} ({n})")).collect();
         println!(
@@ -201,7 +202,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
             }
         );
     }
-    let (extent, units) = print_extent(mesh);
+    let (extent, units) = print_extent(mesh, &r.warnings);
     print_quality(&q);
     println!("materials:");
     println!("  default: {}", r.default_material);

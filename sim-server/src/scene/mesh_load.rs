@@ -36,6 +36,37 @@ fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Rea
 }
 
 /// `mesh` with every coordinate multiplied by `s`.
+/// A body more than this across (m) is refused: not an organ in metres.
+const MAX_BODY_M: Real = 10.0;
+
+/// A mesh file's body checked for its units: refused, with the `[mesh]
+/// scale` to set, when it is more than [`MAX_BODY_M`] across (a liver
+/// read in millimetres is 1400 m wide and would run, untouchable); said as
+/// a warning (here, so that `run` says it as `check` does) when its edges
+/// are not plausibly metres.
+fn plausible_units(
+    src: &SceneSource,
+    at: std::ops::Range<usize>,
+    mesh: &TetMesh,
+    report: &mut SceneReport,
+) -> Result<(), SceneError> {
+    let extent = crate::mesh::extent::Extent::of(mesh);
+    let size = extent.max_m - extent.min_m;
+    let across = size.max_element();
+    let warning = extent.units_warning();
+    if across > MAX_BODY_M {
+        let fix = warning.unwrap_or_else(|| "set [mesh] scale to what makes it metres".into());
+        return Err(src.error(
+            at,
+            format!(
+                "the body is {across:.1} m across, more than {MAX_BODY_M} m: not an organ in metres; {fix}"
+            ),
+        ));
+    }
+    report.warnings.extend(warning);
+    Ok(())
+}
+
 fn scaled(mesh: &TetMesh, s: Real) -> Result<TetMesh, crate::mesh::MeshError> {
     TetMesh::new(
         mesh.positions_m().iter().map(|p| *p * s).collect(),
@@ -71,6 +102,7 @@ pub(super) fn load_mesh(
                 }
                 None => imported.mesh,
             };
+            plausible_units(src, file.span(), &mesh, report)?;
             let tags = Tags {
                 tets: imported.tet_physical,
                 surface: imported
