@@ -42,7 +42,15 @@ pub enum RefineError {
     /// The refined mesh failed validation (cannot happen for a valid input:
     /// bisection halves volumes and keeps orientation).
     #[error("the refined mesh is invalid: {0}")]
-    Mesh(#[from] super::MeshError),
+    Mesh(super::MeshError),
+}
+
+// The mesh's error is in the message, not a separate `source()`, so that a
+// chain of causes does not say it twice.
+impl From<super::MeshError> for RefineError {
+    fn from(e: super::MeshError) -> Self {
+        Self::Mesh(e)
+    }
 }
 
 /// A refined mesh and how it descends from the input.
@@ -282,6 +290,17 @@ mod tests {
     use crate::math::tet_signed_volume;
     use crate::mesh::quality::quality_report;
     use crate::mesh::{BoxSpec, CellSize, TET_FACES};
+
+    /// The mesh's reason is said once: in the message, not again as a
+    /// separate cause (anyhow's "Caused by" repeated it).
+    #[test]
+    fn an_invalid_mesh_is_said_once() {
+        let mesh_error = TetMesh::new(Vec::new(), vec![[0, 1, 2, 3]]).unwrap_err();
+        let reason = mesh_error.to_string();
+        let e = RefineError::from(mesh_error);
+        assert!(e.to_string().contains(&reason), "{e}");
+        assert!(std::error::Error::source(&e).is_none());
+    }
 
     fn cube(size_m: Real, cell_m: Real) -> TetMesh {
         BoxSpec::new(Vec3::splat(size_m), CellSize::EdgeM(cell_m))

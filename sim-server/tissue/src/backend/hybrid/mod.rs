@@ -92,16 +92,39 @@ pub enum HybridError {
     },
     /// A part could not be made.
     #[error("cannot split the body: {0}")]
-    Part(#[from] SubmodelError),
+    Part(SubmodelError),
     /// The precomputed part could not be factorized.
     #[error("precomputed part: {0}")]
-    Static(#[from] StaticError),
+    Static(StaticError),
     /// The precomputed part is too large to keep its responses.
     #[error("precomputed part: {0}")]
-    TooLarge(#[from] super::cache::TooManyResponses),
+    TooLarge(super::cache::TooManyResponses),
     /// The tensor-mass part's integrator refused.
     #[error("tensor-mass part: {0}")]
-    Explicit(#[from] ExplicitError),
+    Explicit(ExplicitError),
+}
+
+// The part's error is in the message, not a separate `source()`, so that
+// a chain of causes (anyhow's "Caused by") does not say it twice.
+impl From<SubmodelError> for HybridError {
+    fn from(e: SubmodelError) -> Self {
+        Self::Part(e)
+    }
+}
+impl From<StaticError> for HybridError {
+    fn from(e: StaticError) -> Self {
+        Self::Static(e)
+    }
+}
+impl From<super::cache::TooManyResponses> for HybridError {
+    fn from(e: super::cache::TooManyResponses) -> Self {
+        Self::TooLarge(e)
+    }
+}
+impl From<ExplicitError> for HybridError {
+    fn from(e: ExplicitError) -> Self {
+        Self::Explicit(e)
+    }
 }
 
 /// The hybrid backend.
