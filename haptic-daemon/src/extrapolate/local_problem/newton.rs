@@ -108,6 +108,12 @@ pub(super) struct Scratch {
 }
 
 impl Scratch {
+    /// The step's slope along the gradient, step . grad (negative: a
+    /// descent direction).
+    fn slope(&self) -> f64 {
+        self.step.iter().zip(&self.grad).map(|(a, b)| a * b).sum()
+    }
+
     /// Room for `vertices`.
     pub(super) fn with_capacity(vertices: usize) -> Self {
         let n = 3 * vertices;
@@ -241,13 +247,7 @@ impl LocalProblem {
                 return false;
             }
             self.trust_region();
-            let slope: f64 = self
-                .scratch
-                .step
-                .iter()
-                .zip(&self.scratch.grad)
-                .map(|(a, b)| a * b)
-                .sum();
+            let slope = self.scratch.slope();
             // Backtracking on Pi (Armijo).
             let mut alpha = 1.0;
             let mut accepted = false;
@@ -319,13 +319,7 @@ impl LocalProblem {
                 return false;
             }
         }
-        let slope: f64 = self
-            .scratch
-            .step
-            .iter()
-            .zip(&self.scratch.grad)
-            .map(|(a, b)| a * b)
-            .sum();
+        let slope = self.scratch.slope();
         slope < 0.0 && self.scratch.step.iter().all(|x| x.is_finite())
     }
 
