@@ -18,7 +18,9 @@ mod stvk_lanes;
 pub mod submodel;
 
 pub use element::{Geometry, TetElastic};
-pub use explicit::{DtPolicy, Explicit, ExplicitConfig, ExplicitError, substeps_for};
+pub use explicit::{
+    DtPolicy, Explicit, ExplicitConfig, ExplicitError, MultirateError, MultirateReport, substeps_for,
+};
 pub use force_term::{ForcePoint, ForceTerm, NoForce, SubStep};
 pub use kernel::{Kernel, Storage};
 pub use model::{CutChange, CutError, ElasticModel, LinearOnly, ModelError};

@@ -94,6 +94,8 @@ impl<S: Storage> Explicit<S> {
         }
         // A step computed ahead used the old elements.
         self.forget_prepared();
+        // The region's vertices step at the fine step.
+        self.multirate_follow_region();
     }
 
     /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
@@ -202,21 +204,22 @@ impl<S: Storage> Explicit<S> {
 
     /// Velocity of `v` (m/s): the last sub-step's backward difference.
     pub fn velocity(&self, v: VertexId) -> Vec3 {
-        let h = self.size.dt_s / self.size.substeps as Real;
+        let h = self.size.dt_s / self.own_substeps(v.idx()) as Real;
         (Vec3::from_array(self.u[v.idx()]) - Vec3::from_array(self.next[v.idx()])) / h
     }
 
     /// Kinetic plus elastic energy (J), velocities by the centred difference
     /// of the last two states (for tests and diagnostics; allocates).
     pub fn energy_j(&self) -> Real {
-        let h = self.size.dt_s / self.size.substeps as Real;
         let u: Vec<Vec3> = self.u.iter().map(|a| Vec3::from_array(*a)).collect();
         let kinetic: Real = self
             .u
             .iter()
             .zip(&self.next)
             .zip(self.model.masses_kg())
-            .map(|((a, b), m)| {
+            .enumerate()
+            .map(|(i, ((a, b), m))| {
+                let h = self.size.dt_s / self.own_substeps(i) as Real;
                 let v = (Vec3::from_array(*a) - Vec3::from_array(*b)) / h;
                 0.5 * m * v.length_squared()
             })

@@ -11,6 +11,8 @@ use super::model::ElasticModel;
 use super::stability::StableStep;
 use crate::math::Real;
 use partition::{PartBuffers, PartPlan, run_parts};
+use multirate::Multirate;
+pub use multirate::{MultirateError, MultirateReport};
 use predicted::Prediction;
 pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, substeps_for};
 pub use step_size::{MAX_SUBSTEPS, MAX_THREADS, PREDICTED_SUBSTEPS_MAX};
@@ -49,6 +51,9 @@ struct StepSize {
     policy: DtPolicy,
     dt_s: Real,
     substeps: usize,
+    /// Sub-steps of the slow vertices with multirate stepping engaged
+    /// (`substeps` is then a whole multiple of it; see `multirate.rs`).
+    coarse_substeps: usize,
     /// Sub-steps the elastic model alone needs.
     elastic_substeps: usize,
     /// Every step's sub-steps are multiplied by this
@@ -100,12 +105,14 @@ pub struct Explicit<S: Storage> {
     steps: u64,
     /// What is computed ahead of the next step while the loop waits.
     ahead: Ahead,
+    /// The fast and slow vertices of multirate stepping (`None`: off).
+    multirate: Option<Multirate>,
 }
 
 impl<S: Storage> Explicit<S> {
     /// Recomputes the integration coefficients and kind of vertex `v`.
     fn refresh_vertex(&mut self, v: usize) {
-        let h = self.size.dt_s / self.size.substeps as Real;
+        let h = self.size.dt_s / self.own_substeps(v) as Real;
         let m = self.model.masses_kg()[v];
         let c = self.model.damping_kg_s()[v];
         if m > 0.0 {
@@ -128,13 +135,35 @@ impl<S: Storage> Explicit<S> {
         }
         let mut k = 0;
         while k < self.size.substeps {
+            let fine = self.begin_substep(k);
             self.membrane_step();
             k *= self.large_strain_pass();
-            self.kernel_step();
+            self.end_substep(fine);
             k += 1;
         }
         self.steps += 1;
         self.follow_tangent();
+    }
+
+    /// Sub-step `k` of a step: whether it is a fine one (the fast rows
+    /// alone, with the slow neighbours interpolated; see `multirate.rs`)
+    /// or a whole pass.
+    fn begin_substep(&mut self, k: usize) -> bool {
+        let m = self.fine_per_coarse();
+        let fine = m > 1 && k % m != 0;
+        if fine {
+            self.interpolate_interface((k % m) as Real / m as Real);
+        }
+        fine
+    }
+
+    /// Finishes the sub-step [`Explicit::begin_substep`] began.
+    fn end_substep(&mut self, fine: bool) {
+        if fine {
+            self.fast_rows();
+        } else {
+            self.kernel_step();
+        }
     }
 
     /// The nonlinear elements' forces at the current state, and the step
@@ -197,6 +226,7 @@ impl<S: Storage> Explicit<S> {
             self.step();
             return;
         }
+        self.multirate_cover(field);
         if self.fmem.len() != self.u.len() {
             self.fmem = huge_vec(self.u.len(), [0.0; 3]);
         }
@@ -216,6 +246,7 @@ impl<S: Storage> Explicit<S> {
             if k > 0 && k % every == 0 {
                 resample(self, field);
             }
+            let fine = self.begin_substep(k);
             let factor = self.large_strain_pass();
             if factor > 1 {
                 k *= factor;
@@ -234,7 +265,7 @@ impl<S: Storage> Explicit<S> {
                 masses_kg: self.model.masses_kg(),
             };
             field.add_forces(rest, &self.u, &self.next, at, &mut self.fmem);
-            self.kernel_step();
+            self.end_substep(fine);
             if field.implicit_springs() {
                 // After the swap: `u` is the explicit prediction, `next`
                 // the sub-step's start.
@@ -308,6 +339,7 @@ impl<S: Storage> Explicit<S> {
             .resample_every_s
             .is_some_and(|r| ((r / h).floor() as usize).max(1) < self.size.substeps);
         if self.large.is_none()
+            && self.fine_per_coarse() == 1
             && self.capsule_vertices.is_empty()
             && self.kernel.is_elastic()
             && self.size.substeps <= PREDICTED_SUBSTEPS_MAX
@@ -440,6 +472,7 @@ impl<S: Storage> Explicit<S> {
 }
 
 mod inputs;
+mod multirate;
 mod partition;
 pub(in crate::tensor_mass) mod predicted;
 mod setup;

@@ -153,6 +153,7 @@ impl<S: Storage> Explicit<S> {
                 policy: config.policy,
                 dt_s,
                 substeps,
+                coarse_substeps: substeps,
                 elastic_substeps: substeps,
                 substep_factor: 1,
                 resubsteps: 0,
@@ -165,6 +166,7 @@ impl<S: Storage> Explicit<S> {
                 predicted_steps: 0,
                 resample_every_s: None,
             },
+            multirate: None,
             model,
         };
         for v in 0..n {

@@ -216,23 +216,11 @@ impl<S: Storage> Explicit<S> {
         self.resubstep(base * factor);
     }
 
-    /// Sets the sub-step count, keeping the velocity (U(t) - U(t-1)) / h.
+    /// Sets the sub-step count (with multirate stepping, the fine one,
+    /// rounded to a whole multiple of the coarse), keeping each vertex's
+    /// velocity (U(t) - U(t-1)) / h.
     pub(super) fn resubstep(&mut self, n: usize) {
-        if n == self.size.substeps {
-            return;
-        }
-        self.forget_prepared();
-        let ratio = self.size.substeps as Real / n as Real;
-        for (now, before) in self.u.iter().zip(self.next.iter_mut()) {
-            for k in 0..3 {
-                before[k] = now[k] - (now[k] - before[k]) * ratio;
-            }
-        }
-        self.size.substeps = n;
-        self.size.resubsteps += 1;
-        for v in 0..self.u.len() {
-            self.refresh_vertex(v);
-        }
+        self.resubstep_always(n);
     }
 }
 

@@ -228,6 +228,11 @@ impl LargeStrain {
         self.elements.is_empty()
     }
 
+    /// The vertices the nonlinear elements touch, ascending.
+    pub fn vertices(&self) -> &[u32] {
+        &self.vertices
+    }
+
     /// What the last pass found.
     pub fn last(&self) -> PassReport {
         self.last
