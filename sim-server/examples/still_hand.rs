@@ -10,7 +10,8 @@
 //!     [--size-m 0.1,0.04,0.04] [--cell-m 0.005] [--young-pa 30000] \
 //!     [--radius-m 0.0025] [--depth-m 0.015] [--at-m 0.05,0.02] \
 //!     [--model linear|corotational] [--hold-s 1.5] \
-//!     [--refine-cell-m 0.0025 --refine-radius-m 0.0125] [--corotational-radius-m 0.02]
+//!     [--refine-cell-m 0.0025 --refine-radius-m 0.0125] [--corotational-radius-m 0.02] \
+//!     [--follow-radius-m 0.012] [--slide-m 0.01] [--multirate true]
 //! ```
 //!
 //! The box (nu 0.45, density 1000, damping 20 /s) has its bottom fixed; the
@@ -45,6 +46,7 @@ struct Args {
     corotational_radius_m: Option<f64>,
     follow_radius_m: Option<f64>,
     slide_m: f64,
+    multirate: bool,
 }
 
 fn parse() -> Result<Args> {
@@ -62,6 +64,7 @@ fn parse() -> Result<Args> {
         corotational_radius_m: None,
         follow_radius_m: None,
         slide_m: 0.0,
+        multirate: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -84,13 +87,18 @@ fn parse() -> Result<Args> {
             "--hold-s" => a.hold_s = one()?,
             "--refine-cell-m" => a.refine_cell_m = Some(one()?),
             "--refine-radius-m" => a.refine_radius_m = one()?,
-            "--corotational-radius-m, --follow-radius-m, --slide-m" => {
-                a.corotational_radius_m = Some(one()?)
+            "--corotational-radius-m" => a.corotational_radius_m = Some(one()?),
+            "--multirate" => {
+                a.multirate = match value.as_str() {
+                    "true" => true,
+                    "false" => false,
+                    _ => bail!("--multirate takes true or false, got {value}"),
+                }
             }
             "--follow-radius-m" => a.follow_radius_m = Some(one()?),
             "--slide-m" => a.slide_m = one()?,
             _ => bail!(
-                "unknown flag {flag}: --size-m, --cell-m, --young-pa, --radius-m, --depth-m, --at-m, --model, --hold-s, --refine-cell-m, --refine-radius-m, --corotational-radius-m, --follow-radius-m, --slide-m"
+                "unknown flag {flag}: --size-m, --cell-m, --young-pa, --radius-m, --depth-m, --at-m, --model, --hold-s, --refine-cell-m, --refine-radius-m, --corotational-radius-m, --follow-radius-m, --slide-m, --multirate"
             ),
         }
     }
@@ -151,7 +159,10 @@ tip_length_m = 0.01
 {refine}
 {corotational}
 {follow}
+[simulation]
+multirate = {multirate}
 "#,
+        multirate = a.multirate,
         cell = a.cell_m,
         young = a.young_pa,
         model = a.model,
@@ -226,6 +237,12 @@ tip_length_m = 0.01
         a.radius_m * 1e3,
         a.depth_m * 1e3
     );
+    if let Some(m) = p.sim.multirate() {
+        println!(
+            "multirate (engaged: {}): {} of {} vertices fast, {} whole passes and {} fast sub-steps a step",
+            m.engaged, m.fast_vertices, m.vertices, m.coarse_substeps, m.fine_substeps
+        );
+    }
     if let Some((region, rebuilds)) = p.tools.corotational_region() {
         let tets = region.iter().filter(|r| **r).count();
         println!(

@@ -42,7 +42,7 @@ pub fn prepare<S: Storage>(
     dt_s: Option<Real>,
 ) -> Result<Prepared<Explicit<S>>, PrepareError<crate::tensor_mass::ExplicitError>> {
     prepare_with(scene, dt_s, |model, settings, dt_s| {
-        Explicit::<S>::new(
+        let mut sim = Explicit::<S>::new(
             model,
             ExplicitConfig {
                 dt_s,
@@ -50,7 +50,11 @@ pub fn prepare<S: Storage>(
                 bound: settings.bound,
                 threads: settings.threads,
             },
-        )
+        )?;
+        if settings.multirate {
+            sim.set_multirate(true)?;
+        }
+        Ok(sim)
     })
 }
 

@@ -281,6 +281,9 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
             if substeps == 1 { "" } else { "s" },
             1.0 / dt
         );
+        if b.settings.multirate {
+            print_multirate(b, dt, name)?;
+        }
         // What `run` warns of too (after it prepares the backend).
         if let Some(w) = RealTime::of(b).warning(bound.dt_max_s) {
             println!("warning: {w}");
@@ -393,6 +396,46 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 refined: r.refined.clone(),
             },
         )?;
+    }
+    Ok(())
+}
+
+/// The partition `[simulation] multirate` gives the scene's model at `dt`
+/// (the run's own: the same integrator set up the same way).
+fn print_multirate(b: &sim_server::scene::BuiltScene, dt: f64, name: &str) -> anyhow::Result<()> {
+    use sim_server::tensor_mass::{Explicit, ExplicitConfig};
+    let mut sim = Explicit::<f32>::new(
+        b.model.clone(),
+        ExplicitConfig {
+            dt_s: dt,
+            policy: b.settings.policy,
+            bound: b.settings.bound,
+            threads: 1,
+        },
+    )
+    .map_err(|e| anyhow::anyhow!("{name}: the tensor-mass backend would refuse this scene: {e}"))?;
+    let uniform = sim.substeps();
+    let Some(m) = sim
+        .set_multirate(true)
+        .map_err(|e| anyhow::anyhow!("{name}: [simulation] multirate: {e}"))?
+    else {
+        return Ok(());
+    };
+    if m.engaged {
+        println!(
+            "multirate: {} of {} vertices fast ({} slow neighbours interpolated): {} whole passes and {} fast sub-steps a step, against {} whole passes for one step for all (contact and the corotational region add their vertices at run time)",
+            m.fast_vertices,
+            m.vertices,
+            m.interface_vertices,
+            m.coarse_substeps,
+            m.fine_substeps,
+            uniform
+        );
+    } else {
+        println!(
+            "multirate: does not pay here ({} of {} vertices would be fast, {} whole passes and {} fast sub-steps a step against {}): the run steps every vertex alike",
+            m.fast_vertices, m.vertices, m.coarse_substeps, m.fine_substeps, uniform
+        );
     }
     Ok(())
 }

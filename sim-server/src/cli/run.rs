@@ -195,6 +195,15 @@ pub fn run(args: RunArgs) -> Result<()> {
             summary.corotational_region_rebuilds
         );
     }
+    if summary.multirate_fast_vertices > 0 {
+        println!(
+            "{}: multirate: {} fast vertices took {} sub-steps a step, the rest {}",
+            src.name,
+            summary.multirate_fast_vertices,
+            summary.multirate_fine_substeps,
+            summary.multirate_coarse_substeps
+        );
+    }
     if summary.nonlinear_tets > 0 {
         println!(
             "{}: {} nonlinear tetrahedra; at most {} StVK elements squeezed below half their volume at once (their volume barrier acted)",

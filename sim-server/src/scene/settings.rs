@@ -30,6 +30,8 @@ pub struct SimSettings {
     pub bound: BoundMethod,
     /// Which backend (default tensor-mass).
     pub backend: BackendName,
+    /// Multirate stepping (`[simulation] multirate`, tensor-mass only).
+    pub multirate: bool,
 }
 
 /// The longest step a scene or `--dt-s` may ask for (s): longer, a live
@@ -209,6 +211,7 @@ pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSetting
         policy: DtPolicy::Substep,
         bound: BoundMethod::Element,
         backend: BackendName::TensorMass,
+        multirate: false,
     };
     let Some(sim) = &spec.simulation else {
         return Ok(s);
@@ -272,5 +275,20 @@ pub(super) fn settings(src: &SceneSource, spec: &SceneSpec) -> Result<SimSetting
         BoundName::Element => BoundMethod::Element,
         BoundName::PowerIteration => BoundMethod::PowerIteration,
     };
+    if let Some(m) = &sim.multirate {
+        s.multirate = *m.get_ref();
+        if s.multirate && s.backend != BackendName::TensorMass {
+            return Err(src.error(
+                m.span(),
+                "[simulation] multirate sub-steps the explicit tensor-mass step; the other backends do not step explicitly: remove it or use backend = \"tensor-mass\"",
+            ));
+        }
+        if s.multirate && s.policy == DtPolicy::Unchecked {
+            return Err(src.error(
+                m.span(),
+                crate::tensor_mass::MultirateError::Unchecked.to_string(),
+            ));
+        }
+    }
     Ok(s)
 }

@@ -522,4 +522,7 @@ pub struct SimulationSpec {
     pub dt_policy: Option<DtPolicyName>,
     /// Which bound to enforce (default element).
     pub bound: Option<BoundName>,
+    /// Sub-step only the vertices whose elements need a short step, the
+    /// rest at a longer one (default false; tensor-mass backend only).
+    pub multirate: Option<Spanned<bool>>,
 }

@@ -222,6 +222,13 @@ pub struct RunSummary {
     pub corotational_region_largest_tets: usize,
     /// See `corotational_region_largest_tets`: times the region changed.
     pub corotational_region_rebuilds: u64,
+    /// With `[simulation] multirate`: the vertices stepped at the fine
+    /// step at the end of the run (0 without, or when it did not pay).
+    pub multirate_fast_vertices: usize,
+    /// See `multirate_fast_vertices`: whole passes a step (coarse sub-steps).
+    pub multirate_coarse_substeps: usize,
+    /// See `multirate_fast_vertices`: the fast vertices' sub-steps a step.
+    pub multirate_fine_substeps: usize,
 }
 
 /// Why a run failed.

@@ -548,6 +548,11 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             self.solve_iterations as Real / (summary.steps.max(1)) as Real;
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
+        if let Some(m) = self.sim.multirate().filter(|m| m.engaged) {
+            summary.multirate_fast_vertices = m.fast_vertices;
+            summary.multirate_coarse_substeps = m.coarse_substeps;
+            summary.multirate_fine_substeps = m.fine_substeps;
+        }
         if let Some(r) = self.contacts.corotational_region_stats() {
             summary.corotational_region_largest_tets = r.largest_tets;
             summary.corotational_region_rebuilds = r.rebuilds;

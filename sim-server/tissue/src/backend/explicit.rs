@@ -25,6 +25,9 @@ impl<S: Storage> Backend for Explicit<S> {
     fn predicted(&self) -> Option<(u64, u64)> {
         Some((self.predicted_steps(), self.predicted_rows()))
     }
+    fn multirate(&self) -> Option<crate::tensor_mass::MultirateReport> {
+        Explicit::multirate(self)
+    }
     fn dt_s(&self) -> Real {
         Explicit::dt_s(self)
     }

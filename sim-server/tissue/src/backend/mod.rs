@@ -127,6 +127,10 @@ pub trait Backend {
     fn predicted(&self) -> Option<(u64, u64)> {
         None
     }
+    /// The multirate partition (`None`: the backend steps every vertex alike).
+    fn multirate(&self) -> Option<crate::tensor_mass::MultirateReport> {
+        None
+    }
     /// Makes the linear tetrahedra flagged in `corotational` corotational
     /// (and the others linear) from the next step on: the region that
     /// follows the tools (the scene's `[contact] corotational_radius_m`).

@@ -82,6 +82,9 @@ pub enum ExplicitError {
         /// Sub-steps it would need.
         needed: Real,
     },
+    /// Multirate stepping cannot partition this model.
+    #[error(transparent)]
+    Multirate(#[from] super::MultirateError),
     /// The thread pool could not be created.
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads {
