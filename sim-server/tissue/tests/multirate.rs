@@ -57,7 +57,9 @@ fn max_norm(u: &[Vec3]) -> f64 {
 }
 
 fn displacements(sim: &Explicit<f64>, n: usize) -> Vec<Vec3> {
-    (0..n).map(|v| sim.displacement(VertexId::from(v))).collect()
+    (0..n)
+        .map(|v| sim.displacement(VertexId::from(v)))
+        .collect()
 }
 
 #[test]
@@ -78,10 +80,7 @@ fn the_refined_vertices_are_sub_stepped_and_the_rest_keeps_a_longer_step() {
         uniform.substeps()
     );
     // Few of the vertices are fast: the refined corner and a ring round it.
-    assert!(
-        report.fast_vertices * 2 < report.vertices,
-        "{report:?}"
-    );
+    assert!(report.fast_vertices * 2 < report.vertices, "{report:?}");
     assert!(report.interface_vertices > 0);
     // Off again: one step for all.
     multi.set_multirate(false).unwrap();
@@ -134,7 +133,10 @@ fn the_motion_converges_to_one_step_for_all() {
     // is halved (measured: 1.30% of the swing, then 0.37x of it).
     let (coarse, swing) = multirate_against_uniform(&model, 1);
     let (fine, _) = multirate_against_uniform(&model, 2);
-    assert!(coarse < 0.03 * swing, "{coarse:e} m apart, swing {swing:e} m");
+    assert!(
+        coarse < 0.03 * swing,
+        "{coarse:e} m apart, swing {swing:e} m"
+    );
     assert!(
         fine < 0.5 * coarse,
         "halving the steps took the difference from {coarse:e} to {fine:e} m"

@@ -19,7 +19,8 @@ pub mod submodel;
 
 pub use element::{Geometry, TetElastic};
 pub use explicit::{
-    DtPolicy, Explicit, ExplicitConfig, ExplicitError, MultirateError, MultirateReport, substeps_for,
+    DtPolicy, Explicit, ExplicitConfig, ExplicitError, MultirateError, MultirateReport,
+    substeps_for,
 };
 pub use force_term::{ForcePoint, ForceTerm, NoForce, SubStep};
 pub use kernel::{Kernel, Storage};

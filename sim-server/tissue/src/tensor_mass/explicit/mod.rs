@@ -10,9 +10,9 @@ use super::large_strain::LargeStrain;
 use super::model::ElasticModel;
 use super::stability::StableStep;
 use crate::math::Real;
-use partition::{PartBuffers, PartPlan, run_parts};
 use multirate::Multirate;
 pub use multirate::{MultirateError, MultirateReport};
+use partition::{PartBuffers, PartPlan, run_parts};
 use predicted::Prediction;
 pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, substeps_for};
 pub use step_size::{MAX_SUBSTEPS, MAX_THREADS, PREDICTED_SUBSTEPS_MAX};
@@ -150,7 +150,7 @@ impl<S: Storage> Explicit<S> {
     /// or a whole pass.
     fn begin_substep(&mut self, k: usize) -> bool {
         let m = self.fine_per_coarse();
-        let fine = m > 1 && k % m != 0;
+        let fine = m > 1 && !k.is_multiple_of(m);
         if fine {
             self.interpolate_interface((k % m) as Real / m as Real);
         }

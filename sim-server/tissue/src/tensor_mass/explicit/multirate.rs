@@ -206,10 +206,8 @@ impl Multirate {
         // One ring more: the partition moved one row of elements into the
         // slow side.
         let mut base = core.clone();
-        for i in 0..n {
-            if core[i] {
-                for_neighbours(kernel, lower, i, |j| base[j] = true);
-            }
+        for (i, _) in core.iter().enumerate().filter(|(_, c)| **c) {
+            for_neighbours(kernel, lower, i, |j| base[j] = true);
         }
         let mut coarse = 0.0;
         for (t, tet) in tets.iter().enumerate() {
@@ -380,7 +378,12 @@ impl<S: Storage> Explicit<S> {
         if self.size.policy == DtPolicy::Unchecked {
             return Err(MultirateError::Unchecked);
         }
-        if !self.kernel.is_elastic() || self.large.as_ref().is_some_and(|l| l.computes_whole_forces()) {
+        if !self.kernel.is_elastic()
+            || self
+                .large
+                .as_ref()
+                .is_some_and(|l| l.computes_whole_forces())
+        {
             return Err(MultirateError::WholeForces);
         }
         let uniform = self.size.elastic_substeps * self.size.substep_factor;
@@ -516,7 +519,10 @@ impl<S: Storage> Explicit<S> {
         let Some(plan) = &mut self.multirate else {
             return;
         };
-        let extra: Vec<u32> = self.large.as_ref().map_or(Vec::new(), |l| l.vertices().to_vec());
+        let extra: Vec<u32> = self
+            .large
+            .as_ref()
+            .map_or(Vec::new(), |l| l.vertices().to_vec());
         let changed = plan.set_extra(&self.kernel, extra);
         // Each changed vertex switched level.
         self.after_level_change(&changed);
