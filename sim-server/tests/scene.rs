@@ -217,6 +217,18 @@ fn each_kind_of_mistake_names_its_line() {
         11,
         "[simulation] threads must be at least 1 and at most 256, got 1000",
     );
+    // Multirate stepping on a backend that does not step explicitly, and
+    // with no bound to partition by.
+    fails_at(
+        &format!("{BASE}\n[simulation]\nbackend = \"implicit\"\nmultirate = true\n"),
+        12,
+        "[simulation] multirate sub-steps the explicit tensor-mass step",
+    );
+    fails_at(
+        &format!("{BASE}\n[simulation]\ndt_policy = \"unchecked\"\nmultirate = true\n"),
+        12,
+        "with dt_policy = \"unchecked\" there is none",
+    );
     // Unknown section.
     fails_at(
         &format!("{BASE}\n[solver]\nx = 1\n"),

@@ -129,6 +129,36 @@ fn check_reports_the_embedded_scene_and_refuses_bad_ones_with_a_position() {
         said.contains("(no dt_s: 0.9 of the stable step; set [simulation] dt_s = 0.001 for 1 kHz)"),
         "{said}"
     );
+    // A refined corner with multirate stepping: check says the partition
+    // (few vertices fast, fewer whole passes than fast sub-steps).
+    let refined = dir.join("refined.toml");
+    std::fs::write(
+        &refined,
+        "[mesh]\ngenerate = { shape = \"box\", size_m = [0.16, 0.08, 0.02], cell_m = 0.005 }\n[material]\nyoung_pa = 5000.0\npoisson = 0.45\ndensity_kg_m3 = 1000.0\n[[refine]]\nselect = { sphere_m = [0.02, 0.02, 0.02, 0.004] }\ncell_m = 0.0025\n[simulation]\ndt_s = 0.002\nmultirate = true\n",
+    )
+    .unwrap();
+    let out = run_ok(
+        Command::new(binary("sim-server"))
+            .arg("check")
+            .arg(&refined),
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    let line = said
+        .lines()
+        .find(|l| l.starts_with("multirate: "))
+        .unwrap_or_else(|| panic!("no multirate line in:\n{said}"));
+    let numbers: Vec<usize> = line
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    // fast, vertices, interface, whole passes, fast sub-steps, one step for all.
+    let [fast, vertices, _, whole, fine, uniform] = numbers[..] else {
+        panic!("{line}");
+    };
+    assert!(
+        fast * 2 < vertices && whole < fine && fine >= uniform,
+        "{line}"
+    );
     let bad = dir.join("bad.toml");
     std::fs::write(
         &bad,

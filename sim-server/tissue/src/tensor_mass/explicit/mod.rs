@@ -11,10 +11,10 @@ use super::model::ElasticModel;
 use super::stability::StableStep;
 use crate::math::Real;
 use multirate::Multirate;
-pub use multirate::{MultirateError, MultirateReport};
+pub use multirate::MultirateReport;
 use partition::{PartBuffers, PartPlan, run_parts};
 use predicted::Prediction;
-pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, substeps_for};
+pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, MultirateError, substeps_for};
 pub use step_size::{MAX_SUBSTEPS, MAX_THREADS, PREDICTED_SUBSTEPS_MAX};
 
 /// What a kernel pass reads ([`StepInputs`]) and, borrowed apart from it,

@@ -36,7 +36,7 @@
 //! rows per fine one, a gathered row costing [`GATHERED_ROW_COST`] streamed
 //! ones) is below [`ENGAGE_BELOW`] of one step for all.
 
-use super::{DtPolicy, Explicit, MAX_SUBSTEPS};
+use super::{DtPolicy, Explicit, MAX_SUBSTEPS, MultirateError};
 use crate::math::Real;
 use crate::tensor_mass::force_term::{ForcePoint, ForceTerm};
 use crate::tensor_mass::kernel::{Kernel, LowerRows, StepInputs, Storage, V3, row_product};
@@ -321,21 +321,6 @@ impl Multirate {
             engaged: self.engaged,
         }
     }
-}
-
-/// Why multirate stepping cannot be set up.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum MultirateError {
-    /// The step is unchecked: there is no bound to partition by.
-    #[error(
-        "multirate stepping partitions the organ by its stable step; with dt_policy = \"unchecked\" there is none: use \"substep\""
-    )]
-    Unchecked,
-    /// Every element's force is the nonlinear pass's (no linear rows to recompute alone).
-    #[error(
-        "multirate stepping recomputes the fast vertices' linear rows; every element of this scene is nonlinear, so there are none: use a linear material with a corotational region"
-    )]
-    WholeForces,
 }
 
 /// The level parameters of a step: total (fine) sub-steps, coarse ones,

@@ -84,7 +84,7 @@ pub enum ExplicitError {
     },
     /// Multirate stepping cannot partition this model.
     #[error(transparent)]
-    Multirate(#[from] super::MultirateError),
+    Multirate(#[from] MultirateError),
     /// The thread pool could not be created.
     #[error("cannot start {threads} worker threads: {reason}")]
     Threads {
@@ -93,6 +93,21 @@ pub enum ExplicitError {
         /// The OS error.
         reason: String,
     },
+}
+
+/// Why multirate stepping cannot be set up.
+#[derive(Debug, Error, PartialEq)]
+pub enum MultirateError {
+    /// The step is unchecked: there is no bound to partition by.
+    #[error(
+        "multirate stepping partitions the organ by its stable step; with dt_policy = \"unchecked\" there is none: use \"substep\""
+    )]
+    Unchecked,
+    /// Every element's force is the nonlinear pass's (no linear rows to recompute alone).
+    #[error(
+        "multirate stepping recomputes the fast vertices' linear rows; every element of this scene is nonlinear, so there are none: use a linear material with a corotational region"
+    )]
+    WholeForces,
 }
 
 /// Sub-steps per step of `dt_s` under `stable` as `policy` says: 1 when
