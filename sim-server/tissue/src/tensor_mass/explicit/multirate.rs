@@ -39,7 +39,7 @@
 use super::{DtPolicy, Explicit, MAX_SUBSTEPS, MultirateError};
 use crate::math::Real;
 use crate::tensor_mass::force_term::{ForcePoint, ForceTerm};
-use crate::tensor_mass::kernel::{Kernel, LowerRows, StepInputs, Storage, V3, row_product};
+use crate::tensor_mass::kernel::{Kernel, LowerRows, Storage, V3, row_product};
 use crate::tensor_mass::model::ElasticModel;
 
 /// The work of one row recomputed alone (gathered), in rows of a whole
@@ -549,45 +549,26 @@ impl<S: Storage> Explicit<S> {
     /// One fine sub-step of the fast rows alone (the pass's own products
     /// and integration), then the interface's U(t + H) back.
     pub(super) fn fast_rows(&mut self) {
-        let Self {
-            kernel,
-            u,
-            next,
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            fnl,
-            multirate,
-            ..
-        } = self;
-        let Some(plan) = multirate else {
+        // Out of `self` while the pass's inputs borrow it.
+        let Some(mut plan) = self.multirate.take() else {
             return;
         };
-        let inputs = StepInputs {
-            u,
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            fnl,
-        };
+        let pass = self.pass();
         for (fresh, &i) in plan.fresh.iter_mut().zip(&plan.fast) {
             let i = i as usize;
-            let ku = row_product(kernel, &plan.lower, inputs.u, i);
-            let mut v = next[i];
-            inputs.integrate(i, ku, &mut v);
+            let ku = row_product(pass.kernel, &plan.lower, pass.inputs.u, i);
+            let mut v = pass.next[i];
+            pass.inputs.integrate(i, ku, &mut v);
             *fresh = v;
         }
         for (fresh, &i) in plan.fresh.iter().zip(&plan.fast) {
             let i = i as usize;
-            next[i] = u[i];
-            u[i] = *fresh;
+            self.next[i] = self.u[i];
+            self.u[i] = *fresh;
         }
         for (saved, &j) in plan.saved.iter().zip(&plan.interface) {
-            u[j as usize] = *saved;
+            self.u[j as usize] = *saved;
         }
+        self.multirate = Some(plan);
     }
 }
