@@ -29,7 +29,7 @@
 //! H under the bound of every element with a slow vertex, which is what
 //! the partition enforces. The energy of an undamped refined block over
 //! thousands of steps and the agreement with one step for all are tested
-//! (`explicit/multirate_tests.rs`).
+//! (`sim-server/tissue/tests/multirate.rs`).
 //!
 //! A scene asks for it (`[simulation] multirate = true`); it engages only
 //! when the predicted work (a whole pass per coarse sub-step plus the fast
@@ -148,26 +148,30 @@ impl Multirate {
             .map(|t| lambdas[t])
             .fold(0.0, Real::max);
         let rows = n as Real;
-        let mut best: Option<(Real, Candidate)> = None;
+        let work_of = |c: &Candidate| {
+            let m = uniform.div_ceil(c.coarse_base).max(1);
+            c.coarse_base as Real
+                * (rows + (m - 1) as Real * c.fast_count as Real * GATHERED_ROW_COST)
+        };
         // Thresholds from the stiffest element down by 1.5x in lambda
         // (1.22x in step): refined cells sit at 4x per halving.
         let mut threshold = top / 1.5;
-        for _ in 0..16 {
-            let cand = Self::candidate(model, kernel, &lower, dt_s, threshold);
-            let m = uniform.div_ceil(cand.coarse_base).max(1);
-            let work = cand.coarse_base as Real
-                * (rows + (m - 1) as Real * cand.fast_count as Real * GATHERED_ROW_COST);
-            let all = cand.fast_count == n;
-            if best.as_ref().is_none_or(|(w, _)| work < *w) {
-                best = Some((work, cand));
-            }
-            threshold /= 1.5;
+        let first = Self::candidate(model, kernel, &lower, dt_s, threshold);
+        let mut all_fast = first.fast_count == n;
+        let (mut work, mut cand) = (work_of(&first), first);
+        for _ in 1..16 {
             // Lower thresholds only add fast vertices.
-            if all {
+            if all_fast {
                 break;
             }
+            threshold /= 1.5;
+            let next = Self::candidate(model, kernel, &lower, dt_s, threshold);
+            all_fast = next.fast_count == n;
+            let w = work_of(&next);
+            if w < work {
+                (work, cand) = (w, next);
+            }
         }
-        let (work, cand) = best.expect("at least one candidate");
         let engaged = work < ENGAGE_BELOW * uniform as Real * rows;
         let mut plan = Self {
             lower,
@@ -284,18 +288,15 @@ impl Multirate {
             if v >= self.is_fast.len() {
                 continue;
             }
-            let mut mark = |j: usize, fast: &mut Vec<bool>| {
-                if !fast[j] {
-                    fast[j] = true;
+            let is_fast = &mut self.is_fast;
+            let mut mark = |j: usize| {
+                if !is_fast[j] {
+                    is_fast[j] = true;
                     changed.push(j as u32);
                 }
             };
-            mark(v, &mut self.is_fast);
-            let mut ring = Vec::new();
-            for_neighbours(kernel, &self.lower, v, |j| ring.push(j));
-            for j in ring {
-                mark(j, &mut self.is_fast);
-            }
+            mark(v);
+            for_neighbours(kernel, &self.lower, v, mark);
         }
         if !changed.is_empty() {
             self.rebuild_lists(kernel);
@@ -326,7 +327,7 @@ impl Multirate {
 /// The level parameters of a step: total (fine) sub-steps, coarse ones,
 /// and whether the slow vertices take the coarse one.
 #[derive(Clone, Copy, PartialEq, Eq)]
-struct Levels {
+pub(super) struct Levels {
     fine: usize,
     coarse: usize,
     engaged: bool,
@@ -377,7 +378,7 @@ impl<S: Storage> Explicit<S> {
             plan.set_extra(&self.kernel, large.vertices().iter().copied());
         }
         self.multirate = Some(plan);
-        self.resubstep_always(self.size.substeps);
+        self.resubstep(self.size.substeps);
         Ok(self.multirate())
     }
 
@@ -419,7 +420,7 @@ impl<S: Storage> Explicit<S> {
     /// The levels for `n` fine sub-steps: with the partition engaged, the
     /// coarse count its slow elements need (times the sub-step factor) and
     /// `n` rounded up to a whole multiple of it.
-    fn levels_for(&self, n: usize) -> Levels {
+    pub(super) fn levels_for(&self, n: usize) -> Levels {
         match &self.multirate {
             Some(p) if p.engaged => {
                 let coarse = (p.coarse_base * self.size.substep_factor).min(n).max(1);
@@ -438,16 +439,9 @@ impl<S: Storage> Explicit<S> {
         }
     }
 
-    /// Sets the sub-step counts for `n` fine sub-steps (see
-    /// [`Explicit::levels_for`]), keeping each vertex's velocity.
-    pub(super) fn resubstep_always(&mut self, n: usize) {
-        let levels = self.levels_for(n);
-        self.relevel(levels);
-    }
-
     /// Moves to `new` levels, keeping every vertex's velocity
     /// (U(t) - U(t-1)) / h with its own h: an O(n) pass.
-    fn relevel(&mut self, new: Levels) {
+    pub(super) fn relevel(&mut self, new: Levels) {
         let old = self.levels();
         if old == new {
             return;
@@ -504,10 +498,7 @@ impl<S: Storage> Explicit<S> {
         let Some(plan) = &mut self.multirate else {
             return;
         };
-        let extra: Vec<u32> = self
-            .large
-            .as_ref()
-            .map_or(Vec::new(), |l| l.vertices().to_vec());
+        let extra = self.large.iter().flat_map(|l| l.vertices().iter().copied());
         let changed = plan.set_extra(&self.kernel, extra);
         // Each changed vertex switched level.
         self.after_level_change(&changed);

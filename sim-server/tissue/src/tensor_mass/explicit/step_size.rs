@@ -238,7 +238,8 @@ impl<S: Storage> Explicit<S> {
     /// rounded to a whole multiple of the coarse), keeping each vertex's
     /// velocity (U(t) - U(t-1)) / h.
     pub(super) fn resubstep(&mut self, n: usize) {
-        self.resubstep_always(n);
+        let levels = self.levels_for(n);
+        self.relevel(levels);
     }
 }
 
