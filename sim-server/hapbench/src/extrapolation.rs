@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 
 use crate::local_render::LocalRender;
 use crate::phases::{Phase, away_from_snaps, classify, dropouts, near_snaps, rms_by_phase};
-use crate::plot::{Log, Series, chart};
+use crate::plot::{Axes, Series, chart};
 use crate::progress::bar;
 
 /// The default hand path (tool 0).
@@ -407,6 +407,16 @@ pub fn run(args: &Args) -> Result<()> {
         ),
     };
     let duration = traj.duration_s();
+    println!(
+        "run: scene {}{}, trajectory {traj_name} ({duration:.2} s), simulation {} Hz{}, haptic {} Hz{}, delay {} ms",
+        src.name,
+        if args.scene.is_none() { " (default)" } else { "" },
+        args.sim_rate,
+        if args.sim_rate == 60.0 { " (default)" } else { "" },
+        args.haptic_rate,
+        if args.haptic_rate == 1000.0 { " (default)" } else { "" },
+        args.delay_ms
+    );
     // Every tick of the truth, each method and the series is kept: a
     // trajectory of days would ask for more memory than any machine has.
     anyhow::ensure!(
@@ -604,20 +614,29 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let colors = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728"];
         let curve = |f: &[[f64; 3]]| -> Vec<(f64, f64)> {
             f.iter()
                 .enumerate()
                 .map(|(k, v)| (k as f64 * h, norm(*v)))
                 .collect()
         };
-        let mut series = vec![Series::line("truth", "#000", curve(&truth_f))];
-        for (i, (name, r)) in rendered_all.iter().enumerate() {
-            series.push(Series::line(name, colors[i % colors.len()], curve(r)));
+        let mut series = vec![Series::line("truth", curve(&truth_f))];
+        for (name, r) in &rendered_all {
+            series.push(Series::line(name, curve(r)));
         }
         let title = format!(
-            "|F| on tool 0: simulation {} Hz, haptic {} Hz",
-            args.sim_rate, args.haptic_rate
+            "|F| on tool 0: {}, {}, simulation {} Hz, haptic {} Hz{}",
+            src.name,
+            Path::new(&report.trajectory)
+                .file_name()
+                .map_or(report.trajectory.clone(), |n| n.to_string_lossy().into_owned()),
+            args.sim_rate,
+            args.haptic_rate,
+            if args.delay_ms > 0.0 {
+                format!(", delay {} ms", args.delay_ms)
+            } else {
+                String::new()
+            }
         );
         for (file, x0, x1) in [
             ("extrapolation.svg", 0.0, duration),
@@ -630,7 +649,7 @@ pub fn run(args: &Args) -> Result<()> {
                 x0,
                 x1.min(duration),
                 &series,
-                Log::default(),
+                Axes::default(),
             );
             let path = dir.join(file);
             std::fs::write(&path, svg)

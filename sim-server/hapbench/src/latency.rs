@@ -30,7 +30,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use crate::plot::{Log, Series, chart};
+use crate::plot::{Axes, Scale, Series, chart};
 use crate::progress::bar;
 
 /// Flags of `hapbench latency`.
@@ -188,6 +188,8 @@ pub fn run(args: &Args) -> Result<()> {
         sim_server::scene::check_step("--dt-s", dt).map_err(anyhow::Error::msg)?;
     }
     let d = args.duration_s;
+    let what = run_description(args);
+    println!("run: {what}");
     let pid = std::process::id();
     // The daemon's timer slack (1 ns) for the observer's polling and the
     // sleep baseline alike, so that only what is measured differs.
@@ -407,16 +409,16 @@ pub fn run(args: &Args) -> Result<()> {
         "no traffic between sim-server and haptic-daemon"
     );
 
-    let mut curves: Vec<(&str, &str, Vec<f64>)> = vec![
-        ("iceoryx2 bare", "#7f7f7f", bare.clone()),
-        ("sleep lateness bare", "#bcbd22", sleep.clone()),
-        ("sim -> daemon", "#1f77b4", s2d.clone()),
-        ("daemon -> sim", "#ff7f0e", d2s.clone()),
-        ("device -> force", "#d62728", dev2f.clone()),
-        ("tick lateness", "#2ca02c", ticks.clone()),
+    let mut curves: Vec<(&str, Vec<f64>)> = vec![
+        ("iceoryx2 bare", bare.clone()),
+        ("sleep lateness bare", sleep.clone()),
+        ("sim -> daemon", s2d.clone()),
+        ("daemon -> sim", d2s.clone()),
+        ("device -> force", dev2f.clone()),
+        ("tick lateness", ticks.clone()),
     ];
     if let Some(z) = &bare_zenoh {
-        curves.push(("zenoh bare", "#8c564b", z.clone()));
+        curves.push(("zenoh bare", z.clone()));
     }
     let report = Report {
         duration_s: d,
@@ -487,32 +489,88 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let series: Vec<Series> = curves
+        let mut series: Vec<Series> = curves
             .into_iter()
-            .map(|(name, color, mut v)| {
-                v.sort_by(f64::total_cmp);
-                let n = v.len().max(1) as f64;
-                Series::line(
-                    name,
-                    color,
-                    v.iter()
-                        .enumerate()
-                        .map(|(i, x)| (100.0 * i as f64 / n, *x))
-                        .collect(),
-                )
-            })
+            .map(|(name, v)| Series::line(name, tail_points(v)))
             .collect();
+        // The simulation's own rows: only their summary's percentiles, as
+        // markers where they fall (the largest at 1 - 1/steps).
+        let steps = report.sim_steps.max(2) as f64;
+        for (name, v) in [
+            ("sim step", &report.sim_step_us),
+            ("sim turnaround", &report.sim_turnaround_us),
+            ("device -> sim wake", &report.sim_pose_wait_us),
+        ] {
+            let pts: Vec<(f64, f64)> = [(0.5, "p50"), (0.99, "p99"), (0.999, "p999")]
+                .into_iter()
+                .chain([(1.0 - 1.0 / steps, "max")])
+                .filter_map(|(p, k)| Some((p, v[k].as_f64()?)))
+                .collect();
+            series.push(Series::markers(name, pts));
+        }
+        let x1 = series
+            .iter()
+            .flat_map(|s| s.points.iter().map(|p| p.0))
+            .fold(0.99, f64::max);
         let svg = chart(
-            "Latency percentiles",
-            "percentile",
-            "us",
+            &format!("Latency percentiles: {what}"),
+            "percentile (1 - p on a log scale)",
+            "latency (us)",
             0.0,
-            99.0,
+            x1,
             &series,
-            Log::default(),
+            Axes {
+                x: Scale::Tail,
+                y: Scale::Log10,
+            },
         );
         let path = dir.join("latency.svg");
         std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
+}
+
+/// What a run measures, said at its start and in its plot's title: the
+/// scene, the duration, the step and the daemon's settings, with the
+/// defaults named.
+fn run_description(args: &Args) -> String {
+    let scene = args.scene.as_ref().map_or_else(
+        || "the embedded liver (default)".to_string(),
+        |p| p.display().to_string(),
+    );
+    let dt = args
+        .dt_s
+        .map_or_else(|| "the scene's step".to_string(), |dt| format!("step {dt} s"));
+    format!(
+        "{scene}, {} s, {dt}, {}{} extrapolation, RT priority {}{}",
+        args.duration_s,
+        args.extrapolation.name(),
+        if args.quasi_static { " (quasi-static)" } else { "" },
+        args.rt_priority,
+        if args.bridge { ", zenoh bridge" } else { "" }
+    )
+}
+
+/// A sorted distribution's percentile curve for a tail axis: points at
+/// log-spaced 1 - p, from p0 to the last sample's p = 1 - 1/n.
+fn tail_points(mut v: Vec<f64>) -> Vec<(f64, f64)> {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    // 50 points per decade of 1 - p, each the sample at that rank.
+    let decades = (n as f64).log10();
+    let steps = (decades * 50.0).ceil() as usize;
+    let mut out: Vec<(f64, f64)> = Vec::with_capacity(steps + 1);
+    let mut last = usize::MAX;
+    for k in 0..=steps {
+        let p = 1.0 - 10f64.powf(-decades * k as f64 / steps.max(1) as f64);
+        let i = ((p * n as f64) as usize).min(n - 1);
+        if i != last {
+            out.push((i as f64 / n as f64, v[i]));
+            last = i;
+        }
+    }
+    out
 }

@@ -14,7 +14,7 @@ use sim_server::scene::{SceneSource, build_scene};
 use sim_server::tensor_mass::element_bound;
 use std::path::PathBuf;
 
-use crate::plot::{Log, Series, chart};
+use crate::plot::{Axes, Scale, Series, chart};
 use crate::progress::bar;
 use indicatif::ProgressBar;
 
@@ -36,8 +36,9 @@ pub struct Args {
 const CASES: usize = 33;
 
 /// One chart per family of cases: the stable step bound and the largest
-/// displacement against the pushed value (log10 of it for the wide ranges).
-fn plot(dir: &std::path::Path, cases: &[Case]) -> Result<()> {
+/// displacement against the pushed value (on a log axis for the wide
+/// ranges), each case simulated for `duration_s`.
+fn plot(dir: &std::path::Path, cases: &[Case], duration_s: f64) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     for (family, log) in [
         ("poisson", false),
@@ -46,34 +47,46 @@ fn plot(dir: &std::path::Path, cases: &[Case]) -> Result<()> {
         ("sliver_thickness_m", true),
         ("sliver_damping_per_s", true),
     ] {
-        let x = |v: f64| if log { v.log10() } else { v };
         let of: Vec<&Case> = cases.iter().filter(|c| c.case == family).collect();
         let pts = |f: &dyn Fn(&Case) -> f64| -> Vec<(f64, f64)> {
             of.iter()
                 .filter(|c| c.outcome == "stable")
-                .map(|c| (x(c.value), f(c)))
+                .map(|c| (c.value, f(c)))
                 .collect()
         };
-        let xs: Vec<f64> = of.iter().map(|c| x(c.value)).collect();
-        let (x0, x1) = (
-            xs.iter().copied().fold(f64::INFINITY, f64::min),
-            xs.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-        );
+        let (lo, hi) = of.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+            (lo.min(c.value), hi.max(c.value))
+        });
+        // A margin of 5% of the range each side, in the axis's own terms.
+        let (x0, x1, scale) = if log {
+            let m = (hi / lo).powf(0.05);
+            (lo / m, hi * m, Scale::Log10)
+        } else {
+            (lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo), Scale::Linear)
+        };
         // One unit per chart: the stable step, then the largest displacement.
-        let bound = Series::markers("stable step", "#1f77b4", pts(&|c| c.dt_bound_s * 1e6));
-        let moved = Series::markers("max |u|", "#d62728", pts(&|c| c.max_displacement_m * 1e3));
+        let bound = Series::markers("stable step", pts(&|c| c.dt_bound_s * 1e6));
+        let moved = Series::markers("max |u|", pts(&|c| c.max_displacement_m * 1e3));
+        let unstable = of.iter().filter(|c| c.outcome != "stable").count();
         for (what, series, unit) in [
             ("bound", bound, "element bound on the step (us)"),
             ("displacement", moved, "largest displacement (mm)"),
         ] {
             let svg = chart(
-                &format!("Stable cases: {family}"),
+                &format!(
+                    "Stable cases: {family}, {} of {} cases, {duration_s} s each",
+                    of.len() - unstable,
+                    of.len()
+                ),
                 family,
                 unit,
-                x0 - 0.05 * (x1 - x0),
-                x1 + 0.05 * (x1 - x0),
+                x0,
+                x1,
                 &[series],
-                Log { x: log, y: false },
+                Axes {
+                    x: scale,
+                    y: Scale::Linear,
+                },
             );
             let path = dir.join(format!("stability-{family}-{what}.svg"));
             std::fs::write(&path, svg)
@@ -423,7 +436,7 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
     if let Some(dir) = &args.plot {
-        plot(dir, &cases)?;
+        plot(dir, &cases, args.duration_s)?;
     }
     if let Some(path) = &args.json {
         sim_server::provenance::write_stamped(path, &serde_json::json!({ "cases": cases }))?;

@@ -22,7 +22,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::plot::{Log, Series, chart};
+use crate::plot::{Axes, Scale, Series, chart};
 use crate::progress::bar;
 
 /// Flags of `hapbench tradeoff`.
@@ -338,6 +338,14 @@ pub fn run(args: &Args) -> Result<()> {
         }
         return Ok(());
     }
+    println!(
+        "run: {}, {} s per run",
+        match &args.scene {
+            Some(s) => format!("scene {}", s.display()),
+            None => "the generated block under an end load (default)".to_string(),
+        },
+        args.duration_s
+    );
     let (mut points, u_ref) = match &args.scene {
         Some(path) => {
             let case = scene_case(path)?;
@@ -412,46 +420,52 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let colors = [
-            ("tensor-mass", "#1f77b4"),
-            ("tensor-mass-f32", "#17becf"),
-            ("implicit", "#d62728"),
-            ("precomputed", "#2ca02c"),
-            ("hybrid", "#9467bd"),
+        let backends = [
+            "tensor-mass",
+            "tensor-mass-f32",
+            "implicit",
+            "precomputed",
+            "hybrid",
         ];
-        let at = |p: &Point| (p.realtime_factor.log10(), p.error.max(1e-6).log10());
+        let at = |p: &Point| (p.realtime_factor, p.error.max(1e-6));
         let mut series = Vec::new();
-        for (name, color) in colors {
+        for name in backends {
             let pts: Vec<(f64, f64)> = points
                 .iter()
                 .filter(|p| p.backend == name)
                 .map(at)
                 .collect();
-            series.push(Series::markers(name, color, pts));
+            series.push(Series::markers(name, pts));
         }
         // The Pareto front: the points no other beats on both speed and
         // error, joined from slow to fast.
         let mut front: Vec<(f64, f64)> = points.iter().filter(|p| p.pareto).map(at).collect();
         front.sort_by(|a, b| a.0.total_cmp(&b.0));
-        series.push(Series::line("Pareto front", "#000", front));
+        series.push(Series::line("Pareto front", front));
         let (x0, x1) = points
             .iter()
             .map(|p| at(p).0)
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
                 (lo.min(x), hi.max(x))
             });
+        let title = match &args.scene {
+            Some(s) => format!(
+                "Speed against accuracy: {}, against its static solution",
+                s.display()
+            ),
+            None => "Speed against accuracy: block under an end load (default)".to_string(),
+        };
         let svg = chart(
-            if args.scene.is_some() {
-                "Speed against accuracy (scene, against its static solution)"
-            } else {
-                "Speed against accuracy (block under an end load)"
-            },
+            &title,
             "simulated seconds per wall second (real-time factor)",
             "relative error",
-            x0 - 0.1,
-            x1 + 0.1,
+            x0 / 1.26,
+            x1 * 1.26,
             &series,
-            Log { x: true, y: true },
+            Axes {
+                x: Scale::Log10,
+                y: Scale::Log10,
+            },
         );
         let path = dir.join("tradeoff.svg");
         std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
