@@ -74,7 +74,9 @@ fn faults(name: &str, svg: &str) -> Vec<String> {
     let series = groups(svg, "series");
     let legend = groups(svg, "legend-entry");
     if series.is_empty() {
-        out.push(format!("{name}: no series groups (written by an old hapbench?)"));
+        out.push(format!(
+            "{name}: no series groups (written by an old hapbench?)"
+        ));
     }
     let names = |g: &[(&str, &str)]| -> Vec<String> {
         g.iter()

@@ -410,11 +410,23 @@ pub fn run(args: &Args) -> Result<()> {
     println!(
         "run: scene {}{}, trajectory {traj_name} ({duration:.2} s), simulation {} Hz{}, haptic {} Hz{}, delay {} ms",
         src.name,
-        if args.scene.is_none() { " (default)" } else { "" },
+        if args.scene.is_none() {
+            " (default)"
+        } else {
+            ""
+        },
         args.sim_rate,
-        if args.sim_rate == 60.0 { " (default)" } else { "" },
+        if args.sim_rate == 60.0 {
+            " (default)"
+        } else {
+            ""
+        },
         args.haptic_rate,
-        if args.haptic_rate == 1000.0 { " (default)" } else { "" },
+        if args.haptic_rate == 1000.0 {
+            " (default)"
+        } else {
+            ""
+        },
         args.delay_ms
     );
     // Every tick of the truth, each method and the series is kept: a
@@ -629,7 +641,9 @@ pub fn run(args: &Args) -> Result<()> {
             src.name,
             Path::new(&report.trajectory)
                 .file_name()
-                .map_or(report.trajectory.clone(), |n| n.to_string_lossy().into_owned()),
+                .map_or(report.trajectory.clone(), |n| n
+                    .to_string_lossy()
+                    .into_owned()),
             args.sim_rate,
             args.haptic_rate,
             if args.delay_ms > 0.0 {

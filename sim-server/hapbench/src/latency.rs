@@ -538,14 +538,19 @@ fn run_description(args: &Args) -> String {
         || "the embedded liver (default)".to_string(),
         |p| p.display().to_string(),
     );
-    let dt = args
-        .dt_s
-        .map_or_else(|| "the scene's step".to_string(), |dt| format!("step {dt} s"));
+    let dt = args.dt_s.map_or_else(
+        || "the scene's step".to_string(),
+        |dt| format!("step {dt} s"),
+    );
     format!(
         "{scene}, {} s, {dt}, {}{} extrapolation, RT priority {}{}",
         args.duration_s,
         args.extrapolation.name(),
-        if args.quasi_static { " (quasi-static)" } else { "" },
+        if args.quasi_static {
+            " (quasi-static)"
+        } else {
+            ""
+        },
         args.rt_priority,
         if args.bridge { ", zenoh bridge" } else { "" }
     )

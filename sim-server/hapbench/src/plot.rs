@@ -489,7 +489,10 @@ mod tests {
 
     #[test]
     fn log_axes_leave_out_what_they_cannot_draw() {
-        let s = [Series::markers("m", vec![(1.0, 0.0), (10.0, 5.0), (100.0, 50.0)])];
+        let s = [Series::markers(
+            "m",
+            vec![(1.0, 0.0), (10.0, 5.0), (100.0, 50.0)],
+        )];
         let axes = Axes {
             x: Scale::Log10,
             y: Scale::Log10,

@@ -54,9 +54,11 @@ fn plot(dir: &std::path::Path, cases: &[Case], duration_s: f64) -> Result<()> {
                 .map(|c| (c.value, f(c)))
                 .collect()
         };
-        let (lo, hi) = of.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
-            (lo.min(c.value), hi.max(c.value))
-        });
+        let (lo, hi) = of
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+                (lo.min(c.value), hi.max(c.value))
+            });
         // A margin of 5% of the range each side, in the axis's own terms.
         let (x0, x1, scale) = if log {
             let m = (hi / lo).powf(0.05);
