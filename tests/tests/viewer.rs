@@ -44,6 +44,7 @@ fn rest(model: &ElasticModel) -> Vec<[f32; 3]> {
 /// about 60 Hz until `stop`.
 fn fake_simulation(
     session: SessionName,
+    rest_m: Vec<[f32; 3]>,
     positions: Vec<[f32; 3]>,
     triangles: Arc<Mutex<(u64, Vec<[u32; 3]>)>>,
     stop: Arc<AtomicBool>,
@@ -68,7 +69,7 @@ fn fake_simulation(
         header.set_name("fake liver");
         let mut s = rest_pub.loan_slice_uninit(n).unwrap();
         *s.user_header_mut() = header;
-        s.write_from_fn(|i| positions[i]).send().unwrap();
+        s.write_from_fn(|i| rest_m[i]).send().unwrap();
         let uncut = triangles.lock().unwrap().1.clone();
         let surface0 = services::slice_publisher(
             &services::surface0_service(&node, &session).unwrap(),
@@ -208,6 +209,7 @@ fn snapshots_show_the_silhouette_and_change_after_a_cut() {
     let sim = fake_simulation(
         session.clone(),
         positions.clone(),
+        positions.clone(),
         triangles.clone(),
         stop.clone(),
         frames.clone(),
@@ -279,6 +281,237 @@ fn snapshots_show_the_silhouette_and_change_after_a_cut() {
         "cut-coloured pixels {cut_a} -> {cut_b}"
     );
     assert!(frames.load(Ordering::Relaxed) > 2);
+}
+
+/// Publishes one hook (`fulcrum` to `tip`, 2.5 mm radius) in the scene
+/// stream and its force sample, `force_n` in contact, at about 60 Hz until
+/// `stop`.
+fn fake_tool(
+    session: SessionName,
+    fulcrum: [f64; 3],
+    tip: [f64; 3],
+    force_n: [f64; 3],
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    use shared::protocol::{CONTACT, ForceMsg, SceneInfo, TOOL_HOOK};
+    std::thread::spawn(move || {
+        let node = services::node("fake-tool").unwrap();
+        let scene =
+            services::publisher(&services::scene_service(&node, &session).unwrap()).unwrap();
+        let mut info = SceneInfo {
+            version: PROTOCOL_VERSION,
+            tool_count: 1,
+            ..SceneInfo::default()
+        };
+        info.tools[0].set_name("probe");
+        info.tools[0].kind = TOOL_HOOK;
+        info.tools[0].fulcrum_m = fulcrum;
+        info.tools[0].length_m = 0.3;
+        info.tools[0].radius_m = 0.0025;
+        scene.send_copy(info).unwrap();
+        let forces =
+            services::publisher(&services::force_service(&node, &session).unwrap()).unwrap();
+        let mut seq = 1;
+        while !stop.load(Ordering::Relaxed) {
+            let mut m = ForceMsg {
+                version: PROTOCOL_VERSION,
+                tool_count: 1,
+                seq,
+                t_ns: monotonic_ns(),
+                ..ForceMsg::default()
+            };
+            m.tools[0].position_m = tip;
+            m.tools[0].force_n = force_n;
+            m.tools[0].flags = CONTACT;
+            forces.send_copy(m).unwrap();
+            // The scene message reaches viewers that join later.
+            use shared::services::UpdateConnections;
+            scene.update_connections().unwrap();
+            seq += 1;
+            std::thread::sleep(Duration::from_millis(16));
+        }
+    })
+}
+
+/// Pixels close to `c` (each channel within `tol`).
+fn near_colour(px: &[[u8; 3]], c: [u8; 3], tol: u8) -> Vec<usize> {
+    (0..px.len())
+        .filter(|&i| (0..3).all(|k| px[i][k].abs_diff(c[k]) <= tol))
+        .collect()
+}
+
+#[test]
+fn a_press_is_shown_in_displacement_colours_with_its_bar_and_a_force_arrow_to_scale() {
+    let name = format!("viewdent{}", std::process::id());
+    let session = SessionName::new(&name).unwrap();
+    let dir = scratch_dir("viewer-dent");
+    let model = liver();
+    let rest_m = rest(&model);
+    // A dent under the top-most vertex: 8 mm deep at its centre, falling
+    // to zero 25 mm away.
+    let top = (0..rest_m.len())
+        .max_by(|&a, &b| rest_m[a][2].total_cmp(&rest_m[b][2]))
+        .unwrap();
+    let c = rest_m[top];
+    let dent = |p: [f32; 3]| {
+        let d = ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt();
+        if d < 0.025 {
+            0.008 * (1.0 - (d / 0.025).powi(2))
+        } else {
+            0.0
+        }
+    };
+    let pressed: Vec<[f32; 3]> = rest_m
+        .iter()
+        .map(|&p| [p[0], p[1], p[2] - dent(p)])
+        .collect();
+    let max_mm = rest_m.iter().map(|&p| dent(p) * 1e3).fold(0.0, f32::max);
+    let triangles = Arc::new(Mutex::new((1u64, surface(&model))));
+    let stop = Arc::new(AtomicBool::new(false));
+    let frames = Arc::new(AtomicU64::new(0));
+    let sim = fake_simulation(
+        session.clone(),
+        rest_m.clone(),
+        pressed.clone(),
+        triangles.clone(),
+        stop.clone(),
+        frames,
+    );
+    // The probe pressing at the dent's centre, the tissue pushing it back
+    // sideways by 1 N along +x (so the top view shows the arrow's length).
+    let tip = [f64::from(c[0]), f64::from(c[1]), f64::from(c[2]) - 0.008];
+    let fulcrum = [tip[0], tip[1], tip[2] + 0.2];
+    let tool = fake_tool(session, fulcrum, tip, [1.0, 0.0, 0.0], stop.clone());
+
+    let shot = |file: &str, extra: &[&str]| {
+        let out = dir.join(file);
+        let json = out.with_extension("json");
+        let run = Command::new(binary("viewer"))
+            .args([
+                "--session",
+                &name,
+                "--wait-s",
+                "20",
+                "--size",
+                "640x480",
+                "--view",
+                "top",
+            ])
+            .arg("--snapshot")
+            .arg(&out)
+            .arg("--json")
+            .arg(&json)
+            .args(extra)
+            .output()
+            .expect("run viewer");
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        (read_json(&json), read_png(&out))
+    };
+    let (report, (w, h, px)) = shot(
+        "dent.png",
+        &["--colour", "displacement", "--no-overlay", "--no-forces"],
+    );
+    // The bar's range is the frame's displacement range.
+    let bar = report["colour_bar"].as_array().expect("a colour bar");
+    let (lo, hi) = (bar[0].as_f64().unwrap(), bar[1].as_f64().unwrap());
+    assert_eq!(lo, 0.0, "{report}");
+    assert!(
+        (hi - f64::from(max_mm)).abs() < 1e-3,
+        "bar top {hi} mm, dent {max_mm} mm: {report}"
+    );
+    let max = report["max_displacement_mm"].as_f64().unwrap();
+    assert!((max - f64::from(max_mm)).abs() < 1e-3, "{report}");
+    // The bar holds the map's two ends exactly, the top colour above the
+    // bottom one.
+    let top_colour = viewer::colour::viridis(1.0);
+    let bottom_colour = viewer::colour::viridis(0.0);
+    let ups = near_colour(&px, top_colour, 2);
+    let downs = near_colour(&px, bottom_colour, 2);
+    assert!(
+        ups.len() >= viewer::overlay::BAR_W && downs.len() >= viewer::overlay::BAR_W,
+        "{} and {} pixels of the bar's ends",
+        ups.len(),
+        downs.len()
+    );
+    assert!(
+        ups.iter().min().unwrap() / w < downs.iter().max().unwrap() / w,
+        "the largest value is at the bar's top"
+    );
+    // The organ: warm (yellow-green) at the dent, cold (violet-blue) away
+    // from it; the top view maps x right and y up as the silhouette test
+    // checks.
+    let lo_xy = [0, 1].map(|k| pressed.iter().map(|p| p[k]).fold(f32::INFINITY, f32::min));
+    let hi_xy = [0, 1].map(|k| {
+        pressed
+            .iter()
+            .map(|p| p[k])
+            .fold(f32::NEG_INFINITY, f32::max)
+    });
+    let height_m = (hi_xy[1] - lo_xy[1]).max((hi_xy[0] - lo_xy[0]) / (w as f32 / h as f32))
+        / viewer::camera::TOP_FILL;
+    let scale = h as f32 / height_m;
+    let centre = [(lo_xy[0] + hi_xy[0]) / 2.0, (lo_xy[1] + hi_xy[1]) / 2.0];
+    let pixel = |p: [f32; 3]| {
+        let x = (w as f32 / 2.0 + (p[0] - centre[0]) * scale) as usize;
+        let y = (h as f32 / 2.0 - (p[1] - centre[1]) * scale) as usize;
+        px[y.min(h - 1) * w + x.min(w - 1)]
+    };
+    let warm = |p: [u8; 3]| p[1] > p[2] + 30;
+    assert!(
+        warm(pixel(pressed[top])),
+        "the dent's centre is drawn {:?}",
+        pixel(pressed[top])
+    );
+    let far = (0..rest_m.len())
+        .filter(|&v| ((rest_m[v][0] - c[0]).powi(2) + (rest_m[v][1] - c[1]).powi(2)).sqrt() > 0.06)
+        .max_by(|&a, &b| rest_m[a][2].total_cmp(&rest_m[b][2]))
+        .unwrap();
+    assert!(
+        !warm(pixel(pressed[far])) && pixel(pressed[far])[2] > pixel(pressed[far])[1],
+        "an unmoved place is drawn {:?}",
+        pixel(pressed[far])
+    );
+
+    // The force arrow: 1 N, drawn over the tissue along +x, as long as the
+    // scale says (the cyan run along the tip's row).
+    let arrow_px = |mm_per_n: &str| {
+        let (report, (w, _, px)) = shot(
+            &format!("arrow-{mm_per_n}.png"),
+            &["--no-overlay", "--force-mm-per-n", mm_per_n],
+        );
+        let a = &report["arrows"][0];
+        assert!(
+            (a["force_n"].as_f64().unwrap() - 1.0).abs() < 1e-6,
+            "{report}"
+        );
+        let cyan = near_colour(&px, [60, 230, 230], 90)
+            .into_iter()
+            .filter(|&i| px[i][0] < 140 && px[i][2] > 150)
+            .collect::<Vec<_>>();
+        let xs = cyan.iter().map(|i| i % w);
+        let extent = xs.clone().max().unwrap_or(0) - xs.min().unwrap_or(0);
+        (a["length_m"].as_f64().unwrap(), extent as f32)
+    };
+    let (len20, px20) = arrow_px("20");
+    let (len40, px40) = arrow_px("40");
+    stop.store(true, Ordering::Relaxed);
+    sim.join().unwrap();
+    tool.join().unwrap();
+    assert!(
+        (len20 - 0.02).abs() < 1e-6 && (len40 - 0.04).abs() < 1e-6,
+        "{len20} {len40}"
+    );
+    for (len, extent) in [(len20, px20), (len40, px40)] {
+        let expected = len as f32 * scale;
+        assert!(
+            (extent - expected).abs() < 0.15 * expected + 3.0,
+            "arrow drawn {extent} px long, {expected} px expected"
+        );
+    }
 }
 
 fn sim_server(session: &str, seconds: &str, json: &Path) -> std::process::Child {

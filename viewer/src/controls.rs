@@ -3,9 +3,11 @@
 //! display: W/S push the driven tip in and out along the view by 1% of the
 //! organ's size, the left button closes the jaws to grip, X held closes
 //! them to cut (over a grip), 1-4 pick the driven tool among the scene's,
-//! F, V and O toggle fibres, force vectors and the overlay, R asks for the
+//! F, V and O toggle fibres, force vectors and the overlay, C colours the
+//! organ by displacement (with a colour bar) or not, R asks for the
 //! default view.
 
+use crate::colour::ColourBy;
 use crate::drive::{JAW_CUT, JAW_GRIP};
 use crate::render::Layers;
 use three_d::Key;
@@ -60,6 +62,12 @@ impl Controls {
             Key::F => self.layers.fibres = !self.layers.fibres,
             Key::V => self.layers.forces = !self.layers.forces,
             Key::O => self.layers.overlay = !self.layers.overlay,
+            Key::C => {
+                self.layers.colour_by = match self.layers.colour_by {
+                    ColourBy::Tissue => ColourBy::Displacement,
+                    ColourBy::Displacement => ColourBy::Tissue,
+                }
+            }
             Key::R => return Request::ResetView,
             Key::Num1 | Key::Num2 | Key::Num3 | Key::Num4 => {
                 let k = match key {
@@ -132,7 +140,7 @@ mod tests {
         assert_eq!(c.tool, 0);
         // Layers toggle; R asks for the view; other keys do nothing.
         let before = c.layers;
-        for k in [Key::F, Key::V, Key::O] {
+        for k in [Key::F, Key::V, Key::O, Key::C] {
             assert_eq!(c.key_press(k), Request::None);
         }
         assert_eq!(
@@ -141,6 +149,8 @@ mod tests {
                 fibres: !before.fibres,
                 forces: !before.forces,
                 overlay: !before.overlay,
+                colour_by: ColourBy::Displacement,
+                ..before
             }
         );
         assert_eq!(c.key_press(Key::R), Request::ResetView);

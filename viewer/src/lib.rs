@@ -27,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub mod colour;
 pub mod controls;
 pub mod drive;
 pub mod egl;

@@ -35,6 +35,13 @@ struct Args {
     /// No text overlay.
     #[arg(long)]
     no_overlay: bool,
+    /// What the organ's colour shows: its tissue, or each vertex's
+    /// displacement from rest with a colour bar (key C in the window).
+    #[arg(long, value_enum, default_value = "tissue")]
+    colour: viewer::colour::ColourBy,
+    /// Force arrow length per newton (mm/N; the overlay prints it).
+    #[arg(long, default_value_t = viewer::render::FORCE_MM_PER_N)]
+    force_mm_per_n: f32,
     /// Write what the snapshot showed as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -86,10 +93,19 @@ fn main() -> Result<()> {
             Session::join_remote(std::sync::Arc::new(link))?
         }
     };
+    if !(args.force_mm_per_n.is_finite() && args.force_mm_per_n > 0.0 && args.force_mm_per_n <= 1e4)
+    {
+        bail!(
+            "--force-mm-per-n must be a length per newton between 0 and 10000 mm/N, got {}",
+            args.force_mm_per_n
+        );
+    }
     let layers = Layers {
         fibres: args.fibres,
         forces: !args.no_forces,
         overlay: !args.no_overlay,
+        colour_by: args.colour,
+        force_mm_per_n: args.force_mm_per_n,
     };
     if let Some(out) = &args.snapshot {
         let cfg = viewer::snapshot::SnapshotConfig {

@@ -22,41 +22,107 @@ pub struct Image {
     pub pixels: Vec<[u8; 4]>,
 }
 
-/// Renders `lines` (ASCII; other characters show as '?') as a panel.
-pub fn render(lines: &[String]) -> Image {
-    let cols = lines.iter().map(|l| l.chars().count()).max().unwrap_or(0);
-    let width = cols * GLYPH + 2 * PAD;
-    let height = lines.len() * LINE + 2 * PAD;
-    let mut pixels = vec![[16, 18, 24, 190]; width * height];
-    for (row, line) in lines.iter().enumerate() {
-        for (col, ch) in line.chars().enumerate() {
-            let code = if ch.is_ascii() {
-                ch as usize
-            } else {
-                '?' as usize
-            };
-            let glyph = BASIC_LEGACY[code];
-            for (gy, bits) in glyph.iter().enumerate() {
-                for gx in 0..8 {
-                    if bits >> gx & 1 == 0 {
-                        continue;
-                    }
-                    for sy in 0..SCALE {
-                        for sx in 0..SCALE {
-                            let x = PAD + col * GLYPH + gx * SCALE + sx;
-                            let y = PAD + row * LINE + gy * SCALE + sy;
-                            pixels[y * width + x] = [235, 235, 235, 255];
+/// Text colour of the overlay.
+pub const TEXT: [u8; 3] = [235, 235, 235];
+const PANEL: [u8; 4] = [16, 18, 24, 190];
+
+/// Draws `text` (ASCII; other characters show as '?') with its top-left
+/// corner at (x, y) into `img`, clipped to it.
+fn draw_text(img: &mut Image, x: usize, y: usize, text: &str, colour: [u8; 3]) {
+    for (col, ch) in text.chars().enumerate() {
+        let code = if ch.is_ascii() {
+            ch as usize
+        } else {
+            '?' as usize
+        };
+        for (gy, bits) in BASIC_LEGACY[code].iter().enumerate() {
+            for gx in 0..8 {
+                if bits >> gx & 1 == 0 {
+                    continue;
+                }
+                for sy in 0..SCALE {
+                    for sx in 0..SCALE {
+                        let px = x + col * GLYPH + gx * SCALE + sx;
+                        let py = y + gy * SCALE + sy;
+                        if px < img.width && py < img.height {
+                            img.pixels[py * img.width + px] =
+                                [colour[0], colour[1], colour[2], 255];
                         }
                     }
                 }
             }
         }
     }
-    Image {
+}
+
+/// Renders `lines` as a panel, all in the overlay's text colour.
+pub fn render(lines: &[String]) -> Image {
+    let coloured: Vec<(String, [u8; 3])> = lines.iter().map(|l| (l.clone(), TEXT)).collect();
+    render_coloured(&coloured)
+}
+
+/// Renders `lines`, each in its own colour (a tool's line in its tip's
+/// colour: the legend of the tip colours), as a panel.
+pub fn render_coloured(lines: &[(String, [u8; 3])]) -> Image {
+    let cols = lines.iter().map(|l| l.0.chars().count()).max().unwrap_or(0);
+    let width = cols * GLYPH + 2 * PAD;
+    let height = lines.len() * LINE + 2 * PAD;
+    let mut img = Image {
         width,
         height,
-        pixels,
+        pixels: vec![PANEL; width * height],
+    };
+    for (row, (line, colour)) in lines.iter().enumerate() {
+        draw_text(&mut img, PAD, PAD + row * LINE, line, *colour);
     }
+    img
+}
+
+/// Height of a colour bar's gradient (pixels).
+pub const BAR_H: usize = 200;
+/// Width of a colour bar's gradient (pixels).
+pub const BAR_W: usize = 20;
+
+/// A colour bar: `title` above a vertical gradient of `map` from `range[0]`
+/// (bottom) to `range[1]` (top), its ends and middle labelled in `unit`.
+/// The gradient's pixels are exactly `map`'s colours, so a snapshot's
+/// bar can be read back against the organ's.
+pub fn colour_bar(title: &str, range: [f32; 2], unit: &str, map: fn(f32) -> [u8; 3]) -> Image {
+    let label = |v: f32| format!("{v:.2} {unit}");
+    let labels = [
+        label(range[1]),
+        label(0.5 * (range[0] + range[1])),
+        label(range[0]),
+    ];
+    let label_cols = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+    let width =
+        (2 * PAD + BAR_W + 8 + label_cols * GLYPH).max(2 * PAD + title.chars().count() * GLYPH);
+    let bar_top = PAD + LINE + GLYPH / 2;
+    let height = bar_top + BAR_H + GLYPH / 2 + PAD;
+    let mut img = Image {
+        width,
+        height,
+        pixels: vec![PANEL; width * height],
+    };
+    draw_text(&mut img, PAD, PAD, title, TEXT);
+    for row in 0..BAR_H {
+        let t = 1.0 - row as f32 / (BAR_H - 1) as f32;
+        let c = map(t);
+        for col in 0..BAR_W {
+            img.pixels[(bar_top + row) * width + PAD + col] = [c[0], c[1], c[2], 255];
+        }
+    }
+    for (k, l) in labels.iter().enumerate() {
+        let y = bar_top + k * (BAR_H - 1) / 2;
+        draw_text(
+            &mut img,
+            PAD + BAR_W + 8,
+            y.saturating_sub(GLYPH / 2),
+            l,
+            TEXT,
+        );
+    }
+    img
 }
 
 #[cfg(test)]
@@ -78,5 +144,16 @@ mod tests {
             }
         }
         assert_eq!(render(&[]).pixels.len(), 4 * PAD * PAD);
+    }
+
+    #[test]
+    fn a_colour_bar_holds_the_map_from_its_range_bottom_to_top() {
+        let map = |t: f32| [(t * 255.0) as u8, 0, 0];
+        let img = colour_bar("displacement", [0.0, 4.0], "mm", map);
+        let bar_top = PAD + LINE + GLYPH / 2;
+        let at = |row: usize| img.pixels[(bar_top + row) * img.width + PAD + BAR_W / 2];
+        assert_eq!(at(0), [255, 0, 0, 255], "top: the range's end");
+        assert_eq!(at(BAR_H - 1), [0, 0, 0, 255], "bottom: its start");
+        assert!(img.width >= 2 * PAD + "displacement".len() * GLYPH);
     }
 }

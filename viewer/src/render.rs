@@ -2,8 +2,13 @@
 //! the organ surface smooth-shaded (cut faces in a paler colour, as their
 //! own mesh so the crease between capsule and cut stays sharp), the tools
 //! (shaft, tip coloured by contact state), optional fibre directions and
-//! force vectors, and the text overlay.
+//! force vectors, and the text overlay. With [`ColourBy::Displacement`] the
+//! organ is coloured by how far each vertex moved (viridis, see
+//! [`crate::colour`]) and a colour bar gives the range; force arrows are
+//! drawn over everything (the tip is inside the dent it makes) at a fixed
+//! length per newton, printed in the overlay.
 
+use crate::colour::ColourBy;
 use crate::overlay::Image;
 use crate::scene_info::Fibre;
 use three_d::*;
@@ -21,8 +26,29 @@ const TIP_GRIP: Srgba = Srgba::new(80, 210, 110, 255);
 const TIP_CUT: Srgba = Srgba::new(240, 60, 200, 255);
 const FORCE: Srgba = Srgba::new(60, 230, 230, 255);
 const FIBRE: Srgba = Srgba::new(250, 250, 250, 255);
-/// Force arrow length per newton (m/N).
-const FORCE_M_PER_N: f32 = 0.02;
+/// The default force arrow length per newton (mm/N).
+pub const FORCE_MM_PER_N: f32 = 20.0;
+
+/// The tip colour of a tool in `flags`' state, and the state's name.
+pub fn tip_state(flags: u32) -> (Srgba, &'static str) {
+    match flags {
+        f if f & shared::protocol::CUTTING != 0 => (TIP_CUT, "cutting"),
+        f if f & shared::protocol::GRIPPING != 0 => (TIP_GRIP, "gripping"),
+        f if f & shared::protocol::CONTACT != 0 => (TIP_CONTACT, "in contact"),
+        _ => (TIP_FREE, "free"),
+    }
+}
+
+/// A force arrow's length (m) for a force of `force_n` newtons at
+/// `mm_per_n`; zero below one tool radius (no arrow is drawn then).
+pub fn arrow_length_m(force_n: f32, mm_per_n: f32, radius_m: f32) -> f32 {
+    let len = force_n * mm_per_n * 1e-3;
+    if len.is_finite() && len > radius_m {
+        len
+    } else {
+        0.0
+    }
+}
 
 /// A tool as drawn.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,6 +74,10 @@ pub struct Layers {
     pub forces: bool,
     /// The text overlay.
     pub overlay: bool,
+    /// What the organ's colour shows.
+    pub colour_by: ColourBy,
+    /// Force arrow length per newton (mm/N).
+    pub force_mm_per_n: f32,
 }
 
 impl Default for Layers {
@@ -56,6 +86,8 @@ impl Default for Layers {
             fibres: false,
             forces: true,
             overlay: true,
+            colour_by: ColourBy::Tissue,
+            force_mm_per_n: FORCE_MM_PER_N,
         }
     }
 }
@@ -68,9 +100,12 @@ pub struct Renderer {
     capsule: Option<Solid>,
     cut: Option<Solid>,
     tools: Vec<Solid>,
+    arrows: Vec<Solid>,
     fibres: Option<Solid>,
     overlay: Option<Gm<Rectangle, ColorMaterial>>,
     overlay_size: (f32, f32),
+    bar: Option<Gm<Rectangle, ColorMaterial>>,
+    bar_size: (f32, f32),
     key: DirectionalLight,
     fill: DirectionalLight,
     ambient: AmbientLight,
@@ -89,6 +124,17 @@ fn solid(context: &Context, mesh: &CpuMesh, color: Srgba) -> Solid {
             },
         ),
     )
+}
+
+/// An sRGB channel as a linear one (both 8-bit).
+fn srgb_to_linear(c: u8) -> u8 {
+    let v = f32::from(c) / 255.0;
+    let l = if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    };
+    (l * 255.0).round() as u8
 }
 
 /// A unit-radius cylinder along x from 0 to 1, placed from `a` to `b`.
@@ -136,9 +182,12 @@ impl Renderer {
             capsule: None,
             cut: None,
             tools: Vec::new(),
+            arrows: Vec::new(),
             fibres: None,
             overlay: None,
             overlay_size: (0.0, 0.0),
+            bar: None,
+            bar_size: (0.0, 0.0),
             // Travelling directions, set for the views from +y (in front):
             // the key from above and behind the organ, the fill from the
             // camera's side, so that tissue is never lit to the cut colour.
@@ -148,12 +197,14 @@ impl Renderer {
         }
     }
 
-    /// The organ surface: `triangles` over `positions_m`, split by `is_cut`.
+    /// The organ surface: `triangles` over `positions_m`, split by
+    /// `is_cut`; the capsule in `colours` (one per vertex) when given.
     pub fn set_surface(
         &mut self,
         positions_m: &[[f32; 3]],
         triangles: &[[u32; 3]],
         is_cut: impl Fn([u32; 3]) -> bool,
+        colours: Option<&[[u8; 3]]>,
     ) {
         let positions: Vec<Vec3> = positions_m.iter().map(|p| vec3(p[0], p[1], p[2])).collect();
         let build = |want_cut: bool| -> Option<CpuMesh> {
@@ -174,13 +225,34 @@ impl Renderer {
             mesh.compute_normals();
             Some(mesh)
         };
-        self.capsule = build(false).map(|m| solid(&self.context, &m, CAPSULE));
+        let field = colours.filter(|c| c.len() == positions.len());
+        self.capsule = build(false).map(|mut m| match field {
+            Some(c) => {
+                m.colors = Some(
+                    c.iter()
+                        .map(|c| Srgba::new(c[0], c[1], c[2], 255))
+                        .collect(),
+                );
+                solid(&self.context, &m, Srgba::WHITE)
+            }
+            None => solid(&self.context, &m, CAPSULE),
+        });
+        // Cut faces keep their colour: where the tissue was opened stays
+        // visible whatever the capsule shows.
         self.cut = build(true).map(|m| solid(&self.context, &m, CUT));
     }
 
-    /// The tools (and their force vectors when `forces`).
-    pub fn set_tools(&mut self, tools: &[ToolShape], forces: bool) {
+    /// The colour bar (drawn in the bottom-right corner); `None` removes it.
+    pub fn set_colour_bar(&mut self, image: Option<&Image>) {
+        self.bar = image.and_then(|i| self.panel(i));
+        self.bar_size = image.map_or((0.0, 0.0), |i| (i.width as f32, i.height as f32));
+    }
+
+    /// The tools (and their force vectors, `mm_per_n` long per newton, when
+    /// `forces`).
+    pub fn set_tools(&mut self, tools: &[ToolShape], forces: bool, mm_per_n: f32) {
         self.tools.clear();
+        self.arrows.clear();
         for t in tools {
             let tip_len = (t.radius_m * 4.0).min((t.end_m - t.fulcrum_m).magnitude());
             let dir = (t.end_m - t.fulcrum_m).normalize();
@@ -188,12 +260,7 @@ impl Renderer {
             if let Some(m) = placed(CpuMesh::cylinder(16), t.fulcrum_m, tip_start, t.radius_m) {
                 self.tools.push(solid(&self.context, &m, SHAFT));
             }
-            let color = match t.flags {
-                f if f & shared::protocol::CUTTING != 0 => TIP_CUT,
-                f if f & shared::protocol::GRIPPING != 0 => TIP_GRIP,
-                f if f & shared::protocol::CONTACT != 0 => TIP_CONTACT,
-                _ => TIP_FREE,
-            };
+            let (color, _) = tip_state(t.flags);
             let mut ball = CpuMesh::sphere(12);
             if ball
                 .transform(Mat4::from_translation(t.end_m) * Mat4::from_scale(t.radius_m))
@@ -206,15 +273,19 @@ impl Renderer {
                     color,
                 ));
             }
-            let f = t.force_n * FORCE_M_PER_N;
-            if forces && f.magnitude() > t.radius_m {
-                let mut arrow = CpuMesh::arrow(0.75, 0.4, 12);
-                let len = f.magnitude();
+            let len = arrow_length_m(t.force_n.magnitude(), mm_per_n, t.radius_m);
+            if forces && len > 0.0 {
+                let mut arrow = CpuMesh::arrow(0.8, 0.5, 12);
+                // Thick enough to see beside the shaft it often runs along.
+                let thick = (1.6 * t.radius_m).max(0.06 * len);
                 let m = Mat4::from_translation(t.end_m)
-                    * rotation_matrix_from_dir_to_dir(vec3(1.0, 0.0, 0.0), f / len)
-                    * Mat4::from_nonuniform_scale(len, t.radius_m, t.radius_m);
+                    * rotation_matrix_from_dir_to_dir(vec3(1.0, 0.0, 0.0), t.force_n.normalize())
+                    * Mat4::from_nonuniform_scale(len, thick, thick);
                 if arrow.transform(m).is_ok() {
-                    self.tools.push(solid(&self.context, &arrow, FORCE));
+                    let mut a = solid(&self.context, &arrow, FORCE);
+                    // Over everything: the tip sits inside its own dent.
+                    a.material.render_states.depth_test = DepthTest::Always;
+                    self.arrows.push(a);
                 }
             }
         }
@@ -232,12 +303,33 @@ impl Renderer {
 
     /// The overlay panel (drawn in the top-left corner).
     pub fn set_overlay(&mut self, image: &Image) {
+        self.overlay = self.panel(image);
+        self.overlay_size = (image.width as f32, image.height as f32);
+    }
+
+    /// A screen-space panel showing `image` pixel for pixel.
+    fn panel(&self, image: &Image) -> Option<Gm<Rectangle, ColorMaterial>> {
         if image.pixels.is_empty() {
-            self.overlay = None;
-            return;
+            return None;
         }
+        // The framebuffer encodes what is drawn as sRGB and an 8-bit texture
+        // is read as linear: decoding the panel's sRGB pixels first makes
+        // the picture hold them as given (a colour bar's colours exactly the
+        // map's, the organ's colours being the same map's as sRGB).
+        let decoded: Vec<[u8; 4]> = image
+            .pixels
+            .iter()
+            .map(|p| {
+                [
+                    srgb_to_linear(p[0]),
+                    srgb_to_linear(p[1]),
+                    srgb_to_linear(p[2]),
+                    p[3],
+                ]
+            })
+            .collect();
         let texture = CpuTexture {
-            data: TextureData::RgbaU8(image.pixels.clone()),
+            data: TextureData::RgbaU8(decoded),
             width: image.width as u32,
             height: image.height as u32,
             min_filter: Interpolation::Nearest,
@@ -258,8 +350,7 @@ impl Renderer {
         };
         let (w, h) = (image.width as f32, image.height as f32);
         let rect = Rectangle::new(&self.context, vec2(w / 2.0, h / 2.0), degrees(0.0), w, h);
-        self.overlay = Some(Gm::new(rect, material));
-        self.overlay_size = (w, h);
+        Some(Gm::new(rect, material))
     }
 
     /// Clears `target` and draws everything with `camera`.
@@ -274,17 +365,30 @@ impl Renderer {
             objects.extend(self.fibres.iter().map(|o| o as &dyn Object));
         }
         target.render(camera, objects, &[&self.key, &self.fill, &self.ambient]);
+        if layers.forces {
+            target.render(
+                camera,
+                self.arrows.iter().map(|o| o as &dyn Object),
+                &[&self.key, &self.fill, &self.ambient],
+            );
+        }
+        let vp = camera.viewport();
         if layers.overlay
             && let Some(panel) = &mut self.overlay
         {
-            {
-                let vp = camera.viewport();
-                let (w, h) = self.overlay_size;
-                panel
-                    .geometry
-                    .set_center(vec2(w / 2.0 + 8.0, vp.height as f32 - h / 2.0 - 8.0));
-                target.render(Camera::new_2d(vp), [&*panel], &[]);
-            }
+            let (w, h) = self.overlay_size;
+            panel
+                .geometry
+                .set_center(vec2(w / 2.0 + 8.0, vp.height as f32 - h / 2.0 - 8.0));
+            target.render(Camera::new_2d(vp), [&*panel], &[]);
+        }
+        // The colour bar is part of the picture's meaning: shown even
+        // without the text overlay.
+        if let Some(bar) = &mut self.bar {
+            let (w, h) = self.bar_size;
+            bar.geometry
+                .set_center(vec2(vp.width as f32 - w / 2.0 - 8.0, h / 2.0 + 8.0));
+            target.render(Camera::new_2d(vp), [&*bar], &[]);
         }
     }
 }

@@ -45,6 +45,9 @@ pub struct SceneInfo {
     pub name: String,
     /// Declared tools, in order (empty until the `scene` stream arrives).
     pub tools: Vec<Tool>,
+    /// Whether the `scene` stream's message came (a scene without tools
+    /// sends one too).
+    pub tools_known: bool,
     /// Vertices of the scene's mesh (0: not known yet).
     pub vertex_count: usize,
     /// Rest positions (m): a picture before the simulation sends a state.
@@ -65,6 +68,7 @@ fn key(t: [u32; 3]) -> [u32; 3] {
 impl SceneInfo {
     /// Takes the tools of a `scene` message.
     pub fn set_tools(&mut self, m: &SceneMsg) {
+        self.tools_known = true;
         self.tools = m.tools[..(m.tool_count as usize).min(MAX_TOOLS)]
             .iter()
             .map(|t| Tool {

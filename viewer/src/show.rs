@@ -1,8 +1,59 @@
-//! From what the session says to what is drawn: tool shapes and overlay text.
+//! From what the session says to what is drawn: tool shapes, the organ's
+//! colour field and its bar, and overlay text.
 
-use crate::render::ToolShape;
+use crate::colour::{self, ColourBy};
+use crate::overlay::{self, Image};
+use crate::render::{ToolShape, tip_state};
 use crate::session::Session;
 use three_d::vec3;
+
+/// The organ coloured by a field: a colour per vertex and the bar.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field {
+    /// What the colours show.
+    pub colour_by: ColourBy,
+    /// One colour per vertex of the mesh state.
+    pub colours: Vec<[u8; 3]>,
+    /// The bar's range (its bottom and top) in `unit`.
+    pub range: [f32; 2],
+    /// The field's largest value in the frame, in `unit`.
+    pub max: f32,
+    /// The unit.
+    pub unit: &'static str,
+}
+
+impl Field {
+    /// The colour bar's image.
+    pub fn bar(&self) -> Image {
+        let title = match self.colour_by {
+            ColourBy::Displacement => "displacement",
+            ColourBy::Tissue => "",
+        };
+        overlay::colour_bar(title, self.range, self.unit, colour::viridis)
+    }
+}
+
+/// The field `colour_by` asks for on the latest mesh state (None: the
+/// tissue's own colour, or no rest shape yet to measure from).
+pub fn field(session: &Session, colour_by: ColourBy) -> Option<Field> {
+    match colour_by {
+        ColourBy::Tissue => None,
+        ColourBy::Displacement => {
+            if session.info.rest_m.is_empty() {
+                return None;
+            }
+            let u = colour::displacement_mm(&session.positions_m, &session.info.rest_m);
+            let range = colour::range(&u);
+            Some(Field {
+                colour_by,
+                colours: colour::colours(&u, range),
+                range,
+                max: u.iter().copied().fold(0.0, f32::max),
+                unit: "mm",
+            })
+        }
+    }
+}
 
 /// One shape per declared tool that the simulation reports, plus the tool
 /// the viewer drives (`driven`: tool index and tip) before the simulation
@@ -28,8 +79,15 @@ pub fn tool_shapes(session: &Session, driven: Option<(usize, [f64; 3])>) -> Vec<
     out
 }
 
-/// The overlay's lines.
-pub fn overlay_lines(session: &Session, now_ns: u64, driving: Option<usize>) -> Vec<String> {
+/// The overlay's lines, each with its colour: a tool's line in its tip's
+/// colour and naming its state (the tip colours' legend), with its force
+/// and the arrow's scale.
+pub fn overlay_lines(
+    session: &Session,
+    now_ns: u64,
+    driving: Option<usize>,
+    mm_per_n: f32,
+) -> Vec<(String, [u8; 3])> {
     let s = &session.stats;
     let name = &session.info.name;
     let mut lines = vec![if name.is_empty() {
@@ -61,15 +119,21 @@ pub fn overlay_lines(session: &Session, now_ns: u64, driving: Option<usize>) -> 
     } else {
         lines.push("haptic: no daemon".into());
     }
+    let mut out: Vec<(String, [u8; 3])> = lines.into_iter().map(|l| (l, overlay::TEXT)).collect();
     for (i, t) in session.tools.iter().enumerate() {
         let f = (t.force_n[0].powi(2) + t.force_n[1].powi(2) + t.force_n[2].powi(2)).sqrt();
         let name = session.info.tools.get(i).map_or("?", |d| d.name.as_str());
-        lines.push(format!("tool {i} {name}: {f:.2} N"));
-    }
-    if let Some(i) = driving {
-        lines.push(format!(
-            "mouse drives tool {i}: move, W/S depth, left grip, X cut, 1-4 tool"
+        let (c, state) = tip_state(t.flags);
+        out.push((
+            format!("tool {i} {name}: {state}, {f:.2} N (arrow {mm_per_n} mm/N)"),
+            [c.r, c.g, c.b],
         ));
     }
-    lines
+    if let Some(i) = driving {
+        out.push((
+            format!("mouse drives tool {i}: move, W/S depth, left grip, X cut, 1-4 tool"),
+            overlay::TEXT,
+        ));
+    }
+    out
 }

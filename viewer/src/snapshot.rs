@@ -5,9 +5,10 @@
 use crate::camera::{View, bounds, framing};
 use crate::egl::{Headless, HeadlessError};
 use crate::overlay;
+use crate::render::arrow_length_m;
 use crate::render::{Layers, Renderer};
 use crate::session::Session;
-use crate::show::{overlay_lines, tool_shapes};
+use crate::show::{field, overlay_lines, tool_shapes};
 use shared::monotonic_ns;
 use std::path::{Path, PathBuf};
 
@@ -72,6 +73,29 @@ pub struct SnapshotReport {
     pub scene: String,
     /// Fibres the scene has (drawn with `--fibres`).
     pub fibres: usize,
+    /// What the organ's colour showed (`--colour`).
+    pub colour_by: crate::colour::ColourBy,
+    /// The colour bar's range, bottom and top (mm for displacement); absent
+    /// when the organ has its tissue colour.
+    pub colour_bar: Option<[f32; 2]>,
+    /// The largest displacement of any vertex in the frame drawn (mm; from
+    /// the rest shape, absent before it came).
+    pub max_displacement_mm: Option<f32>,
+    /// Each reported tool's force arrow as drawn.
+    pub arrows: Vec<ArrowReport>,
+}
+
+/// A tool's force and its arrow.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ArrowReport {
+    /// The tool's index.
+    pub tool: usize,
+    /// |force| (N).
+    pub force_n: f32,
+    /// The arrow's length (m; 0 when too short to draw or arrows are off).
+    pub length_m: f32,
+    /// The scale (mm per N).
+    pub mm_per_n: f32,
 }
 
 /// How to take a snapshot.
@@ -118,9 +142,23 @@ pub fn snapshot(
         // a simulation publishes once at start.
         let early = now - start < 500_000_000;
         let telemetry_pending = session.daemon_present() && session.stats.haptic_hz == 0.0 && early;
-        let scene_pending =
-            (session.info.surface.is_empty() || session.info.name.is_empty()) && early;
-        if session.drawable() && session.frames >= 2 && !telemetry_pending && !scene_pending {
+        let scene_pending = (session.info.surface.is_empty()
+            || session.info.name.is_empty()
+            || !session.info.tools_known)
+            && early;
+        // Force samples name tools the scene message has not declared yet:
+        // wait for it too, or the tools would be missing from the picture.
+        // And the other way: declared tools but no force sample yet (where
+        // they are and what they feel comes only with one).
+        let tools_pending = (session.tools.len() > session.info.tools.len()
+            || (!session.info.tools.is_empty() && session.tools.is_empty()))
+            && early;
+        if session.drawable()
+            && session.frames >= 2
+            && !telemetry_pending
+            && !scene_pending
+            && !tools_pending
+        {
             break;
         }
         if (now - start) as f64 * 1e-9 > wait_s {
@@ -143,8 +181,16 @@ pub fn snapshot(
     let ctx = &headless.context;
     let mut renderer = Renderer::new(ctx);
     let is_cut = |t| session.same_scene() && session.info.is_cut_face(t);
-    renderer.set_surface(&session.positions_m, &session.triangles, is_cut);
-    renderer.set_tools(&tool_shapes(session, None), layers.forces);
+    let colour_field = field(session, layers.colour_by);
+    renderer.set_surface(
+        &session.positions_m,
+        &session.triangles,
+        is_cut,
+        colour_field.as_ref().map(|f| f.colours.as_slice()),
+    );
+    renderer.set_colour_bar(colour_field.as_ref().map(|f| f.bar()).as_ref());
+    let shapes = tool_shapes(session, None);
+    renderer.set_tools(&shapes, layers.forces, layers.force_mm_per_n);
     let Some((lo, hi)) = bounds(&session.positions_m) else {
         return Err(SnapshotError::NoMesh {
             session: session_name.to_string(),
@@ -154,10 +200,11 @@ pub fn snapshot(
     if layers.fibres {
         renderer.set_fibres(&session.info.fibres, (hi - lo).x.max((hi - lo).y) * 0.0015);
     }
-    renderer.set_overlay(&overlay::render(&overlay_lines(
+    renderer.set_overlay(&overlay::render_coloured(&overlay_lines(
         session,
         monotonic_ns(),
         None,
+        layers.force_mm_per_n,
     )));
     let viewport = Viewport::new_at_origo(width, height);
     let camera = framing(viewport, lo, hi, view);
@@ -194,6 +241,32 @@ pub fn snapshot(
         tools: session.info.tools.iter().map(|t| t.name.clone()).collect(),
         scene: session.info.name.clone(),
         fibres: session.info.fibres.len(),
+        colour_by: layers.colour_by,
+        colour_bar: colour_field.as_ref().map(|f| f.range),
+        max_displacement_mm: (!session.info.rest_m.is_empty()).then(|| {
+            crate::colour::displacement_mm(&session.positions_m, &session.info.rest_m)
+                .into_iter()
+                .fold(0.0, f32::max)
+        }),
+        arrows: session
+            .tools
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let force_n = t.force_n.iter().map(|f| f * f).sum::<f64>().sqrt() as f32;
+                let radius = shapes.get(i).map_or(0.0, |s| s.radius_m);
+                ArrowReport {
+                    tool: i,
+                    force_n,
+                    length_m: if layers.forces {
+                        arrow_length_m(force_n, layers.force_mm_per_n, radius)
+                    } else {
+                        0.0
+                    },
+                    mm_per_n: layers.force_mm_per_n,
+                }
+            })
+            .collect(),
     };
     write_png(out, width, height, &pixels)?;
     Ok(report)

@@ -3,7 +3,7 @@
 //! driving a tool.
 //!
 //! Controls: right drag orbits, wheel zooms; the keys and the left button
-//! are [`crate::controls`] (R resets the view, F/V/O layers; driving, when
+//! are [`crate::controls`] (R resets the view, F/V/O/C layers; driving, when
 //! no daemon is in the session: the tip follows the cursor on the plane
 //! through the organ's centre facing the camera, W/S push it in and out,
 //! left button grips, X held cuts, 1-4 pick the tool).
@@ -14,7 +14,7 @@ use crate::drive::Driver;
 use crate::overlay;
 use crate::render::{Layers, Renderer};
 use crate::session::Session;
-use crate::show::{overlay_lines, tool_shapes};
+use crate::show::{field, overlay_lines, tool_shapes};
 use shared::monotonic_ns;
 use three_d::*;
 
@@ -49,6 +49,7 @@ pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
     let mut shown_frames = u64::MAX;
     // The scene's name, fibres and rest surface, set when they arrive.
     let mut shown_scene = String::new();
+    let mut shown_colour = controls.layers.colour_by;
     window.render_loop(move |mut frame| {
         let now = monotonic_ns();
         camera.set_viewport(frame.viewport);
@@ -60,16 +61,26 @@ pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
             controls = Controls::new(size, session.info.tools.len(), controls.layers);
             if session.frames == 0 {
                 // Until the simulation sends a state, the scene at rest.
-                renderer.set_surface(&session.info.rest_m, &session.info.surface, |_| false);
+                renderer.set_surface(&session.info.rest_m, &session.info.surface, |_| false, None);
             }
         }
-        if changed && session.drawable() && session.frames != shown_frames {
+        let colour_by = controls.layers.colour_by;
+        if (changed || colour_by != shown_colour)
+            && session.drawable()
+            && (session.frames != shown_frames || colour_by != shown_colour)
+        {
             shown_frames = session.frames;
+            shown_colour = colour_by;
             let same_scene = session.same_scene();
             let info = &session.info;
-            renderer.set_surface(&session.positions_m, &session.triangles, |t| {
-                same_scene && info.is_cut_face(t)
-            });
+            let colour_field = field(&session, colour_by);
+            renderer.set_surface(
+                &session.positions_m,
+                &session.triangles,
+                |t| same_scene && info.is_cut_face(t),
+                colour_field.as_ref().map(|f| f.colours.as_slice()),
+            );
+            renderer.set_colour_bar(colour_field.as_ref().map(|f| f.bar()).as_ref());
             if let Some(b) = bounds(&session.positions_m) {
                 (lo, hi) = b;
             }
@@ -125,8 +136,17 @@ pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
         let driving = driver.active().then_some(driver.tool);
         let driven = driving.map(|k| (k, driver.tip_m));
         let layers = controls.layers;
-        renderer.set_tools(&tool_shapes(&session, driven), layers.forces);
-        renderer.set_overlay(&overlay::render(&overlay_lines(&session, now, driving)));
+        renderer.set_tools(
+            &tool_shapes(&session, driven),
+            layers.forces,
+            layers.force_mm_per_n,
+        );
+        renderer.set_overlay(&overlay::render_coloured(&overlay_lines(
+            &session,
+            now,
+            driving,
+            layers.force_mm_per_n,
+        )));
         renderer.draw(&frame.screen(), &camera, &layers);
         FrameOutput::default()
     });
