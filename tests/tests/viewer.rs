@@ -514,6 +514,101 @@ fn a_press_is_shown_in_displacement_colours_with_its_bar_and_a_force_arrow_to_sc
     }
 }
 
+#[test]
+fn a_clipped_view_shows_the_vessel_fibres_the_surface_hides() {
+    let name = format!("viewclip{}", std::process::id());
+    let dir = scratch_dir("viewer-clip");
+    let sim = sim_server(&name, "8", &dir.join("sim.json"));
+    // Fibre-coloured pixels: light and grey (the tissue is red, the
+    // background dark).
+    let fibre_px = |px: &[[u8; 3]]| {
+        px.iter()
+            .filter(|p| p.iter().all(|&c| c > 150) && p[0].abs_diff(p[1]) < 40)
+            .count()
+    };
+    let shot = |file: &str, extra: &[&str]| {
+        let out = dir.join(file);
+        let json = out.with_extension("json");
+        let run = Command::new(binary("viewer"))
+            .args(["--session", &name, "--wait-s", "20", "--size", "640x480"])
+            .args(["--view", "front", "--fibres", "--no-overlay", "--no-forces"])
+            .arg("--snapshot")
+            .arg(&out)
+            .arg("--json")
+            .arg(&json)
+            .args(extra)
+            .output()
+            .expect("run viewer");
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let (_, _, px) = read_png(&out);
+        (read_json(&json), fibre_px(&px))
+    };
+    let (whole, hidden) = shot("whole.png", &[]);
+    // The plane across y (the front view looks along -y) just behind the
+    // embedded liver's portal vessels.
+    let (clipped, shown) = shot("clipped.png", &["--clip", "y:0.65"]);
+    finish(sim, Duration::from_secs(20), "sim-server");
+    let fibres = whole["fibres"].as_u64().unwrap();
+    assert!(fibres > 50, "the liver's vessels: {whole}");
+    assert_eq!(
+        clipped["fibres_drawn"], fibres,
+        "every vessel is behind the plane: {clipped}"
+    );
+    assert_eq!(clipped["clip"][0], "y", "{clipped}");
+    let (all, kept) = (
+        whole["triangles_drawn"].as_u64().unwrap(),
+        clipped["triangles_drawn"].as_u64().unwrap(),
+    );
+    assert!(
+        kept < all && kept > all / 4,
+        "{kept} of {all} surface triangles kept"
+    );
+    assert!(
+        hidden < 30 && shown > 300,
+        "fibre pixels: {hidden} with the whole surface, {shown} clipped open"
+    );
+}
+
+#[test]
+fn a_snapshot_of_the_demo_shows_the_cavitrons_cut_and_both_tools() {
+    let dir = scratch_dir("viewer-demo");
+    let mut demo = Command::new(binary("sim-server"))
+        .args(["demo", "--headless", "--no-viewer", "--duration-s", "8"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the demo");
+    // The demo's session is named after its process.
+    let name = format!("demo{}", demo.id());
+    // The cavitron has removed tissue a few seconds in.
+    std::thread::sleep(Duration::from_secs(5));
+    let out = dir.join("demo.png");
+    let report = snapshot(&name, &out, &["--view", "front", "--no-overlay"]);
+    let _ = demo.wait();
+    assert!(report["cut_triangles"].as_u64().unwrap() > 0, "{report}");
+    assert!(report["topology_version"].as_u64().unwrap() > 1, "{report}");
+    assert_eq!(
+        report["tools"],
+        serde_json::json!(["grasper", "cavitron"]),
+        "{report}"
+    );
+    let (_, _, px) = read_png(&out);
+    // The cut faces' pale orange, not the yellow of a tip in contact
+    // (whose blue is under a third of its red).
+    let cut = px
+        .iter()
+        .filter(|p| {
+            let [r, g, b] = p.map(f32::from);
+            r > 80.0 && b > 0.3 * r && g > 0.55 * r && g < 0.85 * r
+        })
+        .count();
+    assert!(cut > 40, "{cut} cut-coloured pixels: {report}");
+}
+
 fn sim_server(session: &str, seconds: &str, json: &Path) -> std::process::Child {
     Command::new(binary("sim-server"))
         .args([

@@ -4,7 +4,8 @@
 //! organ's size, the left button closes the jaws to grip, X held closes
 //! them to cut (over a grip), 1-4 pick the driven tool among the scene's,
 //! F, V and O toggle fibres, force vectors and the overlay, C colours the
-//! organ by displacement (with a colour bar) or not, R asks for the
+//! organ by displacement (with a colour bar) or not, K clips the front half
+//! away (to see inside) or not, R asks for the
 //! default view.
 
 use crate::colour::ColourBy;
@@ -62,6 +63,15 @@ impl Controls {
             Key::F => self.layers.fibres = !self.layers.fibres,
             Key::V => self.layers.forces = !self.layers.forces,
             Key::O => self.layers.overlay = !self.layers.overlay,
+            Key::K => {
+                self.layers.clip = match self.layers.clip {
+                    None => Some(crate::render::Clip {
+                        axis: 1,
+                        fraction: 0.5,
+                    }),
+                    Some(_) => None,
+                }
+            }
             Key::C => {
                 self.layers.colour_by = match self.layers.colour_by {
                     ColourBy::Tissue => ColourBy::Displacement,
@@ -140,7 +150,7 @@ mod tests {
         assert_eq!(c.tool, 0);
         // Layers toggle; R asks for the view; other keys do nothing.
         let before = c.layers;
-        for k in [Key::F, Key::V, Key::O, Key::C] {
+        for k in [Key::F, Key::V, Key::O, Key::C, Key::K] {
             assert_eq!(c.key_press(k), Request::None);
         }
         assert_eq!(
@@ -150,6 +160,10 @@ mod tests {
                 forces: !before.forces,
                 overlay: !before.overlay,
                 colour_by: ColourBy::Displacement,
+                clip: Some(crate::render::Clip {
+                    axis: 1,
+                    fraction: 0.5
+                }),
                 ..before
             }
         );

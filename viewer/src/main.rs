@@ -39,6 +39,12 @@ struct Args {
     /// displacement from rest with a colour bar (key C in the window).
     #[arg(long, value_enum, default_value = "tissue")]
     colour: viewer::colour::ColourBy,
+    /// Cut the view open: leave out what lies beyond a plane across AXIS
+    /// (x, y or z) at FRACTION of the organ's extent (default 0.5), to see
+    /// inside (with --fibres: the vessels' fibres); `y` opens the side the
+    /// front view looks at. Key K in the window.
+    #[arg(long, value_name = "AXIS[:FRACTION]")]
+    clip: Option<viewer::render::Clip>,
     /// Force arrow length per newton (mm/N; the overlay prints it).
     #[arg(long, default_value_t = viewer::render::FORCE_MM_PER_N)]
     force_mm_per_n: f32,
@@ -106,6 +112,7 @@ fn main() -> Result<()> {
         overlay: !args.no_overlay,
         colour_by: args.colour,
         force_mm_per_n: args.force_mm_per_n,
+        clip: args.clip,
     };
     if let Some(out) = &args.snapshot {
         let cfg = viewer::snapshot::SnapshotConfig {

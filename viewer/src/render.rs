@@ -65,6 +65,55 @@ pub struct ToolShape {
     pub force_n: Vec3,
 }
 
+/// A clipping plane across one axis: what lies beyond it (on the axis's
+/// positive side) is not drawn, so the inside (vessels, fibres) shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Clip {
+    /// 0, 1 or 2: x, y or z.
+    pub axis: usize,
+    /// Where across the organ's bounding box along the axis, 0 to 1.
+    pub fraction: f32,
+}
+
+impl Clip {
+    /// The plane's coordinate (m) for bounds `lo..hi`.
+    pub fn at_m(&self, lo: Vec3, hi: Vec3) -> f32 {
+        lo[self.axis] + self.fraction * (hi[self.axis] - lo[self.axis])
+    }
+
+    /// Whether `p` is kept by a plane at `at_m`.
+    pub fn keeps(&self, at_m: f32, p: [f32; 3]) -> bool {
+        p[self.axis] <= at_m
+    }
+}
+
+impl std::str::FromStr for Clip {
+    type Err = String;
+    /// `x`, `y` or `z`, optionally `:FRACTION` (default 0.5): `y:0.4`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (axis, fraction) = s.split_once(':').unwrap_or((s, "0.5"));
+        let axis = match axis.trim() {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            other => {
+                return Err(format!(
+                    "{other:?} is not an axis: use x, y or z, optionally :FRACTION (y:0.5)"
+                ));
+            }
+        };
+        let fraction: f32 = fraction
+            .trim()
+            .parse()
+            .ok()
+            .filter(|f: &f32| (0.0..=1.0).contains(f))
+            .ok_or_else(|| {
+                format!("{fraction:?} is not a fraction of the organ between 0 and 1")
+            })?;
+        Ok(Self { axis, fraction })
+    }
+}
+
 /// What to show.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Layers {
@@ -78,6 +127,8 @@ pub struct Layers {
     pub colour_by: ColourBy,
     /// Force arrow length per newton (mm/N).
     pub force_mm_per_n: f32,
+    /// A clipping plane (None: the whole organ).
+    pub clip: Option<Clip>,
 }
 
 impl Default for Layers {
@@ -88,6 +139,7 @@ impl Default for Layers {
             overlay: true,
             colour_by: ColourBy::Tissue,
             force_mm_per_n: FORCE_MM_PER_N,
+            clip: None,
         }
     }
 }
@@ -106,6 +158,7 @@ pub struct Renderer {
     overlay_size: (f32, f32),
     bar: Option<Gm<Rectangle, ColorMaterial>>,
     bar_size: (f32, f32),
+    clip: Option<(Clip, f32)>,
     key: DirectionalLight,
     fill: DirectionalLight,
     ambient: AmbientLight,
@@ -188,6 +241,7 @@ impl Renderer {
             overlay_size: (0.0, 0.0),
             bar: None,
             bar_size: (0.0, 0.0),
+            clip: None,
             // Travelling directions, set for the views from +y (in front):
             // the key from above and behind the organ, the fill from the
             // camera's side, so that tissue is never lit to the cut colour.
@@ -199,6 +253,7 @@ impl Renderer {
 
     /// The organ surface: `triangles` over `positions_m`, split by
     /// `is_cut`; the capsule in `colours` (one per vertex) when given.
+    /// Clipped by [`Renderer::set_clip`]'s plane.
     pub fn set_surface(
         &mut self,
         positions_m: &[[f32; 3]],
@@ -206,11 +261,18 @@ impl Renderer {
         is_cut: impl Fn([u32; 3]) -> bool,
         colours: Option<&[[u8; 3]]>,
     ) {
+        let clip = self.clip;
+        let kept = |t: &[u32; 3]| {
+            clip.is_none_or(|(c, at)| {
+                t.iter()
+                    .any(|&v| positions_m.get(v as usize).is_some_and(|p| c.keeps(at, *p)))
+            })
+        };
         let positions: Vec<Vec3> = positions_m.iter().map(|p| vec3(p[0], p[1], p[2])).collect();
         let build = |want_cut: bool| -> Option<CpuMesh> {
             let indices: Vec<u32> = triangles
                 .iter()
-                .filter(|t| is_cut(**t) == want_cut)
+                .filter(|t| kept(t) && is_cut(**t) == want_cut)
                 .flatten()
                 .copied()
                 .collect();
@@ -291,14 +353,27 @@ impl Renderer {
         }
     }
 
-    /// Fibre directions as thin rods (built once per scene).
-    pub fn set_fibres(&mut self, fibres: &[Fibre], rod_radius_m: f32) {
-        let rods = fibres.iter().filter_map(|(c, d)| {
+    /// The clipping plane for the surface and fibres set next (None: none).
+    pub fn set_clip(&mut self, clip: Option<(Clip, f32)>) {
+        self.clip = clip;
+    }
+
+    /// Fibre directions as thin rods (built once per scene), those beyond
+    /// the clipping plane left out; returns how many are drawn.
+    pub fn set_fibres(&mut self, fibres: &[Fibre], rod_radius_m: f32) -> usize {
+        let clip = self.clip;
+        let shown: Vec<&Fibre> = fibres
+            .iter()
+            .filter(|(c, _)| clip.is_none_or(|(k, at)| k.keeps(at, *c)))
+            .collect();
+        let count = shown.len();
+        let rods = shown.into_iter().filter_map(|(c, d)| {
             let (c, d) = (Vec3::from(*c), Vec3::from(*d));
             placed(CpuMesh::cylinder(3), c - d * 0.5, c + d * 0.5, rod_radius_m)
         });
         let mesh = merge(rods);
         self.fibres = (mesh.vertex_count() > 0).then(|| solid(&self.context, &mesh, FIBRE));
+        count
     }
 
     /// The overlay panel (drawn in the top-left corner).

@@ -80,8 +80,8 @@ pub fn tool_shapes(session: &Session, driven: Option<(usize, [f64; 3])>) -> Vec<
 }
 
 /// The overlay's lines, each with its colour: a tool's line in its tip's
-/// colour and naming its state (the tip colours' legend), with its force
-/// and the arrow's scale.
+/// colour and naming its state (the tip colours' legend), with its force;
+/// then the arrows' scale.
 pub fn overlay_lines(
     session: &Session,
     now_ns: u64,
@@ -97,7 +97,7 @@ pub fn overlay_lines(
     }];
     if session.sim_alive(now_ns) {
         lines.push(format!(
-            "sim {:6.0} Hz  mesh frames received {}  surface version {}",
+            "sim {:.0} Hz, {} mesh frames in, surface v{}",
             s.sim_hz, session.frames, session.topology_version
         ));
     } else {
@@ -125,9 +125,12 @@ pub fn overlay_lines(
         let name = session.info.tools.get(i).map_or("?", |d| d.name.as_str());
         let (c, state) = tip_state(t.flags);
         out.push((
-            format!("tool {i} {name}: {state}, {f:.2} N (arrow {mm_per_n} mm/N)"),
+            format!("tool {i} {name}: {state}, {f:.2} N"),
             [c.r, c.g, c.b],
         ));
+    }
+    if !session.tools.is_empty() {
+        out.push((format!("force arrows {mm_per_n} mm per N"), overlay::TEXT));
     }
     if let Some(i) = driving {
         out.push((

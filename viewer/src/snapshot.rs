@@ -83,6 +83,13 @@ pub struct SnapshotReport {
     pub max_displacement_mm: Option<f32>,
     /// Each reported tool's force arrow as drawn.
     pub arrows: Vec<ArrowReport>,
+    /// The clipping plane (`--clip`): its axis (`x`, `y`, `z`) and where
+    /// (m); absent without one.
+    pub clip: Option<(char, f32)>,
+    /// Surface triangles drawn after clipping.
+    pub triangles_drawn: usize,
+    /// Fibres drawn (`--fibres`, after clipping).
+    pub fibres_drawn: usize,
 }
 
 /// A tool's force and its arrow.
@@ -181,6 +188,14 @@ pub fn snapshot(
     let ctx = &headless.context;
     let mut renderer = Renderer::new(ctx);
     let is_cut = |t| session.same_scene() && session.info.is_cut_face(t);
+    let Some((lo, hi)) = bounds(&session.positions_m) else {
+        return Err(SnapshotError::NoMesh {
+            session: session_name.to_string(),
+            wait_s,
+        });
+    };
+    let clip = layers.clip.map(|c| (c, c.at_m(lo, hi)));
+    renderer.set_clip(clip);
     let colour_field = field(session, layers.colour_by);
     renderer.set_surface(
         &session.positions_m,
@@ -191,15 +206,11 @@ pub fn snapshot(
     renderer.set_colour_bar(colour_field.as_ref().map(|f| f.bar()).as_ref());
     let shapes = tool_shapes(session, None);
     renderer.set_tools(&shapes, layers.forces, layers.force_mm_per_n);
-    let Some((lo, hi)) = bounds(&session.positions_m) else {
-        return Err(SnapshotError::NoMesh {
-            session: session_name.to_string(),
-            wait_s,
-        });
+    let fibres_drawn = if layers.fibres {
+        renderer.set_fibres(&session.info.fibres, (hi - lo).x.max((hi - lo).y) * 0.004)
+    } else {
+        0
     };
-    if layers.fibres {
-        renderer.set_fibres(&session.info.fibres, (hi - lo).x.max((hi - lo).y) * 0.0015);
-    }
     renderer.set_overlay(&overlay::render_coloured(&overlay_lines(
         session,
         monotonic_ns(),
@@ -236,6 +247,18 @@ pub fn snapshot(
         vertices: session.positions_m.len(),
         triangles: session.triangles.len(),
         cut_triangles: session.triangles.iter().filter(|t| is_cut(**t)).count(),
+        clip: clip.map(|(c, at)| (['x', 'y', 'z'][c.axis], at)),
+        triangles_drawn: session
+            .triangles
+            .iter()
+            .filter(|t| {
+                clip.is_none_or(|(c, at)| {
+                    t.iter()
+                        .any(|&v| c.keeps(at, session.positions_m[v as usize]))
+                })
+            })
+            .count(),
+        fibres_drawn,
         topology_version: session.topology_version,
         covered_pixels: pixels.iter().filter(|p| p[..3] != background).count(),
         tools: session.info.tools.iter().map(|t| t.name.clone()).collect(),

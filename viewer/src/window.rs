@@ -3,7 +3,7 @@
 //! driving a tool.
 //!
 //! Controls: right drag orbits, wheel zooms; the keys and the left button
-//! are [`crate::controls`] (R resets the view, F/V/O/C layers; driving, when
+//! are [`crate::controls`] (R resets the view, F/V/O/C/K layers; driving, when
 //! no daemon is in the session: the tip follows the cursor on the plane
 //! through the organ's centre facing the camera, W/S push it in and out,
 //! left button grips, X held cuts, 1-4 pick the tool).
@@ -49,14 +49,19 @@ pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
     let mut shown_frames = u64::MAX;
     // The scene's name, fibres and rest surface, set when they arrive.
     let mut shown_scene = String::new();
-    let mut shown_colour = controls.layers.colour_by;
+    let mut shown_colour = None;
+    let mut shown_clip = controls.layers.clip;
     window.render_loop(move |mut frame| {
         let now = monotonic_ns();
         camera.set_viewport(frame.viewport);
         let changed = session.poll(now);
-        if session.info.name != shown_scene {
+        let clip = controls.layers.clip;
+        if session.info.name != shown_scene || clip != shown_clip {
             shown_scene = session.info.name.clone();
-            renderer.set_fibres(&session.info.fibres, size * 0.001);
+            shown_clip = clip;
+            renderer.set_clip(clip.map(|c| (c, c.at_m(lo, hi))));
+            shown_colour = None;
+            renderer.set_fibres(&session.info.fibres, size * 0.003);
             driver.tool_count = session.info.tools.len().min(shared::protocol::MAX_TOOLS);
             controls = Controls::new(size, session.info.tools.len(), controls.layers);
             if session.frames == 0 {
@@ -65,12 +70,12 @@ pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
             }
         }
         let colour_by = controls.layers.colour_by;
-        if (changed || colour_by != shown_colour)
+        if (changed || Some(colour_by) != shown_colour)
             && session.drawable()
-            && (session.frames != shown_frames || colour_by != shown_colour)
+            && (session.frames != shown_frames || Some(colour_by) != shown_colour)
         {
             shown_frames = session.frames;
-            shown_colour = colour_by;
+            shown_colour = Some(colour_by);
             let same_scene = session.same_scene();
             let info = &session.info;
             let colour_field = field(&session, colour_by);
