@@ -37,6 +37,13 @@ if ! python3 -c 'import vtkmodules.vtkIOXML' >/dev/null 2>&1; then
   python3 -m pip install --quiet --disable-pip-version-check vtk==9.7.2 2>/dev/null \
     || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages vtk==9.7.2
 fi
+# `sim-server mesh`: fTetWild's Python wheel (MPL-2.0, 3 MB). --no-deps: its
+# pyvista front end (and matplotlib) is not used; the worker loads the
+# compiled wrapper itself and needs only numpy (meshio's).
+if ! python3 -c 'import importlib.util as u; assert u.find_spec("pytetwild")' >/dev/null 2>&1; then
+  python3 -m pip install --quiet --disable-pip-version-check --no-deps pytetwild==0.4.2 2>/dev/null \
+    || python3 -m pip install --quiet --disable-pip-version-check --no-deps --break-system-packages pytetwild==0.4.2
+fi
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: installing the Rust toolchain with rustup" >&2
   curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal

@@ -34,8 +34,11 @@ pub mod scene;
 pub mod step_time;
 pub mod wire;
 
-/// Tetrahedral meshes ([`tissue::mesh`]) and their file formats ([`io`](crate::mesh::io)).
+/// Tetrahedral meshes ([`tissue::mesh`]), their file formats
+/// ([`io`](crate::mesh::io)) and surfaces meshed into them
+/// ([`tetrahedralize`](crate::mesh::tetrahedralize)).
 pub mod mesh {
     pub use tissue::mesh::*;
     pub mod io;
+    pub mod tetrahedralize;
 }

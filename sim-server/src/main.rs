@@ -89,6 +89,11 @@ enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Tetrahedralize organ surfaces (STL, OBJ, PLY, OFF, VTK, VTP, e.g.
+    /// from a 3D Slicer segmentation) with fTetWild, then check the result
+    /// as `check` does (quality, the stable step).
+    #[command(allow_negative_numbers = true)]
+    Mesh(cli::mesh::MeshArgs),
     /// Static equilibrium of a scene: writes a VTU with point data
     /// `displacement` (m) and `force` (N: support reactions at fixed and
     /// prescribed vertices, the applied load elsewhere), as VTU or legacy
@@ -166,6 +171,7 @@ fn main() -> Result<()> {
         Command::Demo(args) => cli::demo::run(args)?,
         Command::Bridge(args) => cli::bridge::bridge(args)?,
         Command::Check { file, json } => cli::check::run(file.as_deref(), json.as_deref())?,
+        Command::Mesh(args) => cli::mesh::run(&args)?,
         Command::Solve { scene, out, json } => {
             cli::solve::run(scene.as_deref(), &out, json.as_deref())?
         }

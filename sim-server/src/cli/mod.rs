@@ -4,6 +4,7 @@
 pub mod bridge;
 pub mod check;
 pub mod demo;
+pub mod mesh;
 pub mod run;
 pub mod solve;
 

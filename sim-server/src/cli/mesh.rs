@@ -1,0 +1,114 @@
+//! `sim-server mesh SURFACE... --cell-m H | --tets N --out organ.msh`: the
+//! surfaces meshed by fTetWild ([`sim_server::mesh::tetrahedralize`]), their
+//! faults said, then the result checked as `sim-server check` does.
+
+use anyhow::{Context, Result, bail};
+use sim_server::mesh::tetrahedralize::{MeshRequest, Size, Units, tetrahedralize};
+use std::path::PathBuf;
+
+/// `sim-server mesh`'s flags.
+#[derive(clap::Args, Debug)]
+pub struct MeshArgs {
+    /// The surfaces: the organ first; more (inner structures) are merged
+    /// into one volume.
+    #[arg(required = true)]
+    pub surfaces: Vec<PathBuf>,
+    /// Ideal edge length of the tetrahedra (m).
+    #[arg(long, conflicts_with = "tets", required_unless_present = "tets")]
+    pub cell_m: Option<f64>,
+    /// About this many tetrahedra (the edge length follows from the
+    /// surface's volume).
+    #[arg(long)]
+    pub tets: Option<usize>,
+    /// The surfaces' units, m or mm (default: mm when the organ is larger
+    /// than 5 "m", said in the output).
+    #[arg(long)]
+    pub units: Option<Units>,
+    /// The tetrahedra, by extension: .msh (Gmsh 2.2), .vtu, .vtk, .mesh.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Stop the mesher after this long (s).
+    #[arg(long, default_value_t = 300.0)]
+    pub time_limit_s: f64,
+    /// Mesher threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Also write the meshing report as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Meshes, reports, checks.
+pub fn run(args: &MeshArgs) -> Result<()> {
+    let size = match (args.cell_m, args.tets) {
+        (Some(h), None) => Size::CellM(h),
+        (None, Some(n)) => Size::Tets(n),
+        _ => bail!("give one of --cell-m or --tets"),
+    };
+    let req = MeshRequest {
+        units: args.units,
+        time_limit_s: args.time_limit_s,
+        threads: args.threads,
+        ..MeshRequest::new(args.surfaces.clone(), size, args.out.clone())
+    };
+    let report = tetrahedralize(&req)?;
+    if report.units_detected && report.scale != 1.0 {
+        println!(
+            "units: the surfaces are larger than 5 m as metres: read as millimetres (--units m to refuse)"
+        );
+    }
+    for s in &report.inputs {
+        println!(
+            "{}: {} vertices, {} triangles, {:.1} cm3 enclosed",
+            s.path,
+            s.vertices,
+            s.triangles,
+            s.volume_m3 * 1e6
+        );
+        for h in &s.holes {
+            println!(
+                "  warning: a hole ({} boundary vertices) around ({:.4}, {:.4}, {:.4}) m: fTetWild meshes across it",
+                h.edges, h.centre[0], h.centre[1], h.centre[2]
+            );
+        }
+        if s.boundary_edges > 0 && s.holes.is_empty() {
+            println!("  warning: {} boundary edges", s.boundary_edges);
+        }
+        if s.nonmanifold_edges > 0 {
+            println!(
+                "  warning: {} non-manifold edges (more than two triangles), e.g.",
+                s.nonmanifold_edges
+            );
+            for [a, b] in s.nonmanifold.iter().take(5) {
+                println!(
+                    "    ({:.4}, {:.4}, {:.4}) - ({:.4}, {:.4}, {:.4}) m",
+                    a[0], a[1], a[2], b[0], b[1], b[2]
+                );
+            }
+        }
+    }
+    println!(
+        "meshed by fTetWild in {:.1} s: {} tetrahedra, {} vertices, ideal edge {:.2} mm -> {}",
+        report.seconds,
+        report.tets,
+        report.vertices,
+        report.edge_length_m * 1e3,
+        args.out.display()
+    );
+    if let Size::Tets(n) = size {
+        let ratio = report.tets as f64 / n as f64;
+        if !(0.7..=1.3).contains(&ratio) {
+            println!(
+                "asked for about {n} tetrahedra, got {}: --cell-m {:.4} should give about {n} from this surface",
+                report.tets,
+                report.edge_length_m * ratio.cbrt()
+            );
+        }
+    }
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&report)? + "\n";
+        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    println!();
+    super::check::run(Some(&args.out), None)
+}

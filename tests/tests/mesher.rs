@@ -1,0 +1,235 @@
+//! `sim-server mesh`: surfaces the test writes (a closed sphere in
+//! millimetres, one with a hole, two overlapping blobs in one file, a
+//! self-intersecting pair) become tetrahedra `sim-server check` accepts,
+//! with their faults said; bad requests are refused with the reason and a
+//! mesher that runs out of time is stopped.
+
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use system_tests::{binary, read_json, scratch_dir};
+
+/// A surface: vertices and triangles (0-based).
+type Surface = (Vec<[f64; 3]>, Vec<[usize; 3]>);
+
+/// A UV sphere (`rings` x 2 `rings`) of `radius` about `centre`, its
+/// triangles turned outward.
+fn sphere(centre: [f64; 3], radius: f64, rings: usize) -> Surface {
+    let cols = 2 * rings;
+    let mut v = vec![[centre[0], centre[1], centre[2] + radius]];
+    for r in 1..rings {
+        let th = std::f64::consts::PI * r as f64 / rings as f64;
+        for c in 0..cols {
+            let ph = 2.0 * std::f64::consts::PI * c as f64 / cols as f64;
+            v.push([
+                centre[0] + radius * th.sin() * ph.cos(),
+                centre[1] + radius * th.sin() * ph.sin(),
+                centre[2] + radius * th.cos(),
+            ]);
+        }
+    }
+    v.push([centre[0], centre[1], centre[2] - radius]);
+    let idx = |r: usize, c: usize| 1 + r * cols + c % cols;
+    let last = v.len() - 1;
+    let mut f = Vec::new();
+    for c in 0..cols {
+        f.push([0, idx(0, c), idx(0, c + 1)]);
+        f.push([idx(rings - 2, c), last, idx(rings - 2, c + 1)]);
+    }
+    for r in 0..rings - 2 {
+        for c in 0..cols {
+            let (a, b, d, e) = (idx(r, c), idx(r + 1, c), idx(r + 1, c + 1), idx(r, c + 1));
+            f.push([a, b, d]);
+            f.push([a, d, e]);
+        }
+    }
+    (v, f)
+}
+
+/// Writes OBJ (1-based faces).
+fn write_obj(path: &Path, parts: &[Surface]) {
+    let mut s = String::new();
+    let mut base = 1;
+    for (v, f) in parts {
+        for p in v {
+            let _ = writeln!(s, "v {} {} {}", p[0], p[1], p[2]);
+        }
+        for t in f {
+            let _ = writeln!(s, "f {} {} {}", t[0] + base, t[1] + base, t[2] + base);
+        }
+        base += v.len();
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+fn mesh(args: &[&str]) -> Output {
+    Command::new(binary("sim-server"))
+        .arg("mesh")
+        .args(args)
+        .output()
+        .expect("run sim-server mesh")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// Meshes `surface` at 20 mm into `out`, expecting success; the report.
+fn mesh_ok(surface: &Path, out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
+    let json = out.with_extension("json");
+    let o = mesh(
+        &[
+            surface.to_str().unwrap(),
+            "--cell-m",
+            "0.02",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ]
+        .into_iter()
+        .chain(extra.iter().copied())
+        .collect::<Vec<_>>(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    (read_json(&json), text(&o))
+}
+
+/// `sim-server check` of a scene on `mesh_file`: its output.
+fn check_scene(dir: &Path, mesh_file: &Path) -> String {
+    let scene: PathBuf = dir.join(format!(
+        "{}.toml",
+        mesh_file.file_stem().unwrap().to_string_lossy()
+    ));
+    std::fs::write(
+        &scene,
+        format!(
+            "[mesh]\nfile = {:?}\n\n[material]\nyoung_pa = 4500.0\npoisson = 0.45\ndensity_kg_m3 = 1060.0\n\n[simulation]\ndt_s = 0.001\n",
+            mesh_file.display().to_string()
+        ),
+    )
+    .unwrap();
+    let o = Command::new(binary("sim-server"))
+        .arg("check")
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    text(&o)
+}
+
+#[test]
+fn a_closed_surface_in_millimetres_becomes_a_checked_organ() {
+    let dir = scratch_dir("mesher-closed");
+    let surface = dir.join("ball.obj");
+    // 50 mm radius, written in millimetres as a segmentation would be.
+    write_obj(&surface, &[sphere([0.0; 3], 50.0, 16)]);
+    let out = dir.join("ball.msh");
+    let (report, said) = mesh_ok(&surface, &out, &[]);
+    assert!(said.contains("read as millimetres"), "{said}");
+    assert_eq!(report["scale"], 1e-3, "{report}");
+    let tets = report["tets"].as_u64().unwrap();
+    assert!(tets > 300, "{report}");
+    assert_eq!(report["inputs"][0]["boundary_edges"], 0, "closed: {report}");
+    // The result loads as a scene and is a ball of 50 mm radius.
+    let checked = check_scene(&dir, &out);
+    assert!(checked.contains("stable step"), "{checked}");
+    assert!(!checked.contains("inverted"), "{checked}");
+    let hi = report["bounds_m"][1][0].as_f64().unwrap();
+    assert!((hi - 0.05).abs() < 1e-3, "{report}");
+    // The mesher's quality: no sliver below 5 degrees.
+    let line = said
+        .lines()
+        .find(|l| l.starts_with("dihedral angles"))
+        .unwrap();
+    let min: f64 = line.split_whitespace().nth(2).unwrap().parse().unwrap();
+    assert!(min > 5.0, "{line}");
+}
+
+#[test]
+fn a_holed_surface_is_meshed_and_its_hole_located_and_overlaps_are_meshed_as_one() {
+    let dir = scratch_dir("mesher-messy");
+    // A hole: the triangles around the north pole removed.
+    let (v, f) = sphere([0.0; 3], 0.05, 16);
+    let open: Vec<[usize; 3]> = f.into_iter().filter(|t| !t.contains(&0)).collect();
+    let holed = dir.join("holed.obj");
+    write_obj(&holed, &[(v, open)]);
+    let (report, said) = mesh_ok(&holed, &dir.join("holed.msh"), &["--units", "m"]);
+    let hole = &report["inputs"][0]["holes"][0];
+    let z = hole["centre"][2].as_f64().unwrap();
+    assert!(z > 0.045, "the hole is at the north pole: {report}");
+    assert!(said.contains("warning: a hole"), "{said}");
+    assert!(report["tets"].as_u64().unwrap() > 300, "{report}");
+    // Two overlapping blobs in one file (each closed, intersecting the
+    // other): one volume.
+    let blobs = dir.join("blobs.obj");
+    write_obj(
+        &blobs,
+        &[
+            sphere([0.0; 3], 0.04, 14),
+            sphere([0.035, 0.0, 0.0], 0.03, 14),
+        ],
+    );
+    let out = dir.join("blobs.msh");
+    let (report, _) = mesh_ok(&blobs, &out, &["--units", "m"]);
+    let lo = report["bounds_m"][0][0].as_f64().unwrap();
+    let hi = report["bounds_m"][1][0].as_f64().unwrap();
+    assert!(
+        (lo + 0.04).abs() < 1e-3 && (hi - 0.065).abs() < 1e-3,
+        "{report}"
+    );
+    let checked = check_scene(&dir, &out);
+    assert!(checked.contains("1 component(s)"), "one volume: {checked}");
+}
+
+#[test]
+fn bad_requests_are_refused_with_the_reason_and_a_slow_mesher_is_stopped() {
+    let dir = scratch_dir("mesher-bad");
+    let surface = dir.join("ball.obj");
+    write_obj(&surface, &[sphere([0.0; 3], 0.05, 16)]);
+    let out = dir.join("ball.msh");
+    let s = surface.to_str().unwrap();
+    let o = out.to_str().unwrap();
+    for (args, says) in [
+        (
+            vec!["missing.stl", "--cell-m", "0.01", "--out", o],
+            "no such file",
+        ),
+        (
+            vec![s, "--cell-m", "0.01", "--out", "ball.txt"],
+            ".msh, .vtu",
+        ),
+        (vec![s, "--cell-m", "-1", "--out", o], "--cell-m must be"),
+        (
+            vec![s, "--cell-m", "0.0002", "--out", o],
+            "exceeds the limit",
+        ),
+        (
+            vec![s, "--cell-m", "0.004", "--out", o, "--time-limit-s", "0.5"],
+            "did not finish within 0.5 s",
+        ),
+    ] {
+        let r = mesh(&args);
+        assert!(!r.status.success(), "{args:?}: {}", text(&r));
+        assert!(text(&r).contains(says), "{args:?}: {}", text(&r));
+        assert!(!text(&r).contains("panicked"), "{}", text(&r));
+    }
+    let not_surface = dir.join("table.csv");
+    std::fs::write(&not_surface, "a,b\n1,2\n").unwrap();
+    let r = mesh(&[
+        not_surface.to_str().unwrap(),
+        "--cell-m",
+        "0.01",
+        "--out",
+        o,
+    ]);
+    assert!(
+        text(&r).contains("table.csv") && text(&r).contains("not a surface format"),
+        "{}",
+        text(&r)
+    );
+}
