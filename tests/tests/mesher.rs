@@ -187,6 +187,64 @@ fn a_holed_surface_is_meshed_and_its_hole_located_and_overlaps_are_meshed_as_one
 }
 
 #[test]
+fn an_inner_surface_becomes_a_physical_tag_a_scene_region_selects() {
+    let dir = scratch_dir("mesher-tags");
+    let organ = dir.join("organ.obj");
+    let tumour = dir.join("tumour.obj");
+    write_obj(&organ, &[sphere([0.0; 3], 0.05, 16)]);
+    // A 20 mm tumour off centre: 6.4% of the organ's volume.
+    write_obj(&tumour, &[sphere([0.015, 0.0, 0.0], 0.02, 12)]);
+    let out = dir.join("tagged.msh");
+    let json = dir.join("tagged.json");
+    let o = mesh(&[
+        organ.to_str().unwrap(),
+        tumour.to_str().unwrap(),
+        "--cell-m",
+        "0.012",
+        "--units",
+        "m",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let report = read_json(&json);
+    let (one, two) = (
+        report["tags"]["1"].as_u64().unwrap() as f64,
+        report["tags"]["2"].as_u64().unwrap() as f64,
+    );
+    let share = two / (one + two);
+    assert!(
+        (0.03..0.12).contains(&share),
+        "tumour share {share}: {report}"
+    );
+    assert!(text(&o).contains("2 ("), "{}", text(&o));
+    // A scene gives the tumour its own stiffness by the tag.
+    let scene = dir.join("tagged.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[mesh]\nfile = {:?}\n\n[material]\nyoung_pa = 4500.0\npoisson = 0.45\ndensity_kg_m3 = 1060.0\n\n[[region]]\nname = \"tumour\"\nselect = {{ physical = 2 }}\nyoung_pa = 40000.0\n\n[simulation]\ndt_s = 0.001\n",
+            out.display().to_string()
+        ),
+    )
+    .unwrap();
+    let c = Command::new(binary("sim-server"))
+        .arg("check")
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(c.status.success(), "{}", text(&c));
+    let said = text(&c);
+    let line = said
+        .lines()
+        .find(|l| l.contains("tumour"))
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!(line.contains(&format!("{}", two as u64)), "{line}\n{said}");
+}
+
+#[test]
 fn bad_requests_are_refused_with_the_reason_and_a_slow_mesher_is_stopped() {
     let dir = scratch_dir("mesher-bad");
     let surface = dir.join("ball.obj");
@@ -218,6 +276,18 @@ fn bad_requests_are_refused_with_the_reason_and_a_slow_mesher_is_stopped() {
         assert!(text(&r).contains(says), "{args:?}: {}", text(&r));
         assert!(!text(&r).contains("panicked"), "{}", text(&r));
     }
+    // The stopped mesher is gone, interpreter and all (a launcher such as
+    // pyenv's shim runs it as a child of its own).
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let left = Command::new("pgrep")
+        .args(["-f", &dir.display().to_string()])
+        .output()
+        .expect("pgrep");
+    assert!(
+        left.stdout.is_empty(),
+        "a mesher still runs: {}",
+        String::from_utf8_lossy(&left.stdout)
+    );
     let not_surface = dir.join("table.csv");
     std::fs::write(&not_surface, "a,b\n1,2\n").unwrap();
     let r = mesh(&[

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 /// `sim-server mesh`'s flags.
 #[derive(clap::Args, Debug)]
 pub struct MeshArgs {
-    /// The surfaces: the organ first; more (inner structures) are merged
-    /// into one volume.
+    /// The surfaces: the organ first; each later one (a vessel, a tumour)
+    /// tags the tetrahedra it encloses with its number (2, 3, ...).
     #[arg(required = true)]
     pub surfaces: Vec<PathBuf>,
     /// Ideal edge length of the tetrahedra (m).
@@ -86,6 +86,21 @@ pub fn run(args: &MeshArgs) -> Result<()> {
                 );
             }
         }
+    }
+    if report.inputs.len() > 1 {
+        let tags: Vec<String> = report
+            .tags
+            .iter()
+            .map(|(k, n)| {
+                let from = k
+                    .parse::<usize>()
+                    .ok()
+                    .and_then(|i| report.inputs.get(i.wrapping_sub(1)))
+                    .map_or("?", |s| s.path.as_str());
+                format!("{k} ({from}): {n}")
+            })
+            .collect();
+        println!("physical tags of the tetrahedra: {}", tags.join(", "));
     }
     println!(
         "meshed by fTetWild in {:.1} s: {} tetrahedra, {} vertices, ideal edge {:.2} mm -> {}",

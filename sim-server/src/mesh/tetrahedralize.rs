@@ -15,6 +15,11 @@
 //! linked dependency) and needs a clean, closed, non-intersecting input;
 //! Gmsh (GPL, usable as a process) was not measured here yet.
 //!
+//! Several surfaces: the first is the organ, each later one (a vessel, a
+//! tumour) becomes a physical tag (2, 3, ...) on the tetrahedra whose
+//! centroid it encloses (by the generalised winding number), so scene
+//! regions can select it (`select = { physical = 2 }`).
+//!
 //! ```no_run
 //! use sim_server::mesh::tetrahedralize::{MeshRequest, Size, tetrahedralize};
 //! let req = MeshRequest::new(vec!["liver.stl".into()], Size::CellM(0.008), "liver.msh".into());
@@ -149,6 +154,10 @@ pub struct MeshReport {
     /// Whether the units were detected (not given).
     #[serde(default)]
     pub units_detected: bool,
+    /// Tetrahedra per physical tag: "1" the organ (the first surface), "2"
+    /// and on those whose centroid a later surface encloses.
+    #[serde(default)]
+    pub tags: std::collections::BTreeMap<String, usize>,
 }
 
 /// Why meshing failed.
@@ -317,7 +326,12 @@ struct WorkerError {
 
 /// Runs `code` with `arg`, at most `limit_s`; its last stdout line.
 fn worker(code: &str, arg: &str, limit_s: f64) -> Result<String, TetrahedralizeError> {
+    use std::os::unix::process::CommandExt;
+    // Its own process group, killed whole on timeout: `python3` may be a
+    // launcher (pyenv's shim) whose child is the interpreter, and killing
+    // only the launcher left the mesher running.
     let mut child = Command::new("python3")
+        .process_group(0)
         .arg("-c")
         .arg(code)
         .arg(arg)
@@ -341,7 +355,9 @@ fn worker(code: &str, arg: &str, limit_s: f64) -> Result<String, TetrahedralizeE
         match child.try_wait().map_err(TetrahedralizeError::Spawn)? {
             Some(status) => break status,
             None if Instant::now() > deadline => {
-                let _ = child.kill();
+                // SAFETY: kill(2) on the process group this function made
+                // (the child's pid is its group id).
+                unsafe { libc::kill(-(child.id() as libc::pid_t), libc::SIGKILL) };
                 let _ = child.wait();
                 return Err(TetrahedralizeError::TimedOut { limit_s });
             }

@@ -118,6 +118,23 @@ def faults(points, tris):
     }
 
 
+def winding(points, tris, queries, chunk=256):
+    # The generalised winding number of each query point about a closed
+    # surface (van Oosterom and Strackee's solid angle per triangle, summed
+    # over 4 pi): 1 inside, 0 outside, robust to small holes.
+    a0, b0, c0 = points[tris[:, 0]], points[tris[:, 1]], points[tris[:, 2]]
+    out = np.empty(len(queries))
+    for s in range(0, len(queries), chunk):
+        q = queries[s:s + chunk, None, :]
+        a, b, c = a0[None] - q, b0[None] - q, c0[None] - q
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        num = np.einsum("ijk,ijk->ij", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("ijk,ijk->ij", a, b) * lc
+               + np.einsum("ijk,ijk->ij", b, c) * la + np.einsum("ijk,ijk->ij", c, a) * lb)
+        out[s:s + chunk] = np.arctan2(num, den).sum(axis=1) / (2.0 * np.pi)
+    return out
+
+
 def volume(points, tris):
     a, b, c = points[tris[:, 0]], points[tris[:, 1]], points[tris[:, 2]]
     return abs(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
@@ -125,7 +142,7 @@ def volume(points, tris):
 
 def main():
     req = json.loads(sys.argv[1])
-    pts_all, tris_all, per_file = [], [], []
+    pts_all, tris_all, per_file, shells = [], [], [], []
     offset = 0
     for path in req["surfaces"]:
         p, t = read_surface(path)
@@ -136,6 +153,7 @@ def main():
         per_file.append(f)
         pts_all.append(p)
         tris_all.append(t + offset)
+        shells.append((p, t))
         offset += len(p)
     points = np.concatenate(pts_all)
     tris = np.concatenate(tris_all)
@@ -175,13 +193,29 @@ def main():
     det = np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))
     flip = det < 0
     tets[flip] = tets[flip][:, [0, 2, 1, 3]]
+    # Physical tags: 1 for the organ (the first surface); each later surface
+    # (a vessel, a tumour) tags the tetrahedra whose centroid it encloses
+    # with its own number (2, 3, ...; a later one wins where they overlap).
+    tags = np.ones(len(tets), dtype=np.int64)
+    centroids = v[tets].mean(axis=1)
+    for k, (p, t) in enumerate(shells[1:], start=2):
+        inside = np.abs(winding(p, t, centroids)) > 0.5
+        tags[inside] = k
     import meshio
     out = req["out"]
     ext = os.path.splitext(out)[1].lower()
     fmt = {".msh": "gmsh22", ".vtu": "vtu", ".vtk": "vtk", ".mesh": "medit"}[ext]
-    meshio.write(out, meshio.Mesh(v, [("tetra", tets.astype(np.int64))]), file_format=fmt, binary=False)
+    if fmt == "gmsh22":
+        data = {"gmsh:physical": [tags], "gmsh:geometrical": [tags]}
+    elif fmt == "medit":
+        data = {"medit:ref": [tags]}
+    else:
+        data = {"physical": [tags.astype(np.int32)]}
+    meshio.write(out, meshio.Mesh(v, [("tetra", tets.astype(np.int64))], cell_data=data),
+                 file_format=fmt, binary=False)
     print(json.dumps({"inputs": per_file, "edge_length_m": edge, "vertices": int(len(v)),
                       "tets": int(len(tets)), "seconds": seconds, "envelope_m": envelope,
+                      "tags": {str(k): int((tags == k).sum()) for k in range(1, len(shells) + 1)},
                       "bounds_m": [lo.tolist(), hi.tolist()]}))
 
 
