@@ -245,6 +245,65 @@ fn an_inner_surface_becomes_a_physical_tag_a_scene_region_selects() {
 }
 
 #[test]
+fn a_scene_meshes_its_surface_at_load_once_and_reads_the_cache_after() {
+    let dir = scratch_dir("mesher-scene");
+    write_obj(&dir.join("ball.obj"), &[sphere([0.0; 3], 50.0, 16)]);
+    let scene = |cell: &str| {
+        let path = dir.join(format!("ball-{cell}.toml"));
+        std::fs::write(
+            &path,
+            format!(
+                "[mesh]\nsurface = \"ball.obj\"\ncell_m = {cell}\nunits = \"mm\"\n\n[material]\nyoung_pa = 4500.0\npoisson = 0.45\ndensity_kg_m3 = 1060.0\n\n[simulation]\ndt_s = 0.001\n"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let check = |path: &Path| {
+        let o = Command::new(binary("sim-server"))
+            .arg("check")
+            .arg(path)
+            .env("XDG_CACHE_HOME", dir.join("cache"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        text(&o)
+    };
+    let cached = |n: usize| {
+        let d = dir.join("cache/hapsim/meshes");
+        let files = std::fs::read_dir(&d).map_or(0, |r| r.count());
+        assert_eq!(files, n, "{}", d.display());
+    };
+    let first = check(&scene("0.02"));
+    assert!(first.contains("meshed by fTetWild"), "{first}");
+    assert!(first.contains("stable step"), "{first}");
+    cached(1);
+    let again = check(&scene("0.02"));
+    assert!(again.contains("meshed surface, cached"), "{again}");
+    assert!(!again.contains("meshed by fTetWild"), "{again}");
+    cached(1);
+    // Another size is another mesh.
+    let finer = check(&scene("0.018"));
+    assert!(finer.contains("meshed by fTetWild"), "{finer}");
+    cached(2);
+    // `cell_m` without a surface is refused at its line.
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[mesh]\nfile = \"ball.msh\"\ncell_m = 0.01\n\n[material]\nyoung_pa = 4500.0\npoisson = 0.45\ndensity_kg_m3 = 1060.0\n",
+    )
+    .unwrap();
+    let o = Command::new(binary("sim-server"))
+        .arg("check")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(text(&o).contains("bad.toml:3"), "{}", text(&o));
+    assert!(text(&o).contains("size a `surface`"), "{}", text(&o));
+}
+
+#[test]
 fn bad_requests_are_refused_with_the_reason_and_a_slow_mesher_is_stopped() {
     let dir = scratch_dir("mesher-bad");
     let surface = dir.join("ball.obj");

@@ -278,14 +278,10 @@ fn real_time_step(scene: &BuiltScene) -> f64 {
     scene.settings.dt_s.unwrap_or(1e-3)
 }
 
-/// Where precomputed responses are kept: `$XDG_CACHE_HOME/hapsim`, else
-/// `~/.cache/hapsim` (none without a home).
+/// Where precomputed responses are kept (the meshes a scene's `surface`
+/// makes too).
 fn cache_dir() -> Option<std::path::PathBuf> {
-    std::env::var_os("XDG_CACHE_HOME")
-        .filter(|v| !v.is_empty())
-        .map(std::path::PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| std::path::PathBuf::from(h).join(".cache")))
-        .map(|d| d.join("hapsim"))
+    sim_server::mesh::tetrahedralize::cache_dir()
 }
 
 /// Reads and builds a scene file, or the embedded scene when `path` is `None`.

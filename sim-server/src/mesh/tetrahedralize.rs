@@ -205,6 +205,41 @@ fn scale_for(units: Option<Units>) -> f64 {
     }
 }
 
+/// Where hapsim keeps what it computed and can compute again (precomputed
+/// responses, meshes made from a scene's `surface`):
+/// `$XDG_CACHE_HOME/hapsim`, else `~/.cache/hapsim` (none without a home).
+pub fn cache_dir() -> Option<PathBuf> {
+    std::env::var_os("XDG_CACHE_HOME")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .map(|d| d.join("hapsim"))
+}
+
+/// The cache key of `req` without its output: an FNV-1a hash of the
+/// worker (so a changed mesher is a miss), each surface's bytes, the size
+/// and the units. Unreadable surfaces are the caller's error.
+pub fn cache_key(req: &MeshRequest) -> Result<u64, TetrahedralizeError> {
+    use tissue::backend::{FNV_OFFSET, fnv};
+    let mut h = fnv(SCRIPT.bytes(), FNV_OFFSET);
+    for s in &req.surfaces {
+        let bytes = std::fs::read(s).map_err(|e| TetrahedralizeError::Input {
+            path: s.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        h = fnv(bytes.len().to_le_bytes().into_iter(), h);
+        h = fnv(bytes.into_iter(), h);
+    }
+    let size = match req.size {
+        Size::CellM(m) => format!("cell {m:e}"),
+        Size::Tets(n) => format!("tets {n}"),
+    };
+    Ok(fnv(
+        format!("{size} {:?}", req.units).into_bytes().into_iter(),
+        h,
+    ))
+}
+
 /// Runs the mesher on `req`.
 pub fn tetrahedralize(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
     check_request(req)?;

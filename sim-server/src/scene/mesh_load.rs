@@ -35,6 +35,93 @@ fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Rea
     }
 }
 
+/// The tetrahedra of a `surface` key: the cached mesh of these surfaces
+/// and options, made by fTetWild when not cached yet (said in the report).
+fn meshed_surface(
+    src: &SceneSource,
+    m: &super::spec::MeshSpec,
+    surface: &toml::Spanned<super::spec::Surfaces>,
+    report: &mut SceneReport,
+) -> Result<std::path::PathBuf, SceneError> {
+    use crate::mesh::tetrahedralize::{
+        MeshRequest, Size, Units, cache_dir, cache_key, tetrahedralize,
+    };
+    let at = surface.span();
+    let files: Vec<std::path::PathBuf> = surface
+        .get_ref()
+        .files()
+        .iter()
+        .map(|f| src.dir.join(f))
+        .collect();
+    let size = match (&m.cell_m, &m.tets) {
+        (Some(c), None) => Size::CellM(positive(src, c, "cell_m")?),
+        (None, Some(n)) => Size::Tets(*n.get_ref()),
+        _ => {
+            return Err(src.error(
+                at,
+                "`surface` needs exactly one of `cell_m`, `tets` at [mesh]",
+            ));
+        }
+    };
+    let units = match mesh_scale(src, m)? {
+        None if m.units.is_some() => Some(Units::M),
+        None => None,
+        Some(s) if (s - 1e-3).abs() < 1e-12 => Some(Units::Mm),
+        Some(_) => {
+            return Err(src.error(
+                at.clone(),
+                "a `surface` takes `units = \"mm\"` or `\"m\"` (or none: millimetres are detected), not `scale` or cm",
+            ));
+        }
+    };
+    let Some(dir) = cache_dir().map(|d| d.join("meshes")) else {
+        return Err(src.error(at, "no cache directory (neither XDG_CACHE_HOME nor HOME is set) for the meshed surface: mesh it with `sim-server mesh` and give `file`"));
+    };
+    let mut req = MeshRequest::new(files, size, std::path::PathBuf::new());
+    req.units = units;
+    let key = cache_key(&req).map_err(|e| src.error(at.clone(), e.to_string()))?;
+    let path = dir.join(format!("{key:016x}.msh"));
+    if path.is_file() {
+        report.mesh_source = format!(
+            "{} (meshed surface, cached: {})",
+            req.surfaces[0].display(),
+            path.display()
+        );
+        return Ok(path);
+    }
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| src.error(at.clone(), format!("cannot create {}: {e}", dir.display())))?;
+    // Written beside, renamed into place: a run stopped mid-way leaves no
+    // half mesh under the key.
+    let partial = dir.join(format!("{key:016x}.{}.partial.msh", std::process::id()));
+    req.out = partial.clone();
+    let made = tetrahedralize(&req).map_err(|e| src.error(at.clone(), e.to_string()))?;
+    std::fs::rename(&partial, &path)
+        .map_err(|e| src.error(at, format!("cannot write {}: {e}", path.display())))?;
+    for s in &made.inputs {
+        for h in &s.holes {
+            report.warnings.push(format!(
+                "{}: a hole ({} boundary vertices) around ({:.4}, {:.4}, {:.4}) m; fTetWild meshed across it",
+                s.path, h.edges, h.centre[0], h.centre[1], h.centre[2]
+            ));
+        }
+        if s.nonmanifold_edges > 0 {
+            report.warnings.push(format!(
+                "{}: {} non-manifold edges (sim-server mesh lists them)",
+                s.path, s.nonmanifold_edges
+            ));
+        }
+    }
+    report.mesh_source = format!(
+        "{} (meshed by fTetWild in {:.1} s: {} tetrahedra; cached: {})",
+        req.surfaces[0].display(),
+        made.seconds,
+        made.tets,
+        path.display()
+    );
+    Ok(path)
+}
+
 /// `mesh` with every coordinate multiplied by `s`.
 /// A body more than this across (m) is refused: not an organ in metres.
 const MAX_BODY_M: Real = 10.0;
@@ -89,8 +176,33 @@ pub(super) fn load_mesh(
     report: &mut SceneReport,
 ) -> Result<LoadedMesh, SceneError> {
     let m = spec.mesh.get_ref();
+    if m.surface.is_none()
+        && let Some(k) = m
+            .cell_m
+            .as_ref()
+            .map(|c| c.span())
+            .or(m.tets.as_ref().map(|t| t.span()))
+    {
+        return Err(src.error(
+            k,
+            "`cell_m` and `tets` at [mesh] size a `surface`; a generated mesh takes them inside `generate`",
+        ));
+    }
     let (mesh, physical) = match (&m.file, &m.generate) {
-        (Some(file), None) => {
+        (None, None) if m.surface.is_some() => {
+            let surface = m.surface.as_ref().expect("checked");
+            let path = meshed_surface(src, m, surface, report)?;
+            let imported =
+                io::read_mesh(&path).map_err(|e| src.error(surface.span(), e.to_string()))?;
+            report.warnings.extend(imported.warnings);
+            plausible_units(src, surface.span(), &imported.mesh, report)?;
+            let tags = Tags {
+                tets: imported.tet_physical,
+                surface: Vec::new(),
+            };
+            (imported.mesh, tags)
+        }
+        (Some(file), None) if m.surface.is_none() => {
             let path = src.dir.join(file.get_ref());
             let imported =
                 io::read_mesh(&path).map_err(|e| src.error(file.span(), e.to_string()))?;
@@ -113,13 +225,13 @@ pub(super) fn load_mesh(
             };
             (mesh, tags)
         }
-        (None, Some(g)) if m.scale.is_some() || m.units.is_some() => {
+        (None, Some(g)) if m.surface.is_none() && (m.scale.is_some() || m.units.is_some()) => {
             return Err(src.error(
                 g.span(),
                 "`scale` and `units` convert a mesh file; a generated mesh is given in metres",
             ));
         }
-        (None, Some(g)) => {
+        (None, Some(g)) if m.surface.is_none() => {
             let gen_span = g.span();
             let g = g.get_ref();
             let cell = g
@@ -216,7 +328,7 @@ pub(super) fn load_mesh(
         _ => {
             return Err(src.error(
                 spec.mesh.span(),
-                "[mesh] needs exactly one of `file`, `generate`",
+                "[mesh] needs exactly one of `file`, `generate`, `surface`",
             ));
         }
     };

@@ -79,6 +79,14 @@ pub struct HybridSpec {
 pub struct MeshSpec {
     /// A mesh file (.msh, .vtk, .vtu, .mesh), relative to the scene file.
     pub file: Option<Spanned<String>>,
+    /// Organ surfaces (STL, OBJ, PLY, OFF, VTK, VTP) to mesh at load with
+    /// fTetWild (`sim-server mesh`), cached: one file or a list (the organ,
+    /// then inner structures that become physical tags 2, 3, ...).
+    pub surface: Option<Spanned<Surfaces>>,
+    /// With `surface`: the ideal edge length (m).
+    pub cell_m: Option<Spanned<f64>>,
+    /// With `surface`: about this many tetrahedra.
+    pub tets: Option<Spanned<usize>>,
     /// A generated mesh.
     pub generate: Option<Spanned<GenerateSpec>>,
     /// Renumber vertices for memory locality (default true).
@@ -89,6 +97,26 @@ pub struct MeshSpec {
     /// The file's length unit, "m", "cm" or "mm" (another way to give
     /// `scale`).
     pub units: Option<Spanned<String>>,
+}
+
+/// `surface = "organ.stl"` or `surface = ["organ.stl", "tumour.stl"]`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Surfaces {
+    /// One surface.
+    One(String),
+    /// The organ, then inner structures.
+    Many(Vec<String>),
+}
+
+impl Surfaces {
+    /// The files in order.
+    pub fn files(&self) -> Vec<&str> {
+        match self {
+            Surfaces::One(s) => vec![s.as_str()],
+            Surfaces::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
 }
 
 /// The generators.

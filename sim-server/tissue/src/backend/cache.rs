@@ -59,7 +59,12 @@ pub(super) fn response_buffer(columns: usize, n: usize) -> Result<Vec<Vec3>, Too
     Ok(v)
 }
 
-fn fnv(bytes: impl Iterator<Item = u8>, mut h: u64) -> u64 {
+/// FNV-1a's 64-bit offset basis: the hash of nothing.
+pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// FNV-1a over `bytes`, continuing from `h` ([`FNV_OFFSET`] to start): the
+/// cache keys' hash (stable across builds and machines, unlike std's).
+pub fn fnv(bytes: impl Iterator<Item = u8>, mut h: u64) -> u64 {
     for b in bytes {
         h ^= u64::from(b);
         h = h.wrapping_mul(0x100_0000_01b3);
@@ -71,7 +76,7 @@ fn fnv(bytes: impl Iterator<Item = u8>, mut h: u64) -> u64 {
 /// materials), the fixed set and `extra` (what else the responses depend on,
 /// e.g. a hybrid's shared vertices).
 pub(super) fn key(model: &ElasticModel, fixed: &[VertexId], extra: &[u32]) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325;
+    let mut h = FNV_OFFSET;
     let f = |x: Real| x.to_le_bytes();
     h = fnv(
         model

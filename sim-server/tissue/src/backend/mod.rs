@@ -29,7 +29,7 @@ mod hybrid;
 mod implicit;
 mod precomputed;
 
-pub use cache::{MAX_RESPONSE_BYTES, TooManyResponses};
+pub use cache::{FNV_OFFSET, MAX_RESPONSE_BYTES, TooManyResponses, fnv};
 pub use capabilities::Capabilities;
 pub use compliance::Compliance;
 pub use hybrid::{Hybrid, HybridConfig, HybridError};
