@@ -304,6 +304,60 @@ fn a_scene_meshes_its_surface_at_load_once_and_reads_the_cache_after() {
 }
 
 #[test]
+fn a_scene_rotates_then_moves_its_organ_under_the_tools() {
+    let dir = scratch_dir("mesher-place");
+    let write = |name: &str, place: &str| {
+        let path = dir.join(name);
+        std::fs::write(
+            &path,
+            format!(
+                "[mesh]\ngenerate = {{ shape = \"box\", size_m = [0.1, 0.2, 0.05], cell_m = 0.025 }}\n{place}\n[material]\nyoung_pa = 4500.0\npoisson = 0.45\ndensity_kg_m3 = 1060.0\n"
+            ),
+        )
+        .unwrap();
+        let o = Command::new(binary("sim-server"))
+            .arg("check")
+            .arg(&path)
+            .output()
+            .unwrap();
+        (o.status.success(), text(&o))
+    };
+    let extent = |said: &str| -> Vec<f64> {
+        let line = said.lines().find(|l| l.starts_with("extent:")).unwrap();
+        line.replace(['[', ']', ','], " ")
+            .split_whitespace()
+            .filter_map(|w| w.parse().ok())
+            .take(6)
+            .collect()
+    };
+    let (ok, plain) = write("plain.toml", "");
+    assert!(ok, "{plain}");
+    let (ok, placed) = write(
+        "placed.toml",
+        "rotate_deg = [0.0, 0.0, 90.0]\ntranslate_m = [0.01, 0.0, 0.3]",
+    );
+    assert!(ok, "{placed}");
+    let (a, b) = (extent(&plain), extent(&placed));
+    // x' = -y + 0.01, y' = x, z' = z + 0.3.
+    let want = [
+        -a[4] + 0.01,
+        a[0],
+        a[2] + 0.3,
+        -a[1] + 0.01,
+        a[3],
+        a[5] + 0.3,
+    ];
+    for (k, (got, w)) in b.iter().zip(want).enumerate() {
+        assert!((got - w).abs() < 2e-4, "extent[{k}] {got} vs {w}: {placed}");
+    }
+    let (ok, bad) = write("bad.toml", "translate_m = [0.0, 50.0, 0.0]");
+    assert!(
+        !ok && bad.contains("bad.toml:3") && bad.contains("more than"),
+        "{bad}"
+    );
+}
+
+#[test]
 fn bad_requests_are_refused_with_the_reason_and_a_slow_mesher_is_stopped() {
     let dir = scratch_dir("mesher-bad");
     let surface = dir.join("ball.obj");

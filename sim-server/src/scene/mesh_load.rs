@@ -35,6 +35,64 @@ fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Rea
     }
 }
 
+/// `mesh` rotated by `rotate_deg` (x, then y, then z, fixed axes) and
+/// moved by `translate_m` (a rotation keeps every tetrahedron's
+/// orientation, so the mesh stays valid).
+fn placed(
+    src: &SceneSource,
+    m: &super::spec::MeshSpec,
+    mesh: TetMesh,
+) -> Result<TetMesh, SceneError> {
+    if m.rotate_deg.is_none() && m.translate_m.is_none() {
+        return Ok(mesh);
+    }
+    let finite = |s: &toml::Spanned<[f64; 3]>, what: &str| {
+        if s.get_ref().iter().all(|x| x.is_finite()) {
+            Ok(*s.get_ref())
+        } else {
+            Err(src.error(s.span(), format!("`{what}` must be three finite numbers")))
+        }
+    };
+    let r = m
+        .rotate_deg
+        .as_ref()
+        .map(|s| finite(s, "rotate_deg"))
+        .transpose()?
+        .unwrap_or([0.0; 3]);
+    let t = m
+        .translate_m
+        .as_ref()
+        .map(|s| finite(s, "translate_m"))
+        .transpose()?
+        .unwrap_or([0.0; 3]);
+    if let Some(s) = &m.translate_m
+        && t.iter().any(|x| x.abs() > MAX_BODY_M)
+    {
+        return Err(src.error(
+            s.span(),
+            format!("`translate_m` moves the organ more than {MAX_BODY_M} m"),
+        ));
+    }
+    let rot = glam::DMat3::from_rotation_z(r[2].to_radians())
+        * glam::DMat3::from_rotation_y(r[1].to_radians())
+        * glam::DMat3::from_rotation_x(r[0].to_radians());
+    let shift = Vec3::from_array(t);
+    let span = m
+        .rotate_deg
+        .as_ref()
+        .or(m.translate_m.as_ref())
+        .map(|s| s.span())
+        .unwrap_or_default();
+    TetMesh::new(
+        mesh.positions_m()
+            .iter()
+            .map(|p| rot * *p + shift)
+            .collect(),
+        mesh.tets().iter().map(|t| t.map(|v| v.0)).collect(),
+    )
+    .map_err(|e| src.error(span, e.to_string()))
+}
+
 /// The tetrahedra of a `surface` key: the cached mesh of these surfaces
 /// and options, made by fTetWild when not cached yet (said in the report).
 fn meshed_surface(
@@ -332,6 +390,7 @@ pub(super) fn load_mesh(
             ));
         }
     };
+    let mesh = placed(src, m, mesh)?;
     // (Reoriented tetrahedra were named by the reader's warning, once; a
     // generated mesh has none.)
     let (mesh, physical) = super::refine::refine_mesh(src, spec, mesh, physical, report)?;

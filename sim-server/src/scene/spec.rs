@@ -87,6 +87,11 @@ pub struct MeshSpec {
     pub cell_m: Option<Spanned<f64>>,
     /// With `surface`: about this many tetrahedra.
     pub tets: Option<Spanned<usize>>,
+    /// Rotates the organ about the origin (degrees about x, then y, then
+    /// z, fixed axes), after `scale`/`units`, before `translate_m`.
+    pub rotate_deg: Option<Spanned<[f64; 3]>>,
+    /// Moves the organ (m), last: to place it under the tools' fulcrums.
+    pub translate_m: Option<Spanned<[f64; 3]>>,
     /// A generated mesh.
     pub generate: Option<Spanned<GenerateSpec>>,
     /// Renumber vertices for memory locality (default true).
