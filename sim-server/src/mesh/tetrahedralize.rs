@@ -158,6 +158,9 @@ pub struct MeshReport {
     /// and on those whose centroid a later surface encloses.
     #[serde(default)]
     pub tags: std::collections::BTreeMap<String, usize>,
+    /// The volume of each tag's tetrahedra (m^3).
+    #[serde(default)]
+    pub tag_volumes_m3: std::collections::BTreeMap<String, f64>,
 }
 
 /// Why meshing failed.
@@ -334,13 +337,16 @@ fn run_worker(req: &MeshRequest, scale: f64) -> Result<MeshReport, Tetrahedraliz
         Size::CellM(h) => (Some(h), None),
         Size::Tets(n) => (None, Some(n)),
     };
+    // The worker runs in a scratch directory (fTetWild leaves
+    // `__tracked_surface.stl` in its working directory): paths absolute.
+    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
     let args = serde_json::json!({
-        "surfaces": req.surfaces.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "surfaces": req.surfaces.iter().map(|p| abs(p).display().to_string()).collect::<Vec<_>>(),
         "scale": scale,
         "cell_m": cell_m,
         "tets": tets,
         "max_tets": MAX_TETS,
-        "out": req.out.display().to_string(),
+        "out": abs(&req.out).display().to_string(),
         "threads": req.threads.max(1),
     });
     let out = worker(SCRIPT, &args.to_string(), req.time_limit_s)?;
@@ -361,12 +367,34 @@ struct WorkerError {
 
 /// Runs `code` with `arg`, at most `limit_s`; its last stdout line.
 fn worker(code: &str, arg: &str, limit_s: f64) -> Result<String, TetrahedralizeError> {
+    let scratch = std::env::temp_dir().join(format!(
+        "hapsim-mesher-{}-{}",
+        std::process::id(),
+        SCRATCH_SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&scratch).map_err(TetrahedralizeError::Spawn)?;
+    let result = worker_in(code, arg, limit_s, &scratch);
+    let _ = std::fs::remove_dir_all(&scratch);
+    result
+}
+
+/// Numbers the workers' scratch directories within a process.
+static SCRATCH_SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// [`worker`] with `dir` as its working directory.
+fn worker_in(
+    code: &str,
+    arg: &str,
+    limit_s: f64,
+    dir: &Path,
+) -> Result<String, TetrahedralizeError> {
     use std::os::unix::process::CommandExt;
     // Its own process group, killed whole on timeout: `python3` may be a
     // launcher (pyenv's shim) whose child is the interpreter, and killing
     // only the launcher left the mesher running.
     let mut child = Command::new("python3")
         .process_group(0)
+        .current_dir(dir)
         .arg("-c")
         .arg(code)
         .arg(arg)

@@ -201,6 +201,8 @@ def main():
     for k, (p, t) in enumerate(shells[1:], start=2):
         inside = np.abs(winding(p, t, centroids)) > 0.5
         tags[inside] = k
+    a, b, c, d = (v[tets[:, k]] for k in range(4))
+    vols = np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
     import meshio
     out = req["out"]
     ext = os.path.splitext(out)[1].lower()
@@ -216,6 +218,8 @@ def main():
     print(json.dumps({"inputs": per_file, "edge_length_m": edge, "vertices": int(len(v)),
                       "tets": int(len(tets)), "seconds": seconds, "envelope_m": envelope,
                       "tags": {str(k): int((tags == k).sum()) for k in range(1, len(shells) + 1)},
+                      "tag_volumes_m3": {str(k): float(vols[tags == k].sum())
+                                         for k in range(1, len(shells) + 1)},
                       "bounds_m": [lo.tolist(), hi.tolist()]}))
 
 
