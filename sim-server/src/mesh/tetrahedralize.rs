@@ -13,7 +13,10 @@
 //! with their centres, non-manifold edges with their end points) are
 //! reported before it runs. Why not the others: TetGen is AGPL (not as a
 //! linked dependency) and needs a clean, closed, non-intersecting input;
-//! Gmsh (GPL, usable as a process) was not measured here yet.
+//! Gmsh (GPL, usable as a process), measured on the same surfaces
+//! (docs/guide/own-organ.md), was faster on a clean organ with a larger
+//! worst-element step, but gave no mesh for a holed sphere and refused two
+//! overlapping ones.
 //!
 //! Several surfaces: the first is the organ, each later one (a vessel, a
 //! tumour) becomes a physical tag (2, 3, ...) on the tetrahedra whose
