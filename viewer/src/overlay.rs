@@ -78,6 +78,26 @@ pub fn render_coloured(lines: &[(String, [u8; 3])]) -> Image {
     img
 }
 
+/// `img` as it fits `max_width_px`: unchanged when it does, else at half
+/// size (every glyph pixel is a 2 x 2 block, so halving gives the same text
+/// at one pixel per glyph pixel, still legible) so that a narrow window or
+/// snapshot does not cut the overlay's lines off.
+pub fn fit(img: Image, max_width_px: usize) -> Image {
+    if img.width <= max_width_px || img.width < 2 {
+        return img;
+    }
+    let (width, height) = (img.width / 2, img.height / 2);
+    let pixels = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| img.pixels[(2 * y) * img.width + 2 * x])
+        .collect();
+    Image {
+        width,
+        height,
+        pixels,
+    }
+}
+
 /// Height of a colour bar's gradient (pixels).
 pub const BAR_H: usize = 200;
 /// Width of a colour bar's gradient (pixels).
@@ -144,6 +164,21 @@ mod tests {
             }
         }
         assert_eq!(render(&[]).pixels.len(), 4 * PAD * PAD);
+    }
+
+    #[test]
+    fn an_overlay_too_wide_for_the_view_is_drawn_at_half_size() {
+        let img = render(&["a line of forty characters, more or less".into()]);
+        let lit = |i: &Image| i.pixels.iter().filter(|p| p[3] == 255).count();
+        let same = fit(img.clone(), img.width);
+        assert_eq!(same, img);
+        let half = fit(img.clone(), img.width - 1);
+        assert_eq!((half.width, half.height), (img.width / 2, img.height / 2));
+        assert_eq!(
+            lit(&half) * 4,
+            lit(&img),
+            "each 2 x 2 glyph block becomes one pixel"
+        );
     }
 
     #[test]

@@ -211,12 +211,15 @@ pub fn snapshot(
     } else {
         0
     };
-    renderer.set_overlay(&overlay::render_coloured(&overlay_lines(
-        session,
-        monotonic_ns(),
-        None,
-        layers.force_mm_per_n,
-    )));
+    renderer.set_overlay(&overlay::fit(
+        overlay::render_coloured(&overlay_lines(
+            session,
+            monotonic_ns(),
+            None,
+            layers.force_mm_per_n,
+        )),
+        width.saturating_sub(16) as usize,
+    ));
     let viewport = Viewport::new_at_origo(width, height);
     let camera = framing(viewport, lo, hi, view);
     let mut color = Texture2D::new_empty::<[u8; 4]>(

@@ -146,12 +146,15 @@ pub fn run(mut session: Session, layers: Layers) -> anyhow::Result<()> {
             layers.forces,
             layers.force_mm_per_n,
         );
-        renderer.set_overlay(&overlay::render_coloured(&overlay_lines(
-            &session,
-            now,
-            driving,
-            layers.force_mm_per_n,
-        )));
+        renderer.set_overlay(&overlay::fit(
+            overlay::render_coloured(&overlay_lines(
+                &session,
+                now,
+                driving,
+                layers.force_mm_per_n,
+            )),
+            frame.viewport.width.saturating_sub(16) as usize,
+        ));
         renderer.draw(&frame.screen(), &camera, &layers);
         FrameOutput::default()
     });
