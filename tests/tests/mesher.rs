@@ -70,6 +70,18 @@ fn mesh(args: &[&str]) -> Output {
         .expect("run sim-server mesh")
 }
 
+/// `sim-server check PATH` with the cache in `cache` (None: the user's):
+/// whether it succeeded and what it said.
+fn check(path: &Path, cache: Option<&Path>) -> (bool, String) {
+    let mut cmd = Command::new(binary("sim-server"));
+    cmd.arg("check").arg(path);
+    if let Some(c) = cache {
+        cmd.env("XDG_CACHE_HOME", c);
+    }
+    let o = cmd.output().expect("run sim-server check");
+    (o.status.success(), text(&o))
+}
+
 fn text(o: &Output) -> String {
     format!(
         "{}{}",
@@ -113,13 +125,9 @@ fn check_scene(dir: &Path, mesh_file: &Path) -> String {
         ),
     )
     .unwrap();
-    let o = Command::new(binary("sim-server"))
-        .arg("check")
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
-    text(&o)
+    let (ok, said) = check(&scene, None);
+    assert!(ok, "{said}");
+    said
 }
 
 #[test]
@@ -234,13 +242,8 @@ fn an_inner_surface_becomes_a_physical_tag_a_scene_region_selects() {
         ),
     )
     .unwrap();
-    let c = Command::new(binary("sim-server"))
-        .arg("check")
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(c.status.success(), "{}", text(&c));
-    let said = text(&c);
+    let (ok, said) = check(&scene, None);
+    assert!(ok, "{said}");
     let line = said
         .lines()
         .find(|l| l.contains("tumour"))
@@ -263,31 +266,27 @@ fn a_scene_meshes_its_surface_at_load_once_and_reads_the_cache_after() {
         .unwrap();
         path
     };
-    let check = |path: &Path| {
-        let o = Command::new(binary("sim-server"))
-            .arg("check")
-            .arg(path)
-            .env("XDG_CACHE_HOME", dir.join("cache"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", text(&o));
-        text(&o)
+    let cache = dir.join("cache");
+    let check_cached = |path: &Path| {
+        let (ok, said) = check(path, Some(&cache));
+        assert!(ok, "{said}");
+        said
     };
     let cached = |n: usize| {
         let d = dir.join("cache/hapsim/meshes");
         let files = std::fs::read_dir(&d).map_or(0, |r| r.count());
         assert_eq!(files, n, "{}", d.display());
     };
-    let first = check(&scene("0.02"));
+    let first = check_cached(&scene("0.02"));
     assert!(first.contains("meshed by fTetWild"), "{first}");
     assert!(first.contains("stable step"), "{first}");
     cached(1);
-    let again = check(&scene("0.02"));
+    let again = check_cached(&scene("0.02"));
     assert!(again.contains("meshed surface, cached"), "{again}");
     assert!(!again.contains("meshed by fTetWild"), "{again}");
     cached(1);
     // Another size is another mesh.
-    let finer = check(&scene("0.018"));
+    let finer = check_cached(&scene("0.018"));
     assert!(finer.contains("meshed by fTetWild"), "{finer}");
     cached(2);
     // `cell_m` without a surface is refused at its line.
@@ -297,14 +296,10 @@ fn a_scene_meshes_its_surface_at_load_once_and_reads_the_cache_after() {
         "[mesh]\nfile = \"ball.msh\"\ncell_m = 0.01\n\n[material]\nyoung_pa = 4500.0\npoisson = 0.45\ndensity_kg_m3 = 1060.0\n",
     )
     .unwrap();
-    let o = Command::new(binary("sim-server"))
-        .arg("check")
-        .arg(&bad)
-        .output()
-        .unwrap();
-    assert!(!o.status.success());
-    assert!(text(&o).contains("bad.toml:3"), "{}", text(&o));
-    assert!(text(&o).contains("size a `surface`"), "{}", text(&o));
+    let (ok, said) = check(&bad, None);
+    assert!(!ok);
+    assert!(said.contains("bad.toml:3"), "{said}");
+    assert!(said.contains("size a `surface`"), "{said}");
 }
 
 #[test]
@@ -319,12 +314,7 @@ fn a_scene_rotates_then_moves_its_organ_under_the_tools() {
             ),
         )
         .unwrap();
-        let o = Command::new(binary("sim-server"))
-            .arg("check")
-            .arg(&path)
-            .output()
-            .unwrap();
-        (o.status.success(), text(&o))
+        check(&path, None)
     };
     let extent = |said: &str| -> Vec<f64> {
         let line = said.lines().find(|l| l.starts_with("extent:")).unwrap();

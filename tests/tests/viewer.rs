@@ -120,9 +120,14 @@ fn fake_simulation(
 }
 
 fn snapshot(session: &str, out: &Path, extra: &[&str]) -> serde_json::Value {
+    snapshot_sized(session, out, "320x240", extra)
+}
+
+/// `viewer --snapshot OUT --size SIZE EXTRA...` on `session`: its report.
+fn snapshot_sized(session: &str, out: &Path, size: &str, extra: &[&str]) -> serde_json::Value {
     let json = out.with_extension("json");
     let run = Command::new(binary("viewer"))
-        .args(["--session", session, "--wait-s", "20", "--size", "320x240"])
+        .args(["--session", session, "--wait-s", "20", "--size", size])
         .arg("--snapshot")
         .arg(out)
         .arg("--json")
@@ -385,31 +390,11 @@ fn a_press_is_shown_in_displacement_colours_with_its_bar_and_a_force_arrow_to_sc
 
     let shot = |file: &str, extra: &[&str]| {
         let out = dir.join(file);
-        let json = out.with_extension("json");
-        let run = Command::new(binary("viewer"))
-            .args([
-                "--session",
-                &name,
-                "--wait-s",
-                "20",
-                "--size",
-                "640x480",
-                "--view",
-                "top",
-            ])
-            .arg("--snapshot")
-            .arg(&out)
-            .arg("--json")
-            .arg(&json)
-            .args(extra)
-            .output()
-            .expect("run viewer");
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-        (read_json(&json), read_png(&out))
+        let view = [&["--view", "top"], extra].concat();
+        (
+            snapshot_sized(&name, &out, "640x480", &view),
+            read_png(&out),
+        )
     };
     let (report, (w, h, px)) = shot(
         "dent.png",
@@ -528,24 +513,10 @@ fn a_clipped_view_shows_the_vessel_fibres_the_surface_hides() {
     };
     let shot = |file: &str, extra: &[&str]| {
         let out = dir.join(file);
-        let json = out.with_extension("json");
-        let run = Command::new(binary("viewer"))
-            .args(["--session", &name, "--wait-s", "20", "--size", "640x480"])
-            .args(["--view", "front", "--fibres", "--no-overlay", "--no-forces"])
-            .arg("--snapshot")
-            .arg(&out)
-            .arg("--json")
-            .arg(&json)
-            .args(extra)
-            .output()
-            .expect("run viewer");
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
+        let flags = ["--view", "front", "--fibres", "--no-overlay", "--no-forces"];
+        let report = snapshot_sized(&name, &out, "640x480", &[&flags[..], extra].concat());
         let (_, _, px) = read_png(&out);
-        (read_json(&json), fibre_px(&px))
+        (report, fibre_px(&px))
     };
     let (whole, hidden) = shot("whole.png", &[]);
     // The plane across y (the front view looks along -y) just behind the
