@@ -253,14 +253,15 @@ impl Renderer {
 
     /// The organ surface: `triangles` over `positions_m`, split by
     /// `is_cut`; the capsule in `colours` (one per vertex) when given.
-    /// Clipped by [`Renderer::set_clip`]'s plane.
+    /// Clipped by [`Renderer::set_clip`]'s plane; returns the triangles
+    /// drawn.
     pub fn set_surface(
         &mut self,
         positions_m: &[[f32; 3]],
         triangles: &[[u32; 3]],
         is_cut: impl Fn([u32; 3]) -> bool,
         colours: Option<&[[u8; 3]]>,
-    ) {
+    ) -> usize {
         let clip = self.clip;
         let kept = |t: &[u32; 3]| {
             clip.is_none_or(|(c, at)| {
@@ -302,6 +303,7 @@ impl Renderer {
         // Cut faces keep their colour: where the tissue was opened stays
         // visible whatever the capsule shows.
         self.cut = build(true).map(|m| solid(&self.context, &m, CUT));
+        triangles.iter().filter(|t| kept(t)).count()
     }
 
     /// The colour bar (drawn in the bottom-right corner); `None` removes it.

@@ -197,7 +197,7 @@ pub fn snapshot(
     let clip = layers.clip.map(|c| (c, c.at_m(lo, hi)));
     renderer.set_clip(clip);
     let colour_field = field(session, layers.colour_by);
-    renderer.set_surface(
+    let triangles_drawn = renderer.set_surface(
         &session.positions_m,
         &session.triangles,
         is_cut,
@@ -251,16 +251,7 @@ pub fn snapshot(
         triangles: session.triangles.len(),
         cut_triangles: session.triangles.iter().filter(|t| is_cut(**t)).count(),
         clip: clip.map(|(c, at)| (['x', 'y', 'z'][c.axis], at)),
-        triangles_drawn: session
-            .triangles
-            .iter()
-            .filter(|t| {
-                clip.is_none_or(|(c, at)| {
-                    t.iter()
-                        .any(|&v| c.keeps(at, session.positions_m[v as usize]))
-                })
-            })
-            .count(),
+        triangles_drawn,
         fibres_drawn,
         topology_version: session.topology_version,
         covered_pixels: pixels.iter().filter(|p| p[..3] != background).count(),

@@ -202,15 +202,6 @@ pub enum TetrahedralizeError {
     Spawn(#[source] std::io::Error),
 }
 
-/// The first surface's largest extent in its own units, read cheaply by
-/// the worker: done there, so this side only picks the scale.
-fn scale_for(units: Option<Units>) -> f64 {
-    match units {
-        Some(Units::Mm) => 1e-3,
-        _ => 1.0,
-    }
-}
-
 /// Where hapsim keeps what it computed and can compute again (precomputed
 /// responses, meshes made from a scene's `surface`):
 /// `$XDG_CACHE_HOME/hapsim`, else `~/.cache/hapsim` (none without a home).
@@ -249,20 +240,7 @@ pub fn cache_key(req: &MeshRequest) -> Result<u64, TetrahedralizeError> {
 /// Runs the mesher on `req`.
 pub fn tetrahedralize(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
     check_request(req)?;
-    let run = |scale: f64| run_worker(req, scale);
-    let (mut report, detected) = match req.units {
-        Some(u) => (run(scale_for(Some(u)))?, false),
-        None => {
-            // Probe the extent in the file's units with a dry run's bounds:
-            // the worker reports them before meshing only on error, so read
-            // them here from the first surface via the same reader.
-            let extent = probe_extent(&req.surfaces[0])?;
-            let mm = extent > MM_DETECT_EXTENT;
-            (run(if mm { 1e-3 } else { 1.0 })?, true)
-        }
-    };
-    report.units_detected = detected;
-    Ok(report)
+    run_worker(req)
 }
 
 fn check_request(req: &MeshRequest) -> Result<(), TetrahedralizeError> {
@@ -317,25 +295,13 @@ fn check_request(req: &MeshRequest) -> Result<(), TetrahedralizeError> {
     }
 }
 
-/// The first surface's largest extent in its own units (for detecting
-/// millimetres), by the worker's reader.
-fn probe_extent(path: &Path) -> Result<f64, TetrahedralizeError> {
-    let code = format!(
-        "{}\np, t = read_surface({:?})\nprint(json.dumps({{\"extent\": float((p.max(axis=0) - p.min(axis=0)).max())}}))",
-        SCRIPT.replace("\nmain()\n", "\n"),
-        path.display().to_string()
-    );
-    let out = worker(&code, "", 60.0)?;
-    #[derive(Deserialize)]
-    struct Extent {
-        extent: f64,
-    }
-    let e: Extent = serde_json::from_str(&out)
-        .map_err(|e| TetrahedralizeError::Failed(format!("unreadable probe ({e}): {out}")))?;
-    Ok(e.extent)
-}
-
-fn run_worker(req: &MeshRequest, scale: f64) -> Result<MeshReport, TetrahedralizeError> {
+/// One worker run: reads the surfaces (detecting millimetres when `units`
+/// is not given), meshes, writes, reports.
+fn run_worker(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
+    let scale = req.units.map(|u| match u {
+        Units::Mm => 1e-3,
+        Units::M => 1.0,
+    });
     let (cell_m, tets) = match req.size {
         Size::CellM(h) => (Some(h), None),
         Size::Tets(n) => (None, Some(n)),
@@ -346,6 +312,7 @@ fn run_worker(req: &MeshRequest, scale: f64) -> Result<MeshReport, Tetrahedraliz
     let args = serde_json::json!({
         "surfaces": req.surfaces.iter().map(|p| abs(p).display().to_string()).collect::<Vec<_>>(),
         "scale": scale,
+        "mm_detect_extent": MM_DETECT_EXTENT,
         "cell_m": cell_m,
         "tets": tets,
         "max_tets": MAX_TETS,
@@ -353,10 +320,8 @@ fn run_worker(req: &MeshRequest, scale: f64) -> Result<MeshReport, Tetrahedraliz
         "threads": req.threads.max(1),
     });
     let out = worker(SCRIPT, &args.to_string(), req.time_limit_s)?;
-    let mut report: MeshReport = serde_json::from_str(&out)
-        .map_err(|e| TetrahedralizeError::Failed(format!("unreadable report ({e}): {out}")))?;
-    report.scale = scale;
-    Ok(report)
+    serde_json::from_str(&out)
+        .map_err(|e| TetrahedralizeError::Failed(format!("unreadable report ({e}): {out}")))
 }
 
 /// The worker's failure line.

@@ -144,9 +144,15 @@ def main():
     req = json.loads(sys.argv[1])
     pts_all, tris_all, per_file, shells = [], [], [], []
     offset = 0
-    for path in req["surfaces"]:
-        p, t = read_surface(path)
-        p, t = weld(p * req["scale"], t)
+    raw = [read_surface(path) for path in req["surfaces"]]
+    # No units given: millimetres when the organ (the first surface) is
+    # larger than a body in metres could be.
+    scale, detected = req["scale"], req["scale"] is None
+    if detected:
+        p0 = raw[0][0]
+        scale = 1e-3 if float((p0.max(axis=0) - p0.min(axis=0)).max()) > req["mm_detect_extent"] else 1.0
+    for path, (p, t) in zip(req["surfaces"], raw):
+        p, t = weld(p * scale, t)
         f = faults(p, t)
         f.update({"path": path, "vertices": int(len(p)), "triangles": int(len(t)),
                   "volume_m3": float(volume(p, t))})
@@ -220,7 +226,8 @@ def main():
                       "tags": {str(k): int((tags == k).sum()) for k in range(1, len(shells) + 1)},
                       "tag_volumes_m3": {str(k): float(vols[tags == k].sum())
                                          for k in range(1, len(shells) + 1)},
-                      "bounds_m": [lo.tolist(), hi.tolist()]}))
+                      "bounds_m": [lo.tolist(), hi.tolist()],
+                      "scale": scale, "units_detected": detected}))
 
 
 main()
