@@ -39,6 +39,7 @@ pub mod wire;
 /// ([`tetrahedralize`](crate::mesh::tetrahedralize)).
 pub mod mesh {
     pub use tissue::mesh::*;
+    pub mod improve;
     pub mod io;
     pub mod tetrahedralize;
 }

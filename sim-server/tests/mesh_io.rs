@@ -7,7 +7,7 @@ use sim_server::ids::{TetId, VertexId};
 use sim_server::math::Vec3;
 use sim_server::mesh::io::{
     DataArray, ImportedMesh, MeshFormat, MeshIoError, parse_mesh, read_mesh, write_medit,
-    write_obj, write_pvd, write_stl, write_vtk, write_vtu, write_vtu_zlib,
+    write_msh, write_obj, write_pvd, write_stl, write_vtk, write_vtu, write_vtu_zlib,
 };
 use std::path::{Path, PathBuf};
 
@@ -129,6 +129,7 @@ fn legacy_vtk_round_trip_is_exact() {
         m.mesh.positions_m(),
         m.mesh.tets(),
         &[("displacement", DataArray::Vectors(&disp))],
+        &[],
     )
     .unwrap();
     let back = read_mesh(&path).unwrap();
@@ -142,7 +143,8 @@ fn legacy_vtk_round_trip_is_exact() {
             &bad,
             m.mesh.positions_m(),
             m.mesh.tets(),
-            &[("two words", DataArray::Vectors(&disp))]
+            &[("two words", DataArray::Vectors(&disp))],
+            &[]
         ),
         Err(MeshIoError::BadInput { .. })
     ));
@@ -151,7 +153,8 @@ fn legacy_vtk_round_trip_is_exact() {
             &bad,
             m.mesh.positions_m(),
             m.mesh.tets(),
-            &[("u", DataArray::Vectors(&disp[1..]))]
+            &[("u", DataArray::Vectors(&disp[1..]))],
+            &[]
         ),
         Err(MeshIoError::BadInput { .. })
     ));
@@ -970,4 +973,42 @@ fn broken_interop_files_are_errors_never_panics() {
     );
     let broken = with_line(&msh1, elm, "1 4 1 1 4 1 2 3 99999");
     fails_at(&broken, MeshFormat::Msh, elm, "node 99999");
+}
+
+#[test]
+fn the_mesher_s_writers_keep_every_tetrahedron_s_physical_tag() {
+    // The formats `sim-server mesh` writes: MSH 2.2, legacy VTK and VTU
+    // with the tags as cell data, medit with them as references.
+    let m = reference("ellipsoid_v41.msh");
+    let tags: Vec<i32> = (0..m.mesh.tet_count())
+        .map(|t| 1 + (t % 3) as i32)
+        .collect();
+    let ids: Vec<u32> = tags.iter().map(|&t| t as u32).collect();
+    let cells = [("physical", DataArray::Ids(&ids))];
+    let (p, t) = (m.mesh.positions_m(), m.mesh.tets());
+    let written = [
+        ("tags.msh", write_msh(&scratch("tags.msh"), p, t, &tags)),
+        (
+            "tags.vtk",
+            write_vtk(&scratch("tags.vtk"), p, t, &[], &cells),
+        ),
+        (
+            "tags.vtu",
+            write_vtu(&scratch("tags.vtu"), p, t, &[], &cells),
+        ),
+        ("tags.mesh", write_medit(&scratch("tags.mesh"), p, t, &tags)),
+    ];
+    for (name, result) in written {
+        result.unwrap();
+        let back = read_mesh(&scratch(name)).unwrap();
+        assert_eq!(back.mesh.positions_m(), p, "{name}");
+        assert_eq!(back.mesh.tets(), t, "{name}");
+        assert_eq!(back.tet_physical, tags, "{name}");
+    }
+    // A tag per tetrahedron or none.
+    assert!(matches!(
+        write_msh(&scratch("short.msh"), p, t, &tags[1..]),
+        Err(MeshIoError::BadInput { .. })
+    ));
+    assert!(!scratch("short.msh").exists());
 }

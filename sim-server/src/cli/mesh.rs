@@ -3,7 +3,9 @@
 //! faults said, then the result checked as `sim-server check` does.
 
 use anyhow::{Context, Result, bail};
-use sim_server::mesh::tetrahedralize::{MeshRequest, Size, Units, tetrahedralize};
+use sim_server::mesh::tetrahedralize::{
+    MeshRequest, REFERENCE_MATERIAL, Size, Units, tetrahedralize,
+};
 use std::path::PathBuf;
 
 /// `sim-server mesh`'s flags.
@@ -33,6 +35,10 @@ pub struct MeshArgs {
     /// Mesher threads.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// Leave fTetWild's vertices where they are (no quality pass for the
+    /// explicit step).
+    #[arg(long)]
+    pub no_improve: bool,
     /// Also write the meshing report as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -49,6 +55,7 @@ pub fn run(args: &MeshArgs) -> Result<()> {
         units: args.units,
         time_limit_s: args.time_limit_s,
         threads: args.threads,
+        improve: !args.no_improve,
         ..MeshRequest::new(args.surfaces.clone(), size, args.out.clone())
     };
     let report = tetrahedralize(&req)?;
@@ -110,6 +117,23 @@ pub fn run(args: &MeshArgs) -> Result<()> {
         report.edge_length_m * 1e3,
         args.out.display()
     );
+    if let Some(q) = &report.improve {
+        let (e, nu, rho) = REFERENCE_MATERIAL;
+        println!(
+            "quality pass (element stable step at E {:.1} kPa, nu {nu}, rho {rho:.0} kg/m3; it scales with sqrt(rho/E)): shortest {:.3e} s -> {:.3e} s ({:.2}x; median element {:.3e} s), elements under half the median {} -> {}; moved {} interior and {} surface vertices (surface at most {:.2} mm, in its tangent plane) in {:.1} s",
+            e / 1e3,
+            q.before_dt_s,
+            q.after_dt_s,
+            q.after_dt_s / q.before_dt_s,
+            q.median_dt_s,
+            q.below_before,
+            q.below_after,
+            q.moved_interior,
+            q.moved_surface,
+            q.max_surface_move_m * 1e3,
+            q.seconds
+        );
+    }
     if let Size::Tets(n) = size {
         let ratio = report.tets as f64 / n as f64;
         if !(0.7..=1.3).contains(&ratio) {

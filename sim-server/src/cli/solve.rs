@@ -107,7 +107,7 @@ pub fn run(scene: Option<&Path>, out: &Path, json: Option<&Path>) -> Result<()> 
     }
     match format {
         OutFormat::Vtu => write_vtu(out, model.mesh().positions_m(), &alive, &point_data, &[])?,
-        OutFormat::Vtk => write_vtk(out, model.mesh().positions_m(), &alive, &point_data)?,
+        OutFormat::Vtk => write_vtk(out, model.mesh().positions_m(), &alive, &point_data, &[])?,
         OutFormat::Medit | OutFormat::Obj | OutFormat::Stl => {
             // Formats without point data: the deformed geometry itself.
             let deformed: Vec<Vec3> = model

@@ -30,6 +30,7 @@
 //! println!("{} tetrahedra in {:.1} s", report.tets, report.seconds);
 //! ```
 
+use crate::mesh::improve::{ImproveOptions, ImproveReport, improve_for_step};
 use serde::{Deserialize, Serialize};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -87,13 +88,17 @@ pub struct MeshRequest {
     pub time_limit_s: f64,
     /// Mesher threads.
     pub threads: usize,
+    /// Whether the quality pass ([`crate::mesh::improve`]) runs after
+    /// fTetWild.
+    pub improve: bool,
 }
 
 /// An input larger than this (m) along any axis is taken as millimetres.
 pub const MM_DETECT_EXTENT: f64 = 5.0;
 
 impl MeshRequest {
-    /// A request with the defaults: units detected, 300 s, 2 threads.
+    /// A request with the defaults: units detected, 300 s, 2 threads, the
+    /// quality pass on.
     pub fn new(surfaces: Vec<PathBuf>, size: Size, out: PathBuf) -> Self {
         Self {
             surfaces,
@@ -102,6 +107,7 @@ impl MeshRequest {
             out,
             time_limit_s: 300.0,
             threads: 2,
+            improve: true,
         }
     }
 }
@@ -164,7 +170,17 @@ pub struct MeshReport {
     /// The volume of each tag's tetrahedra (m^3).
     #[serde(default)]
     pub tag_volumes_m3: std::collections::BTreeMap<String, f64>,
+    /// The quality pass after fTetWild: the element stable step before and
+    /// after, at [`REFERENCE_MATERIAL`] (None when it did not run).
+    #[serde(default)]
+    pub improve: Option<ImproveReport>,
 }
+
+/// The material the quality pass's bound is computed for: a soft
+/// parenchyma, E 4.5 kPa, nu 0.45, rho 1060 kg/m^3 (the step of another
+/// material scales with sqrt(rho / E); the ratio before / after depends
+/// only on nu).
+pub const REFERENCE_MATERIAL: (f64, f64, f64) = (4500.0, 0.45, 1060.0);
 
 /// Why meshing failed.
 #[derive(Debug, thiserror::Error)]
@@ -200,6 +216,16 @@ pub enum TetrahedralizeError {
     /// The worker could not be started.
     #[error("cannot run python3 (the mesher's worker): {0}")]
     Spawn(#[source] std::io::Error),
+    /// The mesher's result could not be read back or written out.
+    #[error(transparent)]
+    Io(Box<crate::mesh::io::MeshIoError>),
+}
+
+impl From<crate::mesh::io::MeshIoError> for TetrahedralizeError {
+    fn from(e: crate::mesh::io::MeshIoError) -> Self {
+        // Boxed: the mesh error is large and this is the cold path.
+        Self::Io(Box::new(e))
+    }
 }
 
 /// Where hapsim keeps what it computed and can compute again (precomputed
@@ -296,7 +322,8 @@ fn check_request(req: &MeshRequest) -> Result<(), TetrahedralizeError> {
 }
 
 /// One worker run: reads the surfaces (detecting millimetres when `units`
-/// is not given), meshes, writes, reports.
+/// is not given), meshes into a scratch medit file, reports; then the
+/// quality pass and the output in the format asked for.
 fn run_worker(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
     let scale = req.units.map(|u| match u {
         Units::Mm => 1e-3,
@@ -309,6 +336,8 @@ fn run_worker(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
     // The worker runs in a scratch directory (fTetWild leaves
     // `__tracked_surface.stl` in its working directory): paths absolute.
     let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let scratch = Scratch::new()?;
+    let raw = scratch.0.join("raw.mesh");
     let args = serde_json::json!({
         "surfaces": req.surfaces.iter().map(|p| abs(p).display().to_string()).collect::<Vec<_>>(),
         "scale": scale,
@@ -316,12 +345,96 @@ fn run_worker(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
         "cell_m": cell_m,
         "tets": tets,
         "max_tets": MAX_TETS,
-        "out": abs(&req.out).display().to_string(),
+        "out": raw.display().to_string(),
         "threads": req.threads.max(1),
     });
-    let out = worker(SCRIPT, &args.to_string(), req.time_limit_s)?;
-    serde_json::from_str(&out)
-        .map_err(|e| TetrahedralizeError::Failed(format!("unreadable report ({e}): {out}")))
+    let out = worker_in(SCRIPT, &args.to_string(), req.time_limit_s, &scratch.0)?;
+    let mut report: MeshReport = serde_json::from_str(&out)
+        .map_err(|e| TetrahedralizeError::Failed(format!("unreadable report ({e}): {out}")))?;
+    finish(&raw, req, &mut report)?;
+    Ok(report)
+}
+
+/// The mesher's tetrahedra improved for the explicit step (unless asked
+/// not to) and written to `req.out` in its format, the tags' volumes
+/// measured on the result.
+fn finish(
+    raw: &Path,
+    req: &MeshRequest,
+    report: &mut MeshReport,
+) -> Result<(), TetrahedralizeError> {
+    use crate::mesh::io::{DataArray, read_mesh, write_medit, write_msh, write_vtk, write_vtu};
+    let imported = read_mesh(raw)?;
+    let mut positions = imported.mesh.positions_m().to_vec();
+    let tets_v = imported.mesh.tets();
+    let tets: Vec<[u32; 4]> = tets_v.iter().map(|t| t.map(|v| v.0)).collect();
+    if req.improve {
+        let (e, nu, rho) = REFERENCE_MATERIAL;
+        let material = crate::material::Material::isotropic(e, nu, rho, 0.0)
+            .map_err(|e| TetrahedralizeError::Failed(format!("reference material: {e}")))?;
+        report.improve = Some(improve_for_step(
+            &mut positions,
+            &tets,
+            &imported.tet_physical,
+            &material,
+            &ImproveOptions::default(),
+        ));
+    }
+    let tags = &imported.tet_physical;
+    // Measured again on the moved vertices (a tag with no tetrahedron
+    // keeps its 0).
+    report.tag_volumes_m3.values_mut().for_each(|v| *v = 0.0);
+    for (t, tag) in tets.iter().zip(tags) {
+        let p = t.map(|v| positions[v as usize]);
+        *report.tag_volumes_m3.entry(tag.to_string()).or_default() +=
+            crate::math::tet_signed_volume(p[0], p[1], p[2], p[3]);
+    }
+    let tags_u: Vec<u32> = tags.iter().map(|&t| t.max(0) as u32).collect();
+    let ext = req
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("msh") => write_msh(&req.out, &positions, tets_v, tags)?,
+        Some("vtu") => write_vtu(
+            &req.out,
+            &positions,
+            tets_v,
+            &[],
+            &[("physical", DataArray::Ids(&tags_u))],
+        )?,
+        Some("vtk") => write_vtk(
+            &req.out,
+            &positions,
+            tets_v,
+            &[],
+            &[("physical", DataArray::Ids(&tags_u))],
+        )?,
+        _ => write_medit(&req.out, &positions, tets_v, tags)?,
+    }
+    Ok(())
+}
+
+/// A scratch directory for one worker, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new() -> Result<Self, TetrahedralizeError> {
+        let dir = std::env::temp_dir().join(format!(
+            "hapsim-mesher-{}-{}",
+            std::process::id(),
+            SCRATCH_SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+        ));
+        std::fs::create_dir_all(&dir).map_err(TetrahedralizeError::Spawn)?;
+        Ok(Self(dir))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The worker's failure line.
@@ -333,23 +446,10 @@ struct WorkerError {
     path: Option<String>,
 }
 
-/// Runs `code` with `arg`, at most `limit_s`; its last stdout line.
-fn worker(code: &str, arg: &str, limit_s: f64) -> Result<String, TetrahedralizeError> {
-    let scratch = std::env::temp_dir().join(format!(
-        "hapsim-mesher-{}-{}",
-        std::process::id(),
-        SCRATCH_SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&scratch).map_err(TetrahedralizeError::Spawn)?;
-    let result = worker_in(code, arg, limit_s, &scratch);
-    let _ = std::fs::remove_dir_all(&scratch);
-    result
-}
-
 /// Numbers the workers' scratch directories within a process.
 static SCRATCH_SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
-/// [`worker`] with `dir` as its working directory.
+/// Runs `code` with `arg` in `dir`, at most `limit_s`; its last stdout line.
 fn worker_in(
     code: &str,
     arg: &str,

@@ -1,8 +1,8 @@
 //! Mesh import and export: Gmsh MSH 4.1 and 2.2 (ASCII and binary) and MSH 1,
 //! legacy VTK (ASCII and binary unstructured grid), VTU (XML, ascii and base64
 //! inline or appended raw data, uncompressed or zlib) and medit `.mesh` in (a
-//! file holding XML is read as VTU whatever its extension); VTU + PVD, OBJ,
-//! binary STL and medit out.
+//! file holding XML is read as VTU whatever its extension); VTU + PVD, legacy
+//! VTK, MSH 2.2, OBJ, binary STL and medit out.
 //!
 //! Every parser is written by hand over a byte slice: the formats are simple,
 //! the crates that read them lose the line of a fault or pull in large
@@ -26,6 +26,7 @@ mod export;
 mod gmsh;
 mod gmsh41;
 mod gmsh41_input;
+mod gmsh_export;
 mod gmsh_legacy;
 mod medit;
 mod text;
@@ -40,6 +41,7 @@ mod xml;
 
 pub use error::{Location, MeshIoError};
 pub use export::{DataArray, write_obj, write_pvd, write_stl, write_vtu, write_vtu_zlib};
+pub use gmsh_export::write_msh;
 pub use medit::write_medit;
 pub use vtk_export::write_vtk;
 

@@ -12,8 +12,9 @@ use crate::math::Vec3;
 use std::io::Write;
 use std::path::Path;
 
-/// Writes a legacy ASCII VTK file: linear tetrahedra and `point_data` (one
-/// value per position: vectors as `VECTORS`, scalars and ids as `SCALARS`).
+/// Writes a legacy ASCII VTK file: linear tetrahedra, `point_data` (one
+/// value per position: vectors as `VECTORS`, scalars and ids as `SCALARS`)
+/// and `cell_data` (one per tetrahedron, e.g. the `physical` tags).
 /// Names must be one word (letters, digits, `_`): legacy VTK separates
 /// fields by spaces.
 pub fn write_vtk(
@@ -21,28 +22,29 @@ pub fn write_vtk(
     positions_m: &[Vec3],
     tets: &[[VertexId; 4]],
     point_data: &[(&str, DataArray)],
+    cell_data: &[(&str, DataArray)],
 ) -> Result<(), MeshIoError> {
     let file = path.display().to_string();
     check_indices(&file, positions_m.len(), tets.iter().flatten())?;
     check_lengths(&file, "point", point_data, positions_m.len(), "points")?;
+    check_lengths(&file, "cell", cell_data, tets.len(), "tetrahedra")?;
     if let Some((name, _)) = point_data
         .iter()
+        .chain(cell_data)
         .find(|(n, _)| n.is_empty() || !n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'))
     {
         return Err(MeshIoError::BadInput {
             file,
-            message: format!("point data {name:?}: a legacy VTK name must be one word"),
+            message: format!("data {name:?}: a legacy VTK name must be one word"),
         });
     }
-    if let Some((name, _)) = point_data.iter().find(|(_, a)| match a {
+    if let Some((name, _)) = point_data.iter().chain(cell_data).find(|(_, a)| match a {
         DataArray::Ids(v) => v.iter().any(|&i| i > i32::MAX as u32),
         _ => false,
     }) {
         return Err(MeshIoError::BadInput {
             file,
-            message: format!(
-                "point data {name:?}: an id above 2^31 - 1 does not fit legacy VTK's int"
-            ),
+            message: format!("data {name:?}: an id above 2^31 - 1 does not fit legacy VTK's int"),
         });
     }
     write_with(&file, path, |w| {
@@ -62,31 +64,42 @@ pub fn write_vtk(
         for _ in tets {
             writeln!(w, "{VTK_TETRA}")?;
         }
-        if !point_data.is_empty() {
-            writeln!(w, "POINT_DATA {}", positions_m.len())?;
-            for (name, values) in point_data {
-                match values {
-                    DataArray::Vectors(v) => {
-                        writeln!(w, "VECTORS {name} double")?;
-                        for v in *v {
-                            writeln!(w, "{} {} {}", v.x, v.y, v.z)?;
-                        }
-                    }
-                    DataArray::Scalars(v) => {
-                        writeln!(w, "SCALARS {name} double 1\nLOOKUP_TABLE default")?;
-                        for x in *v {
-                            writeln!(w, "{x}")?;
-                        }
-                    }
-                    DataArray::Ids(v) => {
-                        writeln!(w, "SCALARS {name} int 1\nLOOKUP_TABLE default")?;
-                        for x in *v {
-                            writeln!(w, "{x}")?;
-                        }
-                    }
+        for (section, count, arrays) in [
+            ("POINT_DATA", positions_m.len(), point_data),
+            ("CELL_DATA", tets.len(), cell_data),
+        ] {
+            if !arrays.is_empty() {
+                writeln!(w, "{section} {count}")?;
+                for (name, values) in arrays {
+                    write_array(w, name, values)?;
                 }
             }
         }
         Ok(())
     })
+}
+
+/// One named array, as `VECTORS` or `SCALARS`.
+fn write_array(w: &mut impl Write, name: &str, values: &DataArray) -> std::io::Result<()> {
+    match values {
+        DataArray::Vectors(v) => {
+            writeln!(w, "VECTORS {name} double")?;
+            for v in *v {
+                writeln!(w, "{} {} {}", v.x, v.y, v.z)?;
+            }
+        }
+        DataArray::Scalars(v) => {
+            writeln!(w, "SCALARS {name} double 1\nLOOKUP_TABLE default")?;
+            for x in *v {
+                writeln!(w, "{x}")?;
+            }
+        }
+        DataArray::Ids(v) => {
+            writeln!(w, "SCALARS {name} int 1\nLOOKUP_TABLE default")?;
+            for x in *v {
+                writeln!(w, "{x}")?;
+            }
+        }
+    }
+    Ok(())
 }

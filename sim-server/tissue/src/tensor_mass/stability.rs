@@ -13,6 +13,7 @@
 //!   residual-based upper value. Valid for the mesh as it is: a cut that
 //!   leaves a small vertex mass can raise omega_max above it.
 
+use super::element::{Geometry, TetElastic};
 use super::model::ElasticModel;
 use crate::ids::TetId;
 use crate::math::{Real, Vec3};
@@ -86,18 +87,7 @@ impl ElasticModel {
 /// Largest eigenvalue of a live element's (K_e, M_e), M_e = rho V / 4 per vertex.
 pub fn element_lambda(model: &ElasticModel, t: TetId) -> Real {
     let (elastic, geom) = model.element(t);
-    let mut k = nalgebra::SMatrix::<Real, 12, 12>::zeros();
-    for i in 0..4 {
-        for j in i..4 {
-            let b = elastic.block(&geom, i, j);
-            for r in 0..3 {
-                for c in 0..3 {
-                    k[(3 * i + r, 3 * j + c)] = b.col(c)[r];
-                    k[(3 * j + c, 3 * i + r)] = b.col(c)[r];
-                }
-            }
-        }
-    }
+    let mut k = element_stiffness(&elastic, &geom);
     // The capsule springs of this tetrahedron's surface faces belong to its
     // element: K = sum over tets of (K_e + springs_e) and M = sum of M_e, so
     // Irons' bound still holds with them (and survives cuts).
@@ -119,6 +109,32 @@ pub fn element_lambda(model: &ElasticModel, t: TetId) -> Real {
     }
     let quarter_mass = model.materials().material(t).density_kg_m3() * geom.volume_m3 / 4.0;
     k.symmetric_eigenvalues().max() / quarter_mass
+}
+
+/// Largest eigenvalue of one tetrahedron's (K_e, M_e) on its own (no
+/// capsule springs): what [`element_lambda`] gives for an element of a
+/// model without a membrane. For tools that move vertices and need the
+/// bound before any model exists (the mesher's quality pass).
+pub fn isolated_element_lambda(elastic: &TetElastic, geom: &Geometry, density_kg_m3: Real) -> Real {
+    let k = element_stiffness(elastic, geom);
+    k.symmetric_eigenvalues().max() / (density_kg_m3 * geom.volume_m3 / 4.0)
+}
+
+/// The element's 12 x 12 stiffness matrix from its blocks.
+fn element_stiffness(elastic: &TetElastic, geom: &Geometry) -> nalgebra::SMatrix<Real, 12, 12> {
+    let mut k = nalgebra::SMatrix::<Real, 12, 12>::zeros();
+    for i in 0..4 {
+        for j in i..4 {
+            let b = elastic.block(geom, i, j);
+            for r in 0..3 {
+                for c in 0..3 {
+                    k[(3 * i + r, 3 * j + c)] = b.col(c)[r];
+                    k[(3 * j + c, 3 * i + r)] = b.col(c)[r];
+                }
+            }
+        }
+    }
+    k
 }
 
 /// Irons' proven bound over the live tetrahedra (the element values are
