@@ -1099,3 +1099,187 @@ fn a_tool_that_cannot_reach_the_organ_is_named() {
         reaches.report.warnings
     );
 }
+
+/// Builds `text` as a scene file in `dir` (relative files resolve there).
+fn build_in(dir: &std::path::Path, text: &str) -> Result<BuiltScene, SceneError> {
+    let src = SceneSource {
+        name: "vessel.toml".into(),
+        dir: dir.to_path_buf(),
+        text: text.into(),
+    };
+    build_scene(&src, &src.parse()?)
+}
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("hapsim-scene-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+const VESSEL_MATERIAL: &str = "young_fiber_pa = 9000.0\nshear_fiber_pa = 3000.0\n";
+
+#[test]
+fn a_centreline_file_in_the_organs_units_and_frame_marks_what_the_inline_polyline_does() {
+    let dir = scratch("centreline");
+    // The vein of the full scene above, as a segmentation exports it: in
+    // millimetres, in Slicer's markups CSV and as a VTK polyline.
+    std::fs::write(
+        dir.join("vein.fcsv"),
+        "# Markups fiducial file version = 4.11\n# CoordinateSystem = LPS\n# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID\n1,0,10,10,0,0,0,1,1,1,0,F-1,,\n2,30,12,10,0,0,0,1,1,1,0,F-2,,\n3,60,10,12,0,0,0,1,1,1,0,F-3,,\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("vein.vtk"),
+        "# vtk DataFile Version 3.0\nvein\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n0 10 10 30 12 10 60 10 12\nLINES 1 4\n3 0 1 2\n",
+    )
+    .unwrap();
+    let inline = build(&format!(
+        "{BASE}\n[[vessel]]\npoints_m = [[0.0, 0.01, 0.01], [0.03, 0.012, 0.01], [0.06, 0.01, 0.012]]\nradius_m = 0.003\n{VESSEL_MATERIAL}"
+    ))
+    .unwrap();
+    let count = inline.report.vessels[0].1;
+    assert!(count > 10, "{count}");
+    for file in ["vein.fcsv", "vein.vtk"] {
+        let b = build_in(
+            &dir,
+            &format!("{BASE}\n[[vessel]]\nfile = \"{file}\"\nunits = \"mm\"\nradius_m = 0.003\n{VESSEL_MATERIAL}"),
+        )
+        .unwrap();
+        assert_eq!(b.report.vessels[0].1, count, "{file}");
+        // Without `units`: detected (it spans 60 "m"), and said.
+        let b = build_in(
+            &dir,
+            &format!("{BASE}\n[[vessel]]\nfile = \"{file}\"\nradius_m = 0.003\n{VESSEL_MATERIAL}"),
+        )
+        .unwrap();
+        assert_eq!(b.report.vessels[0].1, count, "{file}");
+        assert!(
+            b.report
+                .warnings
+                .iter()
+                .any(|w| w.contains("read as millimetres")),
+            "{:?}",
+            b.report.warnings
+        );
+    }
+    // The organ turned 90 degrees about z and moved: the file follows it,
+    // as the inline points given in the turned frame do.
+    let turned = BASE.replace(
+        "cell_m = 0.005 }",
+        "cell_m = 0.005 }\nrotate_deg = [0.0, 0.0, 90.0]\ntranslate_m = [0.1, 0.0, 0.0]",
+    );
+    let b = build_in(
+        &dir,
+        &format!("{turned}\n[[vessel]]\nfile = \"vein.fcsv\"\nunits = \"mm\"\nradius_m = 0.003\n{VESSEL_MATERIAL}"),
+    )
+    .unwrap();
+    let inline_turned = build(&format!(
+        "{turned}\n[[vessel]]\npoints_m = [[0.09, 0.0, 0.01], [0.088, 0.03, 0.01], [0.09, 0.06, 0.012]]\nradius_m = 0.003\n{VESSEL_MATERIAL}"
+    ))
+    .unwrap();
+    // To a tetrahedron whose centroid sits on the radius (the turn's
+    // rounding, 1e-17 m, decides it).
+    let turned_count = b.report.vessels[0].1;
+    assert!(
+        turned_count.abs_diff(inline_turned.report.vessels[0].1) <= 1,
+        "{turned_count}"
+    );
+    assert!(
+        turned_count.abs_diff(count) <= 1,
+        "the same vessel, turned: {turned_count} vs {count}"
+    );
+    // Faults by file and line; one way to give a vessel.
+    std::fs::write(dir.join("bad.csv"), "x,y,z\n0,10,10\n30,zwölf,10\n").unwrap();
+    let e = build_in(
+        &dir,
+        &format!("{BASE}\n[[vessel]]\nfile = \"bad.csv\"\nradius_m = 0.003\n{VESSEL_MATERIAL}"),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("bad.csv:3") && e.contains("zwölf"), "{e}");
+    let e = build_in(
+        &dir,
+        &format!("{BASE}\n[[vessel]]\nfile = \"vein.vtk\"\npoints_m = [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]]\nradius_m = 0.003\n{VESSEL_MATERIAL}"),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("exactly one"), "{e}");
+    let e = build_in(&dir, &format!("{BASE}\n[[vessel]]\nfile = \"vein.fcsv\"\nunits = \"m\"\nradius_m = 0.003\n{VESSEL_MATERIAL}"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("crosses no tetrahedron") && e.contains("units"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_selected_tube_takes_fibres_along_its_axis_and_a_blob_is_said_unreliable() {
+    // A slab organ of 4 mm cells; the vessel: the tetrahedra in a 12 x 12 mm
+    // bar through its middle, along x, then along y: each fibre follows its
+    // own bar.
+    let organ = r#"
+[mesh]
+generate = { shape = "box", size_m = [0.1, 0.1, 0.03], cell_m = 0.004 }
+
+[material]
+young_pa = 4500.0
+poisson = 0.45
+density_kg_m3 = 1060.0
+"#;
+    for (axis, select) in [
+        (
+            sim_server::math::Vec3::X,
+            "box_m = [[0.0, 0.044, 0.009], [0.1, 0.056, 0.021]]",
+        ),
+        (
+            sim_server::math::Vec3::Y,
+            "box_m = [[0.044, 0.0, 0.009], [0.056, 0.1, 0.021]]",
+        ),
+    ] {
+        let b = build(&format!(
+            "{organ}\n[[vessel]]\nselect = {{ {select} }}\n{VESSEL_MATERIAL}"
+        ))
+        .unwrap();
+        let n = b.report.vessels[0].1;
+        assert!(n > 30, "{n}");
+        let mats = b.model.materials();
+        let aligned = (0..b.model.mesh().tet_count())
+            .map(sim_server::ids::TetId::from)
+            .filter(|t| mats.material(*t).is_anisotropic())
+            .filter(|t| mats.fiber(*t).dot(axis).abs() > 0.95)
+            .count();
+        // The tube's ends see only one side: most, not all, along the axis.
+        assert!(
+            aligned as f64 > 0.9 * n as f64,
+            "{aligned} of {n} along {axis}"
+        );
+        assert!(
+            !b.report.warnings.iter().any(|w| w.contains("tube")),
+            "{:?}",
+            b.report.warnings
+        );
+    }
+    let blob = build(&format!(
+        "{organ}\n[[vessel]]\nselect = {{ sphere_m = [0.05, 0.05, 0.015, 0.012] }}\n{VESSEL_MATERIAL}"
+    ))
+    .unwrap();
+    assert!(
+        blob.report
+            .warnings
+            .iter()
+            .any(|w| w.contains("do not form a tube")),
+        "{:?}",
+        blob.report.warnings
+    );
+    let e = build(&format!(
+        "{organ}\n[[vessel]]\nselect = {{ sphere_m = [0.05, 0.05, 0.015, 0.012] }}\nradius_m = 0.002\n{VESSEL_MATERIAL}"
+    ))
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("its own extent"), "{e}");
+}

@@ -153,6 +153,23 @@ fn a_closed_surface_in_millimetres_becomes_a_checked_organ() {
     assert!(!checked.contains("inverted"), "{checked}");
     let hi = report["bounds_m"][1][0].as_f64().unwrap();
     assert!((hi - 0.05).abs() < 1e-3, "{report}");
+    // The quality pass: reported before and after, and what it reports is
+    // the bound the scene's check finds on the written file (same
+    // material).
+    let before = report["improve"]["before_dt_s"].as_f64().unwrap();
+    let after = report["improve"]["after_dt_s"].as_f64().unwrap();
+    assert!(after >= before, "{report}");
+    let step: f64 = checked
+        .lines()
+        .find_map(|l| l.strip_prefix("stable step: "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{checked}"));
+    assert!(
+        (step / after - 1.0).abs() < 1e-3,
+        "check {step} s, report {after} s"
+    );
+    assert!(said.contains("quality pass"), "{said}");
     // The mesher's quality: no sliver below 5 degrees.
     let line = said
         .lines()
@@ -404,4 +421,63 @@ fn bad_requests_are_refused_with_the_reason_and_a_slow_mesher_is_stopped() {
         "{}",
         text(&r)
     );
+}
+
+/// A closed tube of `radius` from `a` to `b` (along x), `n` sides.
+fn tube(a: f64, b: f64, radius: f64, n: usize) -> Surface {
+    let mut v = vec![[a, 0.0, 0.0], [b, 0.0, 0.0]];
+    let mut f = Vec::new();
+    for i in 0..n {
+        let t = std::f64::consts::TAU * i as f64 / n as f64;
+        v.push([a, radius * t.cos(), radius * t.sin()]);
+        v.push([b, radius * t.cos(), radius * t.sin()]);
+    }
+    for i in 0..n {
+        let j = (i + 1) % n;
+        let (a0, b0, a1, b1) = (2 + 2 * i, 3 + 2 * i, 2 + 2 * j, 3 + 2 * j);
+        f.push([0, a1, a0]);
+        f.push([1, b0, b1]);
+        f.push([a0, a1, b1]);
+        f.push([a0, b1, b0]);
+    }
+    (v, f)
+}
+
+#[test]
+fn a_vessel_surface_meshed_with_the_organ_sets_its_fibres_along_it() {
+    let dir = scratch_dir("mesher-vessel");
+    let organ = dir.join("organ.obj");
+    let vessel = dir.join("vessel.obj");
+    write_obj(&organ, &[sphere([0.0; 3], 0.05, 16)]);
+    // A 16 mm-wide vessel along x across most of the organ.
+    write_obj(&vessel, &[tube(-0.035, 0.035, 0.008, 16)]);
+    let out = dir.join("vessel.vtu");
+    let json = dir.join("vessel.json");
+    let o = mesh(&[
+        organ.to_str().unwrap(),
+        vessel.to_str().unwrap(),
+        "--cell-m",
+        "0.006",
+        "--units",
+        "m",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let report = read_json(&json);
+    let tagged = report["tags"]["2"].as_u64().unwrap();
+    assert!(tagged > 50, "{report}");
+    let said = check_scene(
+        &dir,
+        &out,
+        "[[vessel]]\nname = \"portal\"\nselect = { physical = 2 }\nyoung_fiber_pa = 9000.0\nshear_fiber_pa = 3000.0\n\n",
+    );
+    let line = said
+        .lines()
+        .find(|l| l.contains("vessel portal"))
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!(line.contains(&format!("{tagged} tetrahedra")), "{line}");
+    assert!(!said.contains("do not form a tube"), "{said}");
 }

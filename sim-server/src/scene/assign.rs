@@ -3,9 +3,8 @@
 //! each checked at its own line.
 
 use super::materials::resolve;
-use super::ranges;
-use super::report::{SceneReport, positive};
-use super::select::{Region, Tags, distance_to_segment, segment_crosses_tet};
+use super::report::SceneReport;
+use super::select::{Region, Tags};
 use super::spec::{MaterialKeys, SceneSpec};
 use super::{SceneError, SceneSource};
 use crate::ids::TetId;
@@ -53,19 +52,19 @@ pub(super) fn tet_materials(
         fiber: default_fiber,
     };
     regions(src, spec, mesh, physical, &defaults, &mut mats, report)?;
-    vessels(src, spec, mesh, &defaults, &mut mats, report)?;
+    super::vessel::vessels(src, spec, mesh, physical, &defaults, &mut mats, report)?;
     Ok(mats)
 }
 
 /// The `[material]` table's keys and fibre, which regions and vessels
 /// inherit.
-struct Defaults<'s> {
-    keys: MaterialKeys<'s>,
-    fiber: Option<Vec3>,
+pub(super) struct Defaults<'s> {
+    pub(super) keys: MaterialKeys<'s>,
+    pub(super) fiber: Option<Vec3>,
 }
 
 /// The error for a material past the 65,535 a map can hold.
-fn too_many(src: &SceneSource, span: Range<usize>) -> SceneError {
+pub(super) fn too_many(src: &SceneSource, span: Range<usize>) -> SceneError {
     src.error(span, "too many distinct materials (at most 65535)")
 }
 
@@ -106,85 +105,6 @@ fn regions(
             }
         }
         report.regions.push((name, tets.len(), describe(&material)));
-    }
-    Ok(())
-}
-
-/// The `[[vessel]]`s: every tetrahedron a vessel's polyline crosses, or
-/// whose centroid is within its radius, gets its material and a fibre
-/// along the nearest segment.
-fn vessels(
-    src: &SceneSource,
-    spec: &SceneSpec,
-    mesh: &TetMesh,
-    defaults: &Defaults,
-    mats: &mut TetMaterials,
-    report: &mut SceneReport,
-) -> Result<(), SceneError> {
-    let n_tets = mesh.tet_count();
-    for (i, vessel) in spec.vessel.iter().enumerate() {
-        let v = vessel.get_ref();
-        let name = v
-            .name
-            .clone()
-            .unwrap_or_else(|| format!("vessel {}", i + 1));
-        let what = format!("[[vessel]] {name:?}");
-        let points: Vec<Vec3> = v
-            .points_m
-            .get_ref()
-            .iter()
-            .map(|p| Vec3::from_array(*p))
-            .collect();
-        // A segment's length must itself be finite and non-zero (points of
-        // 1e300 m are finite, their distance is not).
-        let usable = |w: &[Vec3]| {
-            let len = (w[1] - w[0]).length();
-            len.is_finite() && len > 0.0
-        };
-        if points.len() < 2
-            || points.iter().any(|p| !p.is_finite())
-            || !points.windows(2).all(usable)
-        {
-            return Err(src.error(
-                v.points_m.span(),
-                format!(
-                    "{what}: points_m needs at least two distinct finite points per segment, each segment of finite length"
-                ),
-            ));
-        }
-        let radius = positive(src, &v.radius_m, &format!("{what} radius_m"))?;
-        ranges::VESSEL_RADIUS_M.check(src, &v.radius_m, &what, report)?;
-        let keys = v.material_keys().over(defaults.keys);
-        let material = resolve(src, &keys, true, vessel.span(), &what, report)?;
-        let id = mats
-            .add(material)
-            .map_err(|_| too_many(src, vessel.span()))?;
-        let mut count = 0;
-        for t in (0..n_tets).map(TetId::from) {
-            let p = mesh.tet_points(t);
-            let centroid = (p[0] + p[1] + p[2] + p[3]) / 4.0;
-            // The closest crossing segment gives the direction.
-            let best = points
-                .windows(2)
-                .filter(|w| {
-                    segment_crosses_tet(w[0], w[1], p)
-                        || distance_to_segment(centroid, w[0], w[1]) <= radius
-                })
-                .min_by(|a, b| {
-                    distance_to_segment(centroid, a[0], a[1])
-                        .total_cmp(&distance_to_segment(centroid, b[0], b[1]))
-                });
-            if let Some(w) = best {
-                mats.assign(t, id).expect("tet in range");
-                mats.set_fiber(t, w[1] - w[0])
-                    .map_err(|e| src.error(v.points_m.span(), format!("{what}: points_m: {e}")))?;
-                count += 1;
-            }
-        }
-        if count == 0 {
-            return Err(src.error(v.points_m.span(), format!("{what} crosses no tetrahedron")));
-        }
-        report.vessels.push((name, count));
     }
     Ok(())
 }

@@ -35,16 +35,15 @@ fn mesh_scale(src: &SceneSource, m: &super::spec::MeshSpec) -> Result<Option<Rea
     }
 }
 
-/// `mesh` rotated by `rotate_deg` (x, then y, then z, fixed axes) and
-/// moved by `translate_m` (a rotation keeps every tetrahedron's
-/// orientation, so the mesh stays valid).
-fn placed(
+/// The `[mesh]` placement as a rotation then a shift: `rotate_deg` (x,
+/// then y, then z, fixed axes) and `translate_m`; `None` when neither is
+/// given. Centreline files of the same segmentation are placed by it too.
+pub(super) fn placement(
     src: &SceneSource,
     m: &super::spec::MeshSpec,
-    mesh: TetMesh,
-) -> Result<TetMesh, SceneError> {
+) -> Result<Option<(glam::DMat3, Vec3)>, SceneError> {
     if m.rotate_deg.is_none() && m.translate_m.is_none() {
-        return Ok(mesh);
+        return Ok(None);
     }
     let finite = |s: &toml::Spanned<[f64; 3]>, what: &str| {
         if s.get_ref().iter().all(|x| x.is_finite()) {
@@ -76,7 +75,19 @@ fn placed(
     let rot = glam::DMat3::from_rotation_z(r[2].to_radians())
         * glam::DMat3::from_rotation_y(r[1].to_radians())
         * glam::DMat3::from_rotation_x(r[0].to_radians());
-    let shift = Vec3::from_array(t);
+    Ok(Some((rot, Vec3::from_array(t))))
+}
+
+/// `mesh` placed by [`placement`] (a rotation keeps every tetrahedron's
+/// orientation, so the mesh stays valid).
+fn placed(
+    src: &SceneSource,
+    m: &super::spec::MeshSpec,
+    mesh: TetMesh,
+) -> Result<TetMesh, SceneError> {
+    let Some((rot, shift)) = placement(src, m)? else {
+        return Ok(mesh);
+    };
     let span = m
         .rotate_deg
         .as_ref()

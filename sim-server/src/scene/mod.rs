@@ -6,6 +6,7 @@
 
 mod assign;
 mod build;
+mod centreline;
 mod loads;
 mod materials;
 mod mesh_load;
@@ -17,6 +18,7 @@ mod select;
 mod settings;
 pub mod spec;
 mod tool_decls;
+mod vessel;
 
 pub use build::{BuiltScene, ToolDecl, build_scene};
 pub use report::SceneReport;

@@ -316,16 +316,26 @@ with_material_keys!(
 );
 
 with_material_keys!(
-    /// `[[vessel]]`: a polyline; tetrahedra crossed by a segment (or with
-    /// their centroid within `radius_m` of it) become transversally
-    /// isotropic along the segment.
+    /// `[[vessel]]`: tetrahedra made transversally isotropic along a
+    /// vessel, given as exactly one of a polyline (`points_m`), a
+    /// centreline file (`file`) or a region (`select`, e.g. the physical
+    /// tag `sim-server mesh` gives an inner surface).
     VesselSpec {
         /// A name for reports.
         name: Option<String>,
-        /// The polyline's points (m), at least two.
-        points_m: Spanned<Vec<[f64; 3]>>,
-        /// Radius (m) around the segments.
-        radius_m: Spanned<f64>,
+        /// The polyline's points (m, the scene's frame), at least two.
+        points_m: Option<Spanned<Vec<[f64; 3]>>>,
+        /// A centreline file (.csv, .fcsv, .txt, .vtk), relative to the
+        /// scene, in the organ's frame: placed by `[mesh] rotate_deg` and
+        /// `translate_m` as the organ is.
+        file: Option<Spanned<String>>,
+        /// The file's units, "m", "cm" or "mm" (default: `[mesh] units`,
+        /// else millimetres when it spans more than 5 "m").
+        units: Option<Spanned<String>>,
+        /// The vessel's tetrahedra; each fibre along the region's local axis.
+        select: Option<Spanned<Selection>>,
+        /// Radius (m) around a polyline's segments.
+        radius_m: Option<Spanned<f64>>,
     }
 );
 
