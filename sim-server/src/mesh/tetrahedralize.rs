@@ -14,9 +14,13 @@
 //! reported before it runs. Why not the others: TetGen is AGPL (not as a
 //! linked dependency) and needs a clean, closed, non-intersecting input;
 //! Gmsh (GPL, usable as a process), measured on the same surfaces
-//! (docs/guide/own-organ.md), was faster on a clean organ with a larger
-//! worst-element step, but gave no mesh for a holed sphere and refused two
-//! overlapping ones.
+//! (docs/guide/own-organ.md), was faster on a clean organ, but gave no mesh
+//! for a holed sphere and refused two overlapping ones.
+//!
+//! fTetWild's result is then improved for the explicit step by
+//! [`crate::mesh::improve`] (its worst elements' vertices moved, Irons'
+//! element bound as the objective) and written by sim-server's own writers
+//! in the format asked for, the tags kept.
 //!
 //! Several surfaces: the first is the organ, each later one (a vessel, a
 //! tumour) becomes a physical tag (2, 3, ...) on the tetrahedra whose
