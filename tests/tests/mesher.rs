@@ -213,6 +213,18 @@ fn a_holed_surface_is_meshed_and_its_hole_located_and_overlaps_are_meshed_as_one
     );
     let checked = check_scene(&dir, &out, "");
     assert!(checked.contains("1 component(s)"), "one volume: {checked}");
+    // A self-intersecting shell: the north pole pulled down through the
+    // ball to 70 mm below its centre, its fan of triangles crossing the
+    // rest (a segmentation's spike folded through): meshed all the same.
+    let (mut v, f) = sphere([0.0; 3], 0.05, 16);
+    v[0] = [0.0, 0.0, -0.07];
+    let folded = dir.join("folded.obj");
+    write_obj(&folded, &[(v, f)]);
+    let out = dir.join("folded.msh");
+    let (report, _) = mesh_ok(&folded, &out, &["--units", "m"]);
+    assert!(report["tets"].as_u64().unwrap() > 300, "{report}");
+    let checked = check_scene(&dir, &out, "");
+    assert!(!checked.contains("inverted"), "{checked}");
 }
 
 #[test]
