@@ -92,21 +92,32 @@ fn text(o: &Output) -> String {
 
 /// Meshes `surface` at 20 mm into `out`, expecting success; the report.
 fn mesh_ok(surface: &Path, out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
+    mesh_all(&[surface], "0.02", out, extra)
+}
+
+/// `sim-server mesh SURFACES --cell-m CELL --out OUT --json` (plus
+/// `extra`), which must succeed: its report and output.
+fn mesh_all(
+    surfaces: &[&Path],
+    cell_m: &str,
+    out: &Path,
+    extra: &[&str],
+) -> (serde_json::Value, String) {
     let json = out.with_extension("json");
-    let o = mesh(
-        &[
-            surface.to_str().unwrap(),
+    let args: Vec<&str> = surfaces
+        .iter()
+        .map(|s| s.to_str().unwrap())
+        .chain([
             "--cell-m",
-            "0.02",
+            cell_m,
             "--out",
             out.to_str().unwrap(),
             "--json",
             json.to_str().unwrap(),
-        ]
-        .into_iter()
+        ])
         .chain(extra.iter().copied())
-        .collect::<Vec<_>>(),
-    );
+        .collect();
+    let o = mesh(&args);
     assert!(o.status.success(), "{}", text(&o));
     (read_json(&json), text(&o))
 }
@@ -236,21 +247,7 @@ fn an_inner_surface_becomes_a_physical_tag_a_scene_region_selects() {
     // A 20 mm tumour off centre: 6.4% of the organ's volume.
     write_obj(&tumour, &[sphere([0.015, 0.0, 0.0], 0.02, 12)]);
     let out = dir.join("tagged.msh");
-    let json = dir.join("tagged.json");
-    let o = mesh(&[
-        organ.to_str().unwrap(),
-        tumour.to_str().unwrap(),
-        "--cell-m",
-        "0.012",
-        "--units",
-        "m",
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let report = read_json(&json);
+    let (report, said_mesh) = mesh_all(&[&organ, &tumour], "0.012", &out, &["--units", "m"]);
     let two = report["tags"]["2"].as_u64().unwrap() as f64;
     // The tagged tetrahedra fill the tumour: their volume is its enclosed
     // volume (the surface's, from the report) to within the cells'
@@ -261,7 +258,7 @@ fn an_inner_surface_becomes_a_physical_tag_a_scene_region_selects() {
         (tagged / enclosed - 1.0).abs() < 0.15,
         "tagged {tagged} m3 against the tumour's {enclosed} m3: {report}"
     );
-    assert!(text(&o).contains("2 ("), "{}", text(&o));
+    assert!(said_mesh.contains("2 ("), "{said_mesh}");
     // A scene gives the tumour its own stiffness by the tag.
     let said = check_scene(
         &dir,
@@ -464,21 +461,7 @@ fn a_vessel_surface_meshed_with_the_organ_sets_its_fibres_along_it() {
     // A 16 mm-wide vessel along x across most of the organ.
     write_obj(&vessel, &[tube(-0.035, 0.035, 0.008, 16)]);
     let out = dir.join("vessel.vtu");
-    let json = dir.join("vessel.json");
-    let o = mesh(&[
-        organ.to_str().unwrap(),
-        vessel.to_str().unwrap(),
-        "--cell-m",
-        "0.006",
-        "--units",
-        "m",
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let report = read_json(&json);
+    let (report, _) = mesh_all(&[&organ, &vessel], "0.006", &out, &["--units", "m"]);
     let tagged = report["tags"]["2"].as_u64().unwrap();
     assert!(tagged > 50, "{report}");
     let said = check_scene(

@@ -401,20 +401,17 @@ fn finish(
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("msh") => write_msh(&req.out, &positions, tets_v, tags)?,
-        Some("vtu") => write_vtu(
-            &req.out,
-            &positions,
-            tets_v,
-            &[],
-            &[("physical", DataArray::Ids(&tags_u))],
-        )?,
-        Some("vtk") => write_vtk(
-            &req.out,
-            &positions,
-            tets_v,
-            &[],
-            &[("physical", DataArray::Ids(&tags_u))],
-        )?,
+        Some(e @ ("vtu" | "vtk")) => {
+            // The same arrays either way: the tags as cell data `physical`.
+            let write = if e == "vtu" { write_vtu } else { write_vtk };
+            write(
+                &req.out,
+                &positions,
+                tets_v,
+                &[],
+                &[("physical", DataArray::Ids(&tags_u))],
+            )?
+        }
         _ => write_medit(&req.out, &positions, tets_v, tags)?,
     }
     Ok(())
