@@ -471,7 +471,7 @@ fn a_vessel_surface_meshed_with_the_organ_sets_its_fibres_along_it() {
     );
     let line = said
         .lines()
-        .find(|l| l.contains("vessel portal"))
+        .find(|l| l.contains("[[vessel]] \"portal\""))
         .unwrap_or_else(|| panic!("{said}"));
     assert!(line.contains(&format!("{tagged} tetrahedra")), "{line}");
     assert!(!said.contains("do not form a tube"), "{said}");

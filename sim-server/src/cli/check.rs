@@ -190,7 +190,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     }
     for f in &r.refined {
         println!(
-            "refine {}: cells up to {:.3} mm, {} -> {} tetrahedra{}",
+            "[[refine]] {:?}: cells up to {:.3} mm, {} -> {} tetrahedra{}",
             f.name,
             f.cell_m * 1e3,
             f.tets_before,
@@ -207,10 +207,13 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     println!("materials:");
     println!("  default: {}", r.default_material);
     for (region, tets, m) in &r.regions {
-        println!("  region {region}: {tets} tetrahedra: {m}");
+        // Named as the scene's messages name them: `[[region]] "liver"`.
+        println!("  [[region]] {region:?}: {tets} tetrahedra: {m}");
     }
     for (vessel, tets) in &r.vessels {
-        println!("  vessel {vessel}: {tets} tetrahedra made transversally isotropic along it");
+        println!(
+            "  [[vessel]] {vessel:?}: {tets} tetrahedra made transversally isotropic along it"
+        );
     }
     let element = element_bound(model);
     let power = power_iteration(model, 1e-6, 2000);

@@ -653,4 +653,44 @@ mod tests {
             "a test that cannot fail"
         );
     }
+
+    #[test]
+    fn a_flat_element_a_reader_would_refuse_is_opened() {
+        // The doc example's cube with its inner vertex 1e-13 m off the
+        // bottom face: two elements of relative volume 1e-13.
+        let mut p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(1.0, 0.0, 1.0),
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(0.0, 1.0, 1.0),
+            Vec3::new(0.4, 0.6, 1e-13),
+        ];
+        let faces = [
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let tets: Vec<[u32; 4]> = faces.iter().map(|f| [f[0], f[2], f[1], 8]).collect();
+        assert!(
+            TetMesh::new(p.clone(), tets.clone()).is_err(),
+            "the reader's check"
+        );
+        let material = Material::isotropic(4500.0, 0.45, 1060.0, 0.0).unwrap();
+        let r = improve_for_step(&mut p, &tets, &[], &material, &ImproveOptions::default());
+        assert!(TetMesh::new(p.clone(), tets.clone()).is_ok(), "{r:?}");
+        assert!(r.after_dt_s > 1e3 * r.before_dt_s, "{r:?}");
+    }
 }

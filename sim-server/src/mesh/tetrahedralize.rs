@@ -341,7 +341,7 @@ fn run_worker(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
     // `__tracked_surface.stl` in its working directory): paths absolute.
     let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
     let scratch = Scratch::new()?;
-    let raw = scratch.0.join("raw.mesh");
+    let raw = scratch.0.join("raw.bin");
     let args = serde_json::json!({
         "surfaces": req.surfaces.iter().map(|p| abs(p).display().to_string()).collect::<Vec<_>>(),
         "scale": scale,
@@ -367,11 +367,12 @@ fn finish(
     req: &MeshRequest,
     report: &mut MeshReport,
 ) -> Result<(), TetrahedralizeError> {
-    use crate::mesh::io::{DataArray, read_mesh, write_medit, write_msh, write_vtk, write_vtu};
-    let imported = read_mesh(raw)?;
-    let mut positions = imported.mesh.positions_m().to_vec();
-    let tets_v = imported.mesh.tets();
-    let tets: Vec<[u32; 4]> = tets_v.iter().map(|t| t.map(|v| v.0)).collect();
+    use crate::mesh::io::{DataArray, write_medit, write_msh, write_vtk, write_vtu};
+    let Raw {
+        mut positions,
+        tets,
+        tags,
+    } = read_raw(raw)?;
     if req.improve {
         let (e, nu, rho) = REFERENCE_MATERIAL;
         let material = crate::material::Material::isotropic(e, nu, rho, 0.0)
@@ -379,19 +380,27 @@ fn finish(
         report.improve = Some(improve_for_step(
             &mut positions,
             &tets,
-            &imported.tet_physical,
+            &tags,
             &material,
             &ImproveOptions::default(),
         ));
     }
-    let tags = &imported.tet_physical;
+    // What a reader would refuse is refused here, before any file exists.
+    let mesh = crate::mesh::TetMesh::new(positions.clone(), tets).map_err(|e| {
+        TetrahedralizeError::Failed(if req.improve {
+            format!("fTetWild's mesh keeps a degenerate element after the quality pass ({e}): try another --cell-m")
+        } else {
+            format!("fTetWild's mesh has a degenerate element ({e}): leave out --no-improve (the quality pass opens such elements) or try another --cell-m")
+        })
+    })?;
+    let tets_v = mesh.tets();
+    let tags = &tags;
     // Measured again on the moved vertices (a tag with no tetrahedron
     // keeps its 0).
     report.tag_volumes_m3.values_mut().for_each(|v| *v = 0.0);
-    for (t, tag) in tets.iter().zip(tags) {
-        let p = t.map(|v| positions[v as usize]);
+    for (t, tag) in tags.iter().enumerate() {
         *report.tag_volumes_m3.entry(tag.to_string()).or_default() +=
-            crate::math::tet_signed_volume(p[0], p[1], p[2], p[3]);
+            mesh.tet_volume_m3(crate::ids::TetId::from(t));
     }
     let tags_u: Vec<u32> = tags.iter().map(|&t| t.max(0) as u32).collect();
     let ext = req
@@ -415,6 +424,65 @@ fn finish(
         _ => write_medit(&req.out, &positions, tets_v, tags)?,
     }
     Ok(())
+}
+
+/// The worker's result: positions (m), tetrahedra (oriented), tags.
+struct Raw {
+    positions: Vec<crate::math::Vec3>,
+    tets: Vec<[u32; 4]>,
+    tags: Vec<i32>,
+}
+
+/// Reads the worker's `HAPRAW1` file, every count and index checked.
+fn read_raw(path: &Path) -> Result<Raw, TetrahedralizeError> {
+    let bad = |m: String| TetrahedralizeError::Failed(format!("{}: {m}", path.display()));
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let word = |i: usize| -> [u8; 8] {
+        bytes
+            .get(i..i + 8)
+            .and_then(|b| b.try_into().ok())
+            .unwrap_or([0; 8])
+    };
+    if bytes.get(..8) != Some(b"HAPRAW1\n".as_slice()) {
+        return Err(bad("not the worker's output".into()));
+    }
+    let (nv, nt) = (u64::from_le_bytes(word(8)), u64::from_le_bytes(word(16)));
+    let expected = (nv as u128) * 24 + (nt as u128) * 40 + 24;
+    if expected != bytes.len() as u128 || nt as usize > MAX_TETS * 2 {
+        return Err(bad(format!(
+            "{} bytes for {nv} vertices and {nt} tetrahedra",
+            bytes.len()
+        )));
+    }
+    let (nv, nt) = (nv as usize, nt as usize);
+    let f = |i: usize| f64::from_le_bytes(word(i));
+    let int = |i: usize| i64::from_le_bytes(word(i));
+    let positions: Vec<crate::math::Vec3> = (0..nv)
+        .map(|k| crate::math::Vec3::new(f(24 + 24 * k), f(32 + 24 * k), f(40 + 24 * k)))
+        .collect();
+    let at = 24 + 24 * nv;
+    let tets = (0..nt)
+        .map(|k| {
+            let mut t = [0u32; 4];
+            for (j, v) in t.iter_mut().enumerate() {
+                let i = int(at + 32 * k + 8 * j);
+                *v = u32::try_from(i)
+                    .ok()
+                    .filter(|&i| (i as usize) < nv)
+                    .ok_or_else(|| bad(format!("tetrahedron {k} has vertex {i} of {nv}")))?;
+            }
+            Ok(t)
+        })
+        .collect::<Result<Vec<_>, TetrahedralizeError>>()?;
+    let at = at + 32 * nt;
+    let tags = (0..nt)
+        .map(|k| i32::try_from(int(at + 8 * k)).unwrap_or(0))
+        .collect();
+    Ok(Raw {
+        positions,
+        tets,
+        tags,
+    })
 }
 
 /// A scratch directory for one worker, removed when dropped.

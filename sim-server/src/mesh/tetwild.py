@@ -209,11 +209,16 @@ def main():
         tags[inside] = k
     a, b, c, d = (v[tets[:, k]] for k in range(4))
     vols = np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
-    # medit with the tags as references, into the scratch directory:
-    # sim-server runs its quality pass on it and writes the format asked for.
-    import meshio
-    meshio.write(req["out"], meshio.Mesh(v, [("tetra", tets.astype(np.int64))],
-                                         cell_data={"medit:ref": [tags]}), file_format="medit")
+    # Raw arrays into the scratch directory (little-endian: counts, f64
+    # positions, i64 tetrahedra, i64 tags): sim-server runs its quality
+    # pass on them, which also opens the near-flat elements fTetWild
+    # sometimes leaves (a file reader would refuse those), then writes the
+    # format asked for.
+    with open(req["out"], "wb") as f:
+        f.write(b"HAPRAW1\n" + np.array([len(v), len(tets)], dtype="<u8").tobytes())
+        f.write(np.ascontiguousarray(v, dtype="<f8").tobytes())
+        f.write(np.ascontiguousarray(tets, dtype="<i8").tobytes())
+        f.write(np.ascontiguousarray(tags, dtype="<i8").tobytes())
     print(json.dumps({"inputs": per_file, "edge_length_m": edge, "vertices": int(len(v)),
                       "tets": int(len(tets)), "seconds": seconds, "envelope_m": envelope,
                       "tags": {str(k): int((tags == k).sum()) for k in range(1, len(shells) + 1)},
