@@ -150,18 +150,10 @@ fn scene_source(path: Option<&Path>) -> Result<SceneSource> {
 /// time and counter are set when it is delivered).
 pub(crate) type Sample = ForceSample;
 
-/// Tool 0's force (and contact state) for each pose the loop gives, the
-/// simulation stepped `dt_s` after each, in `substep_factor` times the
-/// sub-steps stability needs; and the most sub-steps a step used.
-fn simulate(
-    src: &SceneSource,
-    dt_s: f64,
-    substep_factor: usize,
-    poses: impl Iterator<Item = ([f64; 3], f64)>,
-    steps: usize,
-    bar: &ProgressBar,
-    mut local: Option<&mut LocalRender>,
-) -> Result<(Vec<Sample>, usize)> {
+/// The scene built and checked for this bench: a tool, the tensor-mass
+/// backend. Run once before the truth, so that a scene it cannot measure
+/// is refused as such, not as a failure of the ground truth.
+fn checked_scene(src: &SceneSource) -> Result<sim_server::scene::BuiltScene> {
     let scene = build_scene(src, &src.parse()?)?;
     anyhow::ensure!(
         !scene.tools.is_empty(),
@@ -177,6 +169,22 @@ fn simulate(
         src.name,
         scene.settings.backend.as_str()
     );
+    Ok(scene)
+}
+
+/// Tool 0's force (and contact state) for each pose the loop gives, the
+/// simulation stepped `dt_s` after each, in `substep_factor` times the
+/// sub-steps stability needs; and the most sub-steps a step used.
+fn simulate(
+    src: &SceneSource,
+    dt_s: f64,
+    substep_factor: usize,
+    poses: impl Iterator<Item = ([f64; 3], f64)>,
+    steps: usize,
+    bar: &ProgressBar,
+    mut local: Option<&mut LocalRender>,
+) -> Result<(Vec<Sample>, usize)> {
+    let scene = checked_scene(src)?;
     let mut p = prepare::<f64>(scene, Some(dt_s))?;
     p.sim.set_substep_factor(substep_factor);
     // Offline: the stiffness of every sample exact, and the results
@@ -438,6 +446,7 @@ pub fn run(args: &Args) -> Result<()> {
     let (h, s) = (1.0 / args.haptic_rate, 1.0 / args.sim_rate);
     let ticks = (duration / h).floor() as usize;
     let sim_steps = (duration / s).ceil() as usize + 1;
+    checked_scene(&src)?;
     let b = bar(ticks, "truth");
     let haptic_poses = || (0..).map(|k| traj.sample(k as f64 * h));
     let (truth, truth_substeps) =

@@ -522,6 +522,8 @@ fn hapbench_extrapolation_refuses_runs_no_memory_holds_and_other_backends() {
             !out.status.success() && err.contains(needle),
             "{args:?}: {err}"
         );
+        // Refused as the scene or the request, not as a failed truth.
+        assert!(!err.contains("ground truth"), "{args:?}: {err}");
     }
 }
 
