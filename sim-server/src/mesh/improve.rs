@@ -42,6 +42,7 @@
 use crate::material::Material;
 use crate::math::{Real, Vec3, tet_signed_volume};
 use crate::mesh::TET_FACES;
+use crate::mesh::quality::face_key;
 use crate::tensor_mass::stability::isolated_element_lambda;
 use crate::tensor_mass::{Geometry, TetElastic};
 use serde::{Deserialize, Serialize};
@@ -205,6 +206,17 @@ impl<'a> Pass<'a> {
         &self.incident[self.start[v]..self.start[v + 1]]
     }
 
+    /// The shortest distance from `v` to another vertex of its elements
+    /// (infinite when it has none): the scale of its moves.
+    fn shortest_edge(&self, positions: &[Vec3], v: usize) -> Real {
+        self.incident(v)
+            .iter()
+            .flat_map(|&t| self.tets[t as usize])
+            .map(|w| (positions[w as usize] - positions[v]).length())
+            .filter(|l| *l > 0.0)
+            .fold(Real::INFINITY, Real::min)
+    }
+
     /// Element `t`'s own stable step, with vertex `moved.0` at `moved.1`;
     /// 0 when that inverts or flattens it.
     fn element_dt(&self, positions: &[Vec3], t: usize, moved: Option<(usize, Vec3)>) -> Real {
@@ -326,13 +338,7 @@ impl<'a> Pass<'a> {
         if self.freedom[v] == Freedom::Fixed || self.incident(v).is_empty() {
             return false;
         }
-        let scale = self
-            .incident(v)
-            .iter()
-            .flat_map(|&t| self.tets[t as usize])
-            .map(|w| (positions[w as usize] - positions[v]).length())
-            .filter(|l| *l > 0.0)
-            .fold(Real::INFINITY, Real::min);
+        let scale = self.shortest_edge(positions, v);
         if !scale.is_finite() {
             return false;
         }
@@ -436,10 +442,9 @@ fn surface_freedom(
     let tag = |t: usize| tags.get(t).copied().unwrap_or(0);
     let mut faces: HashMap<[u32; 3], Face> = HashMap::with_capacity(tets.len() * 2);
     for (i, t) in tets.iter().enumerate() {
-        for f in TET_FACES {
-            let oriented = [t[f[0]], t[f[1]], t[f[2]]];
-            let mut key = oriented;
-            key.sort_unstable();
+        for (k, f) in TET_FACES.iter().enumerate() {
+            let oriented = f.map(|j| t[j]);
+            let key = face_key(t, k);
             let face = faces.entry(key).or_insert(Face {
                 count: 0,
                 interface: false,
@@ -479,13 +484,7 @@ fn surface_freedom(
             if !flat {
                 return Freedom::Fixed;
             }
-            let shortest = pass
-                .incident(v)
-                .iter()
-                .flat_map(|&t| tets[t as usize])
-                .map(|w| (positions[w as usize] - positions[v]).length())
-                .filter(|l| *l > 0.0)
-                .fold(Real::INFINITY, Real::min);
+            let shortest = pass.shortest_edge(positions, v);
             Freedom::Tangent {
                 normal: mean,
                 origin: positions[v],

@@ -326,8 +326,8 @@ fn check_request(req: &MeshRequest) -> Result<(), TetrahedralizeError> {
 }
 
 /// One worker run: reads the surfaces (detecting millimetres when `units`
-/// is not given), meshes into a scratch medit file, reports; then the
-/// quality pass and the output in the format asked for.
+/// is not given), meshes into a scratch file of raw arrays, reports; then
+/// the quality pass and the output in the format asked for.
 fn run_worker(req: &MeshRequest) -> Result<MeshReport, TetrahedralizeError> {
     let scale = req.units.map(|u| match u {
         Units::Mm => 1e-3,
@@ -386,15 +386,14 @@ fn finish(
         ));
     }
     // What a reader would refuse is refused here, before any file exists.
-    let mesh = crate::mesh::TetMesh::new(positions.clone(), tets).map_err(|e| {
+    let mesh = crate::mesh::TetMesh::new(positions, tets).map_err(|e| {
         TetrahedralizeError::Failed(if req.improve {
             format!("fTetWild's mesh keeps a degenerate element after the quality pass ({e}): try another --cell-m")
         } else {
             format!("fTetWild's mesh has a degenerate element ({e}): leave out --no-improve (the quality pass opens such elements) or try another --cell-m")
         })
     })?;
-    let tets_v = mesh.tets();
-    let tags = &tags;
+    let (positions, tets_v, tags) = (mesh.positions_m(), mesh.tets(), &tags);
     // Measured again on the moved vertices (a tag with no tetrahedron
     // keeps its 0).
     report.tag_volumes_m3.values_mut().for_each(|v| *v = 0.0);
@@ -409,19 +408,19 @@ fn finish(
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     match ext.as_deref() {
-        Some("msh") => write_msh(&req.out, &positions, tets_v, tags)?,
+        Some("msh") => write_msh(&req.out, positions, tets_v, tags)?,
         Some(e @ ("vtu" | "vtk")) => {
             // The same arrays either way: the tags as cell data `physical`.
             let write = if e == "vtu" { write_vtu } else { write_vtk };
             write(
                 &req.out,
-                &positions,
+                positions,
                 tets_v,
                 &[],
                 &[("physical", DataArray::Ids(&tags_u))],
             )?
         }
-        _ => write_medit(&req.out, &positions, tets_v, tags)?,
+        _ => write_medit(&req.out, positions, tets_v, tags)?,
     }
     Ok(())
 }

@@ -22,8 +22,9 @@ use super::{SceneError, SceneSource};
 use crate::ids::TetId;
 use crate::material_map::TetMaterials;
 use crate::math::{Real, Vec3};
+use crate::mesh::TetMesh;
+use crate::mesh::quality::face_key;
 use crate::mesh::tetrahedralize::MM_DETECT_EXTENT;
-use crate::mesh::{TET_FACES, TetMesh};
 use std::collections::HashMap;
 
 /// Below this mean ratio of the first to the second principal extent, a
@@ -247,11 +248,9 @@ fn region_axes(mesh: &TetMesh, tets: &[TetId]) -> (Vec<(TetId, Vec3)>, Real) {
     // The region's boundary area: faces of one region tetrahedron only.
     let mut faces: HashMap<[u32; 3], u8> = HashMap::with_capacity(tets.len() * 3);
     for &t in tets {
-        let tet = mesh.tets()[t.idx()];
-        for f in TET_FACES {
-            let mut k = [tet[f[0]].0, tet[f[1]].0, tet[f[2]].0];
-            k.sort_unstable();
-            *faces.entry(k).or_default() += 1;
+        let tet = mesh.tets()[t.idx()].map(|v| v.0);
+        for k in 0..4 {
+            *faces.entry(face_key(&tet, k)).or_default() += 1;
         }
     }
     let pos = mesh.positions_m();

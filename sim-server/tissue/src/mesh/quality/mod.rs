@@ -113,7 +113,7 @@ pub fn aspect_ratio(p: [Vec3; 4]) -> Real {
 
 /// Face `k` of `tet` with its vertices sorted: the key that identifies a face
 /// independently of which tetrahedron lists it.
-pub(crate) fn face_key(tet: &[u32; 4], k: usize) -> [u32; 3] {
+pub fn face_key(tet: &[u32; 4], k: usize) -> [u32; 3] {
     let mut f = TET_FACES[k].map(|i| tet[i]);
     f.sort_unstable();
     f
