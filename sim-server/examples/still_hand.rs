@@ -11,7 +11,7 @@
 //!     [--radius-m 0.0025] [--depth-m 0.015] [--at-m 0.05,0.02] \
 //!     [--model linear|corotational] [--hold-s 1.5] \
 //!     [--refine-cell-m 0.0025 --refine-radius-m 0.0125] [--corotational-radius-m 0.02] \
-//!     [--follow-radius-m 0.012] [--slide-m 0.01] [--multirate true]
+//!     [--follow-radius-m 0.012] [--tool-refine-radius-m 0.0125] [--slide-m 0.01] [--multirate true]
 //! ```
 //!
 //! The box (nu 0.45, density 1000, damping 20 /s) has its bottom fixed; the
@@ -19,10 +19,14 @@
 //! held there `--hold-s`; the statistics are over the last 0.5 s. With
 //! `--refine-cell-m` a `[[refine]]` sphere of `--refine-radius-m` round the
 //! probe's axis at the top bisects the cells there down to that size; with
-//! `--corotational-radius-m` a `[[region]]` sphere there is corotational.
+//! `--corotational-radius-m` a `[[region]]` sphere there is corotational;
+//! `--follow-radius-m` makes the corotational region follow the tip
+//! (`[contact] corotational_radius_m`) and `--tool-refine-radius-m` the
+//! refined cells (`[contact] refine_radius_m`, cells of the probe's radius).
 
 use anyhow::{Context, Result, bail};
 use sim_server::contact::ToolInput;
+use sim_server::follow_refine::FollowRefine;
 use sim_server::prelude::*;
 use sim_server::prepare::prepare;
 use sim_server::scene::{SceneSource, build_scene};
@@ -45,6 +49,7 @@ struct Args {
     refine_radius_m: f64,
     corotational_radius_m: Option<f64>,
     follow_radius_m: Option<f64>,
+    tool_refine_radius_m: Option<f64>,
     slide_m: f64,
     multirate: bool,
 }
@@ -63,6 +68,7 @@ fn parse() -> Result<Args> {
         refine_radius_m: 0.0125,
         corotational_radius_m: None,
         follow_radius_m: None,
+        tool_refine_radius_m: None,
         slide_m: 0.0,
         multirate: false,
     };
@@ -96,9 +102,10 @@ fn parse() -> Result<Args> {
                 }
             }
             "--follow-radius-m" => a.follow_radius_m = Some(one()?),
+            "--tool-refine-radius-m" => a.tool_refine_radius_m = Some(one()?),
             "--slide-m" => a.slide_m = one()?,
             _ => bail!(
-                "unknown flag {flag}: --size-m, --cell-m, --young-pa, --radius-m, --depth-m, --at-m, --model, --hold-s, --refine-cell-m, --refine-radius-m, --corotational-radius-m, --follow-radius-m, --slide-m, --multirate"
+                "unknown flag {flag}: --size-m, --cell-m, --young-pa, --radius-m, --depth-m, --at-m, --model, --hold-s, --refine-cell-m, --refine-radius-m, --corotational-radius-m, --follow-radius-m, --tool-refine-radius-m, --slide-m, --multirate"
             ),
         }
     }
@@ -132,10 +139,16 @@ fn main() -> Result<()> {
         ),
         None => String::new(),
     };
-    let follow = match a.follow_radius_m {
-        Some(r) => format!("[contact]\ncorotational_radius_m = {r}\n"),
-        None => String::new(),
-    };
+    let mut follow = String::new();
+    if let Some(r) = a.follow_radius_m {
+        follow += &format!("corotational_radius_m = {r}\n");
+    }
+    if let Some(r) = a.tool_refine_radius_m {
+        follow += &format!("refine_radius_m = {r}\n");
+    }
+    if !follow.is_empty() {
+        follow.insert_str(0, "[contact]\n");
+    }
     let text = format!(
         r#"
 [mesh]
@@ -176,29 +189,37 @@ multirate = {multirate}
         dir: PathBuf::from("."),
         text,
     };
-    let built = build_scene(&src, &src.parse()?)?;
+    let mut built = build_scene(&src, &src.parse()?)?;
+    let mut refinement = FollowRefine::new(&src, &mut built)?;
     let mut p = prepare::<f64>(built, Some(1e-3))?;
     let top = sz + a.radius_m;
     let started = Instant::now();
     let mut steps = 0usize;
     let y = a.at_m[1];
-    let press_at = |p: &mut sim_server::prepare::Prepared<Explicit<f64>>, x: f64, depth_m: f64| {
+    let mut press_at = |p: &mut sim_server::prepare::Prepared<Explicit<f64>>,
+                        x: f64,
+                        depth_m: f64|
+     -> Result<f64> {
         let input = [Some(ToolInput {
             tip_m: Vec3::new(x, y, top - depth_m),
             jaw_opening: 1.0,
         })];
         p.tools.update(&mut p.sim, &input);
         p.tools.step(&mut p.sim);
-        p.tools.reaction(0, &p.sim).force_n.z
+        let f = p.tools.reaction(0, &p.sim).force_n.z;
+        if let Some(r) = &mut refinement {
+            r.follow(p, 1e-3, |_| {})?;
+        }
+        Ok(f)
     };
     for _ in 0..300 {
-        press_at(&mut p, a.at_m[0], -0.002);
+        press_at(&mut p, a.at_m[0], -0.002)?;
         steps += 1;
     }
     let mut depth = 0.0;
     while depth < a.depth_m {
         depth = (depth + 1e-5).min(a.depth_m);
-        press_at(&mut p, a.at_m[0], depth);
+        press_at(&mut p, a.at_m[0], depth)?;
         steps += 1;
     }
     let mut x = a.at_m[0];
@@ -206,13 +227,13 @@ multirate = {multirate}
     // A slide: along x at 20 mm/s, then the hold where it ends.
     while (x - a.at_m[0]).abs() < a.slide_m.abs() {
         x += 2e-5 * a.slide_m.signum();
-        forces.push(press_at(&mut p, x, depth));
+        forces.push(press_at(&mut p, x, depth)?);
     }
     let slide_forces = forces.clone();
     forces.clear();
     let hold = (a.hold_s * 1e3) as usize;
     for _ in 0..hold {
-        forces.push(press_at(&mut p, x, depth));
+        forces.push(press_at(&mut p, x, depth)?);
     }
     steps += slide_forces.len() + hold;
     let wall_s = started.elapsed().as_secs_f64();
@@ -241,6 +262,22 @@ multirate = {multirate}
         println!(
             "multirate (engaged: {}): {} of {} vertices fast, {} whole passes and {} fast sub-steps a step",
             m.engaged, m.fast_vertices, m.vertices, m.coarse_substeps, m.fine_substeps
+        );
+    }
+    if let Some(r) = &refinement {
+        let r = r.report();
+        println!(
+            "refinement round the tip: {} tetrahedra now ({} at most), {} meshes made{}{}",
+            r.tets,
+            r.most_tets,
+            r.rebuilds,
+            if r.stopped_at_budget {
+                ", stopped at refine_max_tets"
+            } else {
+                ""
+            },
+            r.pinned
+                .map_or(String::new(), |w| format!(", held once: {w}"))
         );
     }
     if let Some((region, rebuilds)) = p.tools.corotational_region() {

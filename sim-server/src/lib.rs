@@ -26,6 +26,7 @@ pub use tissue::{
 };
 
 pub mod bench;
+pub mod follow_refine;
 pub mod frames;
 pub mod input_file;
 pub mod prepare;

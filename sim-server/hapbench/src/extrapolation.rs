@@ -20,10 +20,12 @@ use serde::Serialize;
 use shared::protocol::ForceMsg;
 use shared::protocol::MAX_TOOLS;
 use sim_server::contact::{StiffnessSolves, ToolInput};
+use sim_server::follow_refine::{FollowRefine, FollowReport};
 use sim_server::math::Vec3;
-use sim_server::prepare::prepare;
+use sim_server::prepare::{Prepared, prepare};
 use sim_server::scene::spec::BackendName;
 use sim_server::scene::{SceneSource, build_scene};
+use sim_server::tensor_mass::Explicit;
 use sim_server::wire::{force_sample, tool_flags};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -111,6 +113,30 @@ struct TruthCheck {
     rms_difference_n: f64,
 }
 
+/// What the refinement that follows the tool did in one run.
+#[derive(Serialize)]
+struct Refinement {
+    /// Meshes made after the first.
+    rebuilds: u64,
+    /// The most tetrahedra a mesh had, and the scene's own.
+    most_tets: usize,
+    /// Whether a mesh stopped at `refine_max_tets`.
+    stopped_at_budget: bool,
+    /// Why the mesh stayed once when it should have followed.
+    pinned: Option<&'static str>,
+}
+
+impl From<FollowReport> for Refinement {
+    fn from(r: FollowReport) -> Self {
+        Self {
+            rebuilds: r.rebuilds,
+            most_tets: r.most_tets,
+            stopped_at_budget: r.stopped_at_budget,
+            pinned: r.pinned,
+        }
+    }
+}
+
 #[derive(Serialize)]
 struct Report {
     scene: String,
@@ -131,6 +157,9 @@ struct Report {
     /// Ticks per phase.
     phase_ticks: BTreeMap<&'static str, usize>,
     methods: BTreeMap<&'static str, MethodResult>,
+    /// With `[contact] refine_radius_m`: what the refinement that follows
+    /// the tool did in the truth's run and in the simulation's.
+    refinement: Option<[Refinement; 2]>,
     /// `local-problem`: wall time of one tick's render (us) over the
     /// ticks it solved, p50 / p99 / max (this machine, this run).
     local_problem_render_us: [f64; 3],
@@ -183,13 +212,19 @@ fn simulate(
     steps: usize,
     bar: &ProgressBar,
     mut local: Option<&mut LocalRender>,
-) -> Result<(Vec<Sample>, usize)> {
-    let scene = checked_scene(src)?;
+) -> Result<(Vec<Sample>, usize, Option<FollowReport>)> {
+    let mut scene = checked_scene(src)?;
+    // `[contact] refine_radius_m`: the mesh follows the tool, made again
+    // between two steps (offline, so the truth stays deterministic).
+    let mut refinement = FollowRefine::new(src, &mut scene)?;
     let mut p = prepare::<f64>(scene, Some(dt_s))?;
-    p.sim.set_substep_factor(substep_factor);
-    // Offline: the stiffness of every sample exact, and the results
-    // independent of thread timing.
-    p.tools.set_stiffness_solves(StiffnessSolves::Inline);
+    let configure = |p: &mut Prepared<Explicit<f64>>| {
+        p.sim.set_substep_factor(substep_factor);
+        // Offline: the stiffness of every sample exact, and the results
+        // independent of thread timing.
+        p.tools.set_stiffness_solves(StiffnessSolves::Inline);
+    };
+    configure(&mut p);
     let mut out = Vec::with_capacity(steps);
     // The contact springs add sub-steps while the tool touches.
     let mut most_substeps = p.sim.substeps();
@@ -215,9 +250,12 @@ fn simulate(
         if let Some(l) = local.as_deref_mut() {
             l.after_step(out.len() - 1, &sample, &mut p.tools, &p.sim);
         }
+        if let Some(r) = &mut refinement {
+            r.follow(&mut p, dt_s, configure)?;
+        }
         bar.inc(1);
     }
-    Ok((out, most_substeps))
+    Ok((out, most_substeps, refinement.map(|r| r.report().clone())))
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -449,18 +487,18 @@ pub fn run(args: &Args) -> Result<()> {
     checked_scene(&src)?;
     let b = bar(ticks, "truth");
     let haptic_poses = || (0..).map(|k| traj.sample(k as f64 * h));
-    let (truth, truth_substeps) =
+    let (truth, truth_substeps, truth_refinement) =
         simulate(&src, h, 1, haptic_poses(), ticks, &b, None).context("ground truth")?;
     b.finish();
     let b = bar(ticks, "truth, twice the sub-steps");
-    let (check, check_substeps) = simulate(&src, h, 2, haptic_poses(), ticks, &b, None)
+    let (check, check_substeps, _) = simulate(&src, h, 2, haptic_poses(), ticks, &b, None)
         .context("ground truth with twice the sub-steps")?;
     b.finish();
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let delay_s = args.delay_ms * 1e-3;
     let mut local = LocalRender::new(&hand[..ticks], h, s, delay_s, ticks);
     let b = bar(sim_steps, "simulation");
-    let (samples, _) = simulate(
+    let (samples, _, sample_refinement) = simulate(
         &src,
         s,
         1,
@@ -562,6 +600,9 @@ pub fn run(args: &Args) -> Result<()> {
         },
         truth_dropout_ticks: dropouts(&truth_f, h),
         truth_snap_ticks: snaps.iter().filter(|n| **n).count(),
+        refinement: truth_refinement
+            .zip(sample_refinement)
+            .map(|(a, b)| [a.into(), b.into()]),
         local_problem_render_us: render_us,
         local_problem_setup_us: setup_us,
         phase_ticks: phases.iter().fold(BTreeMap::new(), |mut m, p| {
@@ -627,6 +668,23 @@ pub fn run(args: &Args) -> Result<()> {
         report.truth_check.substeps[1],
         report.truth_check.rms_difference_n
     );
+    if let Some([t, s]) = &report.refinement {
+        println!(
+            "refinement round the tool: the truth made {} meshes (at most {} tetrahedra), the simulation {} (at most {}){}{}",
+            t.rebuilds,
+            t.most_tets,
+            s.rebuilds,
+            s.most_tets,
+            if t.stopped_at_budget || s.stopped_at_budget {
+                "; stopped at refine_max_tets"
+            } else {
+                ""
+            },
+            t.pinned
+                .or(s.pinned)
+                .map_or(String::new(), |w| format!("; held while {w}"))
+        );
+    }
     if let Some(path) = &args.json {
         sim_server::provenance::write_stamped(path, &report)?;
     }

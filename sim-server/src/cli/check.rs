@@ -46,6 +46,16 @@ struct CheckJson {
     surface_physical_tags: Vec<(i32, usize)>,
     /// What each `[[refine]]` of the scene did (none for a mesh file).
     refined: Vec<sim_server::scene::refine::RefineReport>,
+    /// `[contact] refine_radius_m`: the refinement that follows the tools.
+    follow_refine: Option<FollowJson>,
+}
+
+/// The refinement that follows the tools, as `check` reports it.
+#[derive(Serialize)]
+struct FollowJson {
+    radius_m: f64,
+    cell_m: f64,
+    max_tets: usize,
 }
 
 /// Prints where the mesh is, its typical edge and a warning when that is
@@ -161,6 +171,7 @@ pub fn run(path: Option<&Path>, json: Option<&Path>) -> Result<()> {
                     physical_tags: tags,
                     surface_physical_tags: surface_tags,
                     refined: Vec::new(),
+                    follow_refine: None,
                 },
             )?;
         }
@@ -187,6 +198,14 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     );
     for w in &r.warnings {
         println!("warning: {w}");
+    }
+    if let Some(f) = &b.follow {
+        println!(
+            "[contact] refine_radius_m: cells up to {:.3} mm within {:.1} mm of each tool where it touches, made again as the tools move (at most {} tetrahedra; in `hapbench extrapolation` and the library, not `sim-server run`)",
+            f.settings.cell_m * 1e3,
+            f.settings.radius_m * 1e3,
+            f.settings.max_tets
+        );
     }
     for f in &r.refined {
         println!(
@@ -397,6 +416,11 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
                 physical_tags: Vec::new(),
                 surface_physical_tags: Vec::new(),
                 refined: r.refined.clone(),
+                follow_refine: b.follow.as_ref().map(|f| FollowJson {
+                    radius_m: f.settings.radius_m,
+                    cell_m: f.settings.cell_m,
+                    max_tets: f.settings.max_tets,
+                }),
             },
         )?;
     }

@@ -87,6 +87,10 @@ pub fn run_scene(
     for w in &scene.report.warnings {
         eprintln!("warning: {w}");
     }
+    anyhow::ensure!(
+        scene.follow.is_none(),
+        "[contact] refine_radius_m: the refinement that follows the tools runs offline (`hapbench extrapolation`, `sim_server::follow_refine`); `sim-server run` cannot yet change the mesh under its live streams (the viewer's frames and the daemon's contact problems are of one mesh): refine the working region at load with a [[refine]] instead"
+    );
     Ok(match backend.unwrap_or(scene.settings.backend) {
         BackendName::Implicit => {
             // Stable at any step: the real-time step, not the explicit bound.

@@ -4,7 +4,8 @@
 
 use super::assign::tet_materials;
 use super::loads::loads;
-use super::mesh_load::{LoadedMesh, load_mesh};
+use super::mesh_load::{BaseMesh, LoadedMesh, finish_mesh, load_base};
+use super::refine::{FollowScene, RefineAround, follow_settings};
 use super::report::SceneReport;
 use super::select::Region;
 use super::settings::{SimSettings, backend_runs_models, contact_config, settings};
@@ -43,16 +44,46 @@ pub struct BuiltScene {
     /// scene renumbered the vertices (RCM, `[mesh] reorder`): outputs write
     /// it as the `original_id` point array. `None`: the file's order kept.
     pub original_vertex_ids: Option<Vec<u32>>,
+    /// The refinement that follows the tools, when `[contact]
+    /// refine_radius_m` asks for one (`crate::follow_refine`).
+    pub follow: Option<FollowScene>,
 }
 
 /// Builds everything `spec` declares.
 pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, SceneError> {
     let mut report = SceneReport::default();
+    let base = load_base(src, spec, &mut report)?;
+    build_from(src, spec, base, &[], report)
+}
+
+/// Builds everything `spec` declares on `base` (the scene's mesh before
+/// refinement, [`BuiltScene::follow`]) with the cells in `around` refined
+/// too: the same scene with its mesh refined where the tools are now.
+pub fn build_scene_around(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    base: BaseMesh,
+    around: &[RefineAround],
+) -> Result<BuiltScene, SceneError> {
+    build_from(src, spec, base, around, SceneReport::default())
+}
+
+fn build_from(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    base: BaseMesh,
+    around: &[RefineAround],
+    mut report: SceneReport,
+) -> Result<BuiltScene, SceneError> {
+    // Kept only when the scene asks for a refinement that follows the tools.
+    let kept = (spec.contact.as_ref())
+        .is_some_and(|c| c.get_ref().refine_radius_m.is_some())
+        .then(|| base.clone());
     let LoadedMesh {
         mesh,
         physical,
         original_ids: original_vertex_ids,
-    } = load_mesh(src, spec, &mut report)?;
+    } = finish_mesh(src, spec, base, around, &mut report)?;
     let n_tets = mesh.tet_count();
 
     let mats = tet_materials(src, spec, &mesh, &physical, &mut report)?;
@@ -135,7 +166,18 @@ pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, Sc
     let settings = settings(src, spec)?;
     backend_runs_models(src, spec, &model, settings.backend, hybrid_tets.as_deref())?;
     let contact = contact_config(src, spec, &mut report)?;
+    let follow = follow_settings(
+        src,
+        spec,
+        &tools,
+        settings.backend,
+        contact.law,
+        &mut report,
+    )?
+    .zip(kept)
+    .map(|(settings, base)| FollowScene { settings, base });
     Ok(BuiltScene {
+        follow,
         contact,
         model,
         fixed,

@@ -239,11 +239,28 @@ pub(super) struct LoadedMesh {
     pub original_ids: Option<Vec<u32>>,
 }
 
-pub(super) fn load_mesh(
+/// The mesh as read, generated or meshed and placed, before any
+/// refinement: what a refinement that follows the tools refines again each
+/// time they move (kept in the built scene only when it asks for one).
+#[derive(Clone, Debug)]
+pub struct BaseMesh {
+    pub(super) mesh: TetMesh,
+    pub(super) physical: Tags,
+}
+
+impl BaseMesh {
+    /// The mesh (m).
+    pub fn mesh(&self) -> &TetMesh {
+        &self.mesh
+    }
+}
+
+/// The scene's mesh as read, generated or meshed, and placed.
+pub(super) fn load_base(
     src: &SceneSource,
     spec: &SceneSpec,
     report: &mut SceneReport,
-) -> Result<LoadedMesh, SceneError> {
+) -> Result<BaseMesh, SceneError> {
     let m = spec.mesh.get_ref();
     if m.surface.is_none()
         && let Some(k) = m
@@ -402,9 +419,24 @@ pub(super) fn load_mesh(
         }
     };
     let mesh = placed(src, m, mesh)?;
+    Ok(BaseMesh { mesh, physical })
+}
+
+/// `base` refined as the scene's `[[refine]]` and then `around` (where the
+/// tools are) ask, and renumbered unless `[mesh] reorder = false`.
+pub(super) fn finish_mesh(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    base: BaseMesh,
+    around: &[super::refine::RefineAround],
+    report: &mut SceneReport,
+) -> Result<LoadedMesh, SceneError> {
+    let m = spec.mesh.get_ref();
+    let BaseMesh { mesh, physical } = base;
     // (Reoriented tetrahedra were named by the reader's warning, once; a
     // generated mesh has none.)
     let (mesh, physical) = super::refine::refine_mesh(src, spec, mesh, physical, report)?;
+    let (mesh, physical) = super::refine::refine_around(src, spec, mesh, physical, around, report)?;
     if !m.reorder.unwrap_or(true) {
         return Ok(LoadedMesh {
             mesh,

@@ -20,7 +20,8 @@ pub mod spec;
 mod tool_decls;
 mod vessel;
 
-pub use build::{BuiltScene, ToolDecl, build_scene};
+pub use build::{BuiltScene, ToolDecl, build_scene, build_scene_around};
+pub use mesh_load::BaseMesh;
 pub use report::SceneReport;
 pub use settings::{HYBRID_NEEDS_SPLIT, MAX_DT_S, MIN_DT_S, SimSettings, check_step};
 

@@ -253,6 +253,14 @@ pub const COROTATIONAL_RADIUS_M: KeyRange = key(
     [1e-3, 0.1],
     "a few tool radii",
 );
+/// `[contact] refine_radius_m`.
+pub const REFINE_RADIUS_M: KeyRange = key(
+    "refine_radius_m",
+    "m",
+    [1e-4, 1.0],
+    [1e-3, 0.05],
+    "a few tool radii",
+);
 /// `[[refine]] cell_m`.
 pub const REFINE_CELL_M: KeyRange = key(
     "cell_m",

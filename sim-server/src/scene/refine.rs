@@ -79,17 +79,7 @@ pub(super) fn refine_mesh(
                 "[[refine]] {name} stopped at max_tets = {max_tets} before every tetrahedron there reached cell_m = {cell_m} m (raise max_tets or the cell size)"
             ));
         }
-        tags = Tags {
-            tets: (refined.parent_tet.iter())
-                .map(|&p| tags.tets.get(p as usize).copied().unwrap_or(0))
-                .collect(),
-            surface: (tags.surface.iter())
-                .flat_map(|(tri, tag)| {
-                    (refined.split_triangle(tri.map(|v| v.0)).into_iter())
-                        .map(move |t| (t.map(VertexId), *tag))
-                })
-                .collect(),
-        };
+        tags = carried(&refined, &tags);
         report.refined.push(RefineReport {
             name,
             cell_m,
@@ -100,4 +90,178 @@ pub(super) fn refine_mesh(
         mesh = refined.mesh;
     }
     Ok((mesh, tags))
+}
+
+/// The tags of the mesh `refined` was made from, on its tetrahedra and
+/// split triangles.
+fn carried(refined: &crate::mesh::refine::Refined, tags: &Tags) -> Tags {
+    Tags {
+        tets: (refined.parent_tet.iter())
+            .map(|&p| tags.tets.get(p as usize).copied().unwrap_or(0))
+            .collect(),
+        surface: (tags.surface.iter())
+            .flat_map(|(tri, tag)| {
+                (refined.split_triangle(tri.map(|v| v.0)).into_iter())
+                    .map(move |t| (t.map(VertexId), *tag))
+            })
+            .collect(),
+    }
+}
+
+/// A sphere of the mesh at rest refined to `cell_m` because a tool is
+/// there (`[contact] refine_radius_m`: the refinement that follows the
+/// tools, `crate::follow_refine`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefineAround {
+    /// The centre, in the mesh at rest (m).
+    pub centre_m: Vec3,
+    /// The radius (m).
+    pub radius_m: f64,
+    /// The cell size wanted there (m).
+    pub cell_m: f64,
+    /// The most tetrahedra the whole mesh may have.
+    pub max_tets: usize,
+}
+
+/// `mesh` refined in every sphere of `around` at once (one bisection
+/// pass, so the result does not depend on the spheres' order); past the
+/// smallest `max_tets` it stops, conforming, and the report says so.
+pub(super) fn refine_around(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    mesh: TetMesh,
+    tags: Tags,
+    around: &[RefineAround],
+    report: &mut SceneReport,
+) -> Result<(TetMesh, Tags), SceneError> {
+    if around.is_empty() {
+        return Ok((mesh, tags));
+    }
+    let max_tets = around
+        .iter()
+        .map(|a| a.max_tets)
+        .min()
+        .unwrap_or(DEFAULT_MAX_TETS);
+    let before = mesh.tet_count();
+    let refined = refine(&mesh, max_tets, |parent, p| {
+        (around.iter())
+            .filter(|a| touches(&Region::Sphere(a.centre_m, a.radius_m), &tags, parent, p))
+            .map(|a| a.cell_m)
+            .reduce(f64::min)
+    })
+    .map_err(|e| {
+        let span = (spec.contact.as_ref())
+            .and_then(|c| c.get_ref().refine_radius_m.as_ref())
+            .map_or(0..0, |r| r.span());
+        src.error(span, format!("[contact] refine_radius_m: {e}"))
+    })?;
+    report.refined.push(RefineReport {
+        name: "round the tools".into(),
+        cell_m: around
+            .iter()
+            .map(|a| a.cell_m)
+            .fold(f64::INFINITY, f64::min),
+        tets_before: before,
+        tets_after: refined.mesh.tet_count(),
+        stopped_at_budget: refined.stopped_at_budget,
+    });
+    let tags = carried(&refined, &tags);
+    Ok((refined.mesh, tags))
+}
+
+/// What `[contact] refine_radius_m` asks: the cells within `radius_m` of
+/// where each tool touches refined to `cell_m` while it is there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FollowSettings {
+    /// The refined sphere's radius round a tool (m).
+    pub radius_m: f64,
+    /// The cell size there (m).
+    pub cell_m: f64,
+    /// The most tetrahedra the refined mesh may have.
+    pub max_tets: usize,
+}
+
+/// A refinement that follows the tools: what it asks, and the mesh it
+/// refines again each time they move.
+#[derive(Clone, Debug)]
+pub struct FollowScene {
+    /// What the scene asks.
+    pub settings: FollowSettings,
+    /// The mesh before any refinement.
+    pub base: super::mesh_load::BaseMesh,
+}
+
+/// `[contact] refine_radius_m`, `refine_cell_m`, `refine_max_tets`,
+/// checked: positive, in range, with a tool to follow, on the tensor-mass
+/// backend with the penalty law (the backends that fix their model and
+/// matrices at start cannot change their mesh while they run).
+pub(super) fn follow_settings(
+    src: &SceneSource,
+    spec: &SceneSpec,
+    tools: &[crate::contact::ToolDecl],
+    backend: crate::scene::spec::BackendName,
+    law: Option<crate::contact::ContactLaw>,
+    report: &mut SceneReport,
+) -> Result<Option<FollowSettings>, SceneError> {
+    let Some(c) = &spec.contact else {
+        return Ok(None);
+    };
+    let c = c.get_ref();
+    let Some(r) = &c.refine_radius_m else {
+        if let Some(span) = (c.refine_cell_m.as_ref().map(|k| k.span()))
+            .or(c.refine_max_tets.as_ref().map(|k| k.span()))
+        {
+            return Err(src.error(
+                span,
+                "[contact] refine_cell_m and refine_max_tets size the refinement that follows the tools: give refine_radius_m too",
+            ));
+        }
+        return Ok(None);
+    };
+    let radius_m = positive(src, r, "[contact] refine_radius_m")?;
+    super::ranges::REFINE_RADIUS_M.check(src, r, "[contact]", report)?;
+    if backend != crate::scene::spec::BackendName::TensorMass {
+        return Err(src.error(
+            r.span(),
+            format!(
+                "[contact] refine_radius_m needs the tensor-mass backend, which can change its mesh while it runs; the {} backend fixes its matrices when it starts: refine the working region at load with a [[refine]] instead",
+                backend.as_str()
+            ),
+        ));
+    }
+    if law == Some(crate::contact::ContactLaw::Projection) {
+        return Err(src.error(
+            r.span(),
+            "[contact] refine_radius_m needs the penalty law (the projection law's constraints are on the vertices of one mesh): remove law = \"projection\"",
+        ));
+    }
+    let Some(smallest) = tools.iter().map(|t| t.radius_m).reduce(f64::min) else {
+        return Err(src.error(
+            r.span(),
+            "[contact] refine_radius_m refines where the tools touch, and the scene has no [[tool]]",
+        ));
+    };
+    let cell_m = match &c.refine_cell_m {
+        Some(h) => {
+            let h0 = positive(src, h, "[contact] refine_cell_m")?;
+            super::ranges::REFINE_CELL_M.check(src, h, "[contact]", report)?;
+            h0
+        }
+        None => smallest,
+    };
+    let max_tets = match &c.refine_max_tets {
+        Some(m) if *m.get_ref() == 0 => {
+            return Err(src.error(
+                m.span(),
+                "[contact] refine_max_tets must be at least the mesh's tetrahedra",
+            ));
+        }
+        Some(m) => *m.get_ref(),
+        None => DEFAULT_MAX_TETS,
+    };
+    Ok(Some(FollowSettings {
+        radius_m,
+        cell_m,
+        max_tets,
+    }))
 }

@@ -473,6 +473,14 @@ pub struct ContactSpec {
     /// The linear tetrahedra within this distance of a tool's tip are
     /// corotational, the region following the tools (m; tensor-mass only).
     pub corotational_radius_m: Option<Spanned<f64>>,
+    /// The tetrahedra within this distance of where a tool touches are
+    /// refined while it is there and coarsened back when it leaves (m;
+    /// tensor-mass only).
+    pub refine_radius_m: Option<Spanned<f64>>,
+    /// The cell size there (m; default: the smallest tool radius).
+    pub refine_cell_m: Option<Spanned<f64>>,
+    /// The most tetrahedra the refined mesh may have (default 300,000).
+    pub refine_max_tets: Option<Spanned<usize>>,
     /// How the penalty springs are integrated (default: implicit).
     pub springs: Option<Spanned<SpringsName>>,
 }

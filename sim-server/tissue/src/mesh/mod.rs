@@ -10,6 +10,7 @@ pub mod quality;
 pub mod refine;
 mod reorder;
 pub mod shapes;
+pub mod transfer;
 
 pub use generate::{BoxSpec, CellSize, GenerateError};
 pub use reorder::{bandwidth, rcm_order};

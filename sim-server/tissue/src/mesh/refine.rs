@@ -16,9 +16,12 @@
 //! was not chosen: its green closures must be undone before a tetrahedron is
 //! refined again, and its shapes depend on the order of refinement.
 //!
-//! The refinement is a function of the mesh and a target cell size per
-//! region: the same input always gives the same mesh (ties between equal
-//! edges are broken by the vertices' indices).
+//! The refinement is a function of the mesh's geometry and a target cell
+//! size per region: the same input always gives the same mesh, and ties
+//! between equal edges are broken by the vertices' positions, not their
+//! indices, so that refinements for overlapping regions agree where they
+//! overlap (a tetrahedron's bisection tree does not depend on the order its
+//! neighbours were split in).
 
 use super::TetMesh;
 use crate::ids::TetId;
@@ -104,6 +107,13 @@ impl Refined {
     }
 }
 
+/// Two points in lexicographic order (x, then y, then z).
+fn lex(a: Vec3, b: Vec3) -> std::cmp::Ordering {
+    (a.x.total_cmp(&b.x))
+        .then(a.y.total_cmp(&b.y))
+        .then(a.z.total_cmp(&b.z))
+}
+
 /// The working state of one refinement.
 struct Bisector {
     positions: Vec<Vec3>,
@@ -136,11 +146,25 @@ impl Bisector {
         }
     }
 
-    /// The edge's key in the total order the propagation climbs: squared
-    /// length, then vertex indices.
-    fn rank(&self, e: Edge) -> (Real, Edge) {
-        let d = self.positions[e.0 as usize].distance_squared(self.positions[e.1 as usize]);
-        (d, e)
+    /// The total order the propagation climbs: squared length, then the
+    /// ends' rest positions (lexicographically, smaller end first), then
+    /// their indices (only for coincident vertices). Ties broken by
+    /// positions, not indices, make the refinement a function of the
+    /// geometry alone: a tetrahedron is always bisected at the same edge,
+    /// whatever the numbering, so two refinements of one mesh for regions
+    /// that overlap give the same tetrahedra inside the overlap (what lets a
+    /// refinement that follows a tool change only where the tool has moved).
+    fn compare(&self, x: Edge, y: Edge) -> std::cmp::Ordering {
+        let ends = |e: Edge| {
+            let (a, b) = (self.positions[e.0 as usize], self.positions[e.1 as usize]);
+            if lex(a, b).is_le() { (a, b) } else { (b, a) }
+        };
+        let (x0, x1) = ends(x);
+        let (y0, y1) = ends(y);
+        (x0.distance_squared(x1).total_cmp(&y0.distance_squared(y1)))
+            .then_with(|| lex(x0, y0))
+            .then_with(|| lex(x1, y1))
+            .then(x.cmp(&y))
     }
 
     fn longest(&self, t: u32) -> Edge {
@@ -148,10 +172,7 @@ impl Bisector {
         super::TET_EDGES
             .iter()
             .map(|&[a, b]| edge(tet[a], tet[b]))
-            .max_by(|&x, &y| {
-                let (rx, ry) = (self.rank(x), self.rank(y));
-                rx.0.total_cmp(&ry.0).then(rx.1.cmp(&ry.1))
-            })
+            .max_by(|&x, &y| self.compare(x, y))
             .expect("six edges")
     }
 

@@ -536,3 +536,40 @@ mod approach;
 pub(super) mod claims;
 mod outside;
 pub(super) mod proxy;
+
+impl ToolContact {
+    /// Why this tool's state cannot move to another mesh of the tissue
+    /// now (what a refinement that follows the tools waits for): a grip
+    /// holds vertices and a cut has removed elements, neither of which a
+    /// mesh made again from the scene has.
+    pub fn pins_the_mesh(&self) -> Option<&'static str> {
+        if self.gripping || !self.gripped.is_empty() {
+            Some("a tool grips tissue")
+        } else if self.removed > 0 {
+            Some("a tool has cut tissue")
+        } else {
+            None
+        }
+    }
+
+    /// Takes over `old`'s motion (its proxy, poses, jaw and timers) as the
+    /// same tool over another mesh of the tissue; the vertices it touched
+    /// are renumbered by `new_of_old` (those the new mesh dropped are
+    /// forgotten). The contact set itself is selected again at the next step.
+    pub fn carry_from(&mut self, old: &ToolContact, new_of_old: &[Option<VertexId>]) {
+        self.proxy = old.proxy;
+        self.direction = old.direction;
+        self.pose = old.pose;
+        self.prev_pose = old.prev_pose;
+        self.jaw = old.jaw;
+        self.touched.clear();
+        self.touched.extend(
+            (old.touched.iter()).filter_map(|v| new_of_old.get(v.idx()).copied().flatten()),
+        );
+        self.armed = old.armed && !self.touched.is_empty();
+        self.held_outside = old.held_outside;
+        self.slowed = old.slowed;
+        self.since_burn_s = old.since_burn_s;
+        self.catching_up_s = old.catching_up_s;
+    }
+}

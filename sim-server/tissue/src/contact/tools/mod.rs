@@ -477,5 +477,6 @@ impl Tools {
     }
 }
 
+mod carry;
 mod local_problems;
 mod setup;

@@ -60,6 +60,18 @@ impl<S: Storage> Explicit<S> {
         }
     }
 
+    /// Sets U(t) (m) and the velocity (m/s) of every vertex, U(t-1) from
+    /// each vertex's own sub-step: a state carried from another mesh of the
+    /// tissue, whose sub-steps differ from this one's.
+    pub fn set_motion(&mut self, u_m: &[Vec3], v_m_s: &[Vec3]) {
+        self.forget_prepared();
+        for (v, (u, w)) in u_m.iter().zip(v_m_s).enumerate().take(self.u.len()) {
+            let h = self.size.dt_s / self.own_substeps(v) as Real;
+            self.u[v] = u.to_array();
+            self.next[v] = (*u - *w * h).to_array();
+        }
+    }
+
     /// Makes the linear tetrahedra flagged in `corotational` (per
     /// tetrahedron) corotational from the next step on, and every other
     /// linear one linear again: the region round the tools that the contact
