@@ -5,15 +5,18 @@
 # through `hapbench extrapolation --sim-rate 30`, on four models of the box:
 # linear; linear refined to 2.5 mm under the paths ([[refine]]); the
 # corotational region that follows the tip ([contact] corotational_radius_m
-# = 0.012); both. Prints the truth's figures (p99 per-tick change,
+# = 0.012); both; the refinement that follows the tip ([contact]
+# refine_radius_m = 0.008, cells of the probe's radius) with the linear
+# model and with the region. Prints the truth's figures (p99 per-tick change,
 # dropouts, the 2-vs-4 sub-step check) and each extrapolator's RMS error as
-# a ratio to the constant hold's. Deterministic; about 8 minutes on 2 cores.
-# Usage: scripts/slide-table.sh [OUT_DIR]
+# a ratio to the constant hold's. Deterministic; about 14 minutes on 2 cores.
+# Usage: scripts/slide-table.sh [OUT_DIR] (SCENES="region follow" to run some; NO_BUILD=1
+# to use the hapbench already built)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-$(mktemp -d)}"
 mkdir -p "$out"
-cargo build --release --locked -p hapbench
+[ -n "${NO_BUILD:-}" ] || cargo build --release --locked -p hapbench
 python3 - "$out" <<'PY'
 import math, sys
 out = sys.argv[1]
@@ -54,23 +57,27 @@ PY
 base=tests/data/box-probe-soft.toml
 region=$'[contact]\ncorotational_radius_m = 0.012\n'
 refine=$'[[refine]]\nselect = { box_m = [[0.01, 0.005, 0.008], [0.05, 0.035, 0.021]] }\ncell_m = 0.0025\n'
+follow=$'refine_radius_m = 0.008\n'
 cp "$base" "$out/linear.toml"
 { cat "$base"; echo; echo "$refine"; } > "$out/refined.toml"
 { cat "$base"; echo; echo "$region"; } > "$out/region.toml"
 { cat "$base"; echo; echo "$region"; echo "$refine"; } > "$out/region-refined.toml"
-for scene in linear refined region region-refined; do
+{ cat "$base"; echo; echo "[contact]"; echo "$follow"; } > "$out/follow.toml"
+{ cat "$base"; echo; echo "$region"; echo "$follow"; } > "$out/region-follow.toml"
+scenes="${SCENES:-linear refined region region-refined follow region-follow}"
+for scene in $scenes; do
   for p in p1-press-palpate-slide p2-shallow-diagonal p3-deep-circle; do
     echo "== $scene $p" >&2
     target/release/hapbench extrapolation --scene "$out/$scene.toml" --trajectory "$out/$p.csv" \
       --sim-rate 30 --json "$out/$scene-$p.json" > /dev/null 2> "$out/$scene-$p.err"
   done
 done
-python3 - "$out" <<'PY'
+python3 - "$out" $scenes <<'PY'
 import glob, json, os, sys
 out = sys.argv[1]
 print("| scene | path | truth max N | truth p99 change N | dropouts | sub-step check N | local-problem | away from snaps | local-model | net work LP mJ |")
 print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-for scene in ["linear", "refined", "region", "region-refined"]:
+for scene in sys.argv[2:]:
     for p in ["p1-press-palpate-slide", "p2-shallow-diagonal", "p3-deep-circle"]:
         v = json.load(open(f"{out}/{scene}-{p}.json")); m = v["methods"]
         c, ca = m["constant"]["rms_error_n"], m["constant"]["rms_error_away_from_snaps_n"]

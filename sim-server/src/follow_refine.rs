@@ -94,6 +94,12 @@ pub struct FollowReport {
     pub stopped_at_budget: bool,
     /// Why the mesh stayed once when it should have followed (a grip, a cut).
     pub pinned: Option<&'static str>,
+    /// Wall time spent making meshes again, in all and the longest (s;
+    /// this machine, this run: the scene built on the refined mesh, the
+    /// integrator set up, the state carried).
+    pub rebuild_wall_s: f64,
+    /// The longest of them (s).
+    pub longest_rebuild_wall_s: f64,
 }
 
 /// The refinement that follows a scene's tools, between steps.
@@ -202,6 +208,7 @@ impl FollowRefine {
         wanted: Vec<Option<Vec3>>,
         configure: impl FnOnce(&mut Prepared<Explicit<S>>),
     ) -> Result<(), FollowError> {
+        let started = std::time::Instant::now();
         let s = self.scene.settings;
         let around: Vec<RefineAround> = (wanted.iter().flatten())
             .map(|c| RefineAround {
@@ -240,6 +247,9 @@ impl FollowRefine {
         self.report.vertices = p.sim.model().vertex_count();
         self.report.most_tets = self.report.most_tets.max(self.report.tets);
         self.report.spheres = around.len();
+        let wall_s = started.elapsed().as_secs_f64();
+        self.report.rebuild_wall_s += wall_s;
+        self.report.longest_rebuild_wall_s = self.report.longest_rebuild_wall_s.max(wall_s);
         Ok(())
     }
 }

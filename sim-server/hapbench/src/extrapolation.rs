@@ -109,6 +109,9 @@ pub struct MethodResult {
 struct TruthCheck {
     /// Sub-steps per haptic tick of the truth and of the check.
     substeps: [usize; 2],
+    /// The truth's wall time a tick (us; this machine, this run, the
+    /// refinement's rebuilds included).
+    truth_wall_us_per_tick: f64,
     /// RMS of |F_truth - F_check| over the ticks (N).
     rms_difference_n: f64,
 }
@@ -124,6 +127,9 @@ struct Refinement {
     stopped_at_budget: bool,
     /// Why the mesh stayed once when it should have followed.
     pinned: Option<&'static str>,
+    /// Wall time making meshes again, in all and the longest (s; this
+    /// machine, this run).
+    rebuild_wall_s: [f64; 2],
 }
 
 impl From<FollowReport> for Refinement {
@@ -133,6 +139,7 @@ impl From<FollowReport> for Refinement {
             most_tets: r.most_tets,
             stopped_at_budget: r.stopped_at_budget,
             pinned: r.pinned,
+            rebuild_wall_s: [r.rebuild_wall_s, r.longest_rebuild_wall_s],
         }
     }
 }
@@ -201,6 +208,18 @@ fn checked_scene(src: &SceneSource) -> Result<sim_server::scene::BuiltScene> {
     Ok(scene)
 }
 
+/// One run of the simulation over the path.
+struct Run {
+    /// Tool 0's sample after each step.
+    samples: Vec<Sample>,
+    /// The most sub-steps a step used.
+    most_substeps: usize,
+    /// What the refinement that follows the tool did, if the scene has one.
+    refinement: Option<FollowReport>,
+    /// Wall time of the steps (s; this machine, this run).
+    wall_s: f64,
+}
+
 /// Tool 0's force (and contact state) for each pose the loop gives, the
 /// simulation stepped `dt_s` after each, in `substep_factor` times the
 /// sub-steps stability needs; and the most sub-steps a step used.
@@ -212,7 +231,7 @@ fn simulate(
     steps: usize,
     bar: &ProgressBar,
     mut local: Option<&mut LocalRender>,
-) -> Result<(Vec<Sample>, usize, Option<FollowReport>)> {
+) -> Result<Run> {
     let mut scene = checked_scene(src)?;
     // `[contact] refine_radius_m`: the mesh follows the tool, made again
     // between two steps (offline, so the truth stays deterministic).
@@ -225,6 +244,7 @@ fn simulate(
         p.tools.set_stiffness_solves(StiffnessSolves::Inline);
     };
     configure(&mut p);
+    let started = std::time::Instant::now();
     let mut out = Vec::with_capacity(steps);
     // The contact springs add sub-steps while the tool touches.
     let mut most_substeps = p.sim.substeps();
@@ -255,7 +275,12 @@ fn simulate(
         }
         bar.inc(1);
     }
-    Ok((out, most_substeps, refinement.map(|r| r.report().clone())))
+    Ok(Run {
+        samples: out,
+        most_substeps,
+        refinement: refinement.map(|r| r.report().clone()),
+        wall_s: started.elapsed().as_secs_f64(),
+    })
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -487,18 +512,30 @@ pub fn run(args: &Args) -> Result<()> {
     checked_scene(&src)?;
     let b = bar(ticks, "truth");
     let haptic_poses = || (0..).map(|k| traj.sample(k as f64 * h));
-    let (truth, truth_substeps, truth_refinement) =
-        simulate(&src, h, 1, haptic_poses(), ticks, &b, None).context("ground truth")?;
+    let Run {
+        samples: truth,
+        most_substeps: truth_substeps,
+        refinement: truth_refinement,
+        wall_s: truth_wall_s,
+    } = simulate(&src, h, 1, haptic_poses(), ticks, &b, None).context("ground truth")?;
     b.finish();
     let b = bar(ticks, "truth, twice the sub-steps");
-    let (check, check_substeps, _) = simulate(&src, h, 2, haptic_poses(), ticks, &b, None)
+    let Run {
+        samples: check,
+        most_substeps: check_substeps,
+        ..
+    } = simulate(&src, h, 2, haptic_poses(), ticks, &b, None)
         .context("ground truth with twice the sub-steps")?;
     b.finish();
     let hand: Vec<[f64; 3]> = (0..=ticks).map(|k| traj.sample(k as f64 * h).0).collect();
     let delay_s = args.delay_ms * 1e-3;
     let mut local = LocalRender::new(&hand[..ticks], h, s, delay_s, ticks);
     let b = bar(sim_steps, "simulation");
-    let (samples, _, sample_refinement) = simulate(
+    let Run {
+        samples,
+        refinement: sample_refinement,
+        ..
+    } = simulate(
         &src,
         s,
         1,
@@ -596,6 +633,7 @@ pub fn run(args: &Args) -> Result<()> {
         truth_max_force_n: truth_f.iter().map(|f| norm(*f)).fold(0.0, f64::max),
         truth_check: TruthCheck {
             substeps: [truth_substeps, check_substeps],
+            truth_wall_us_per_tick: truth_wall_s * 1e6 / ticks.max(1) as f64,
             rms_difference_n: figures(&check_f, &truth_f, &hand, &phases, &snaps).rms_error_n,
         },
         truth_dropout_ticks: dropouts(&truth_f, h),
@@ -660,19 +698,22 @@ pub fn run(args: &Args) -> Result<()> {
         report.local_problem_setup_us[2]
     );
     println!(
-        "\ntruth: max |F| {:.3} N, {} dropout ticks, {} ticks near snaps; {} vs {} sub-steps per tick differ by {:.4} N RMS",
+        "\ntruth: max |F| {:.3} N, {} dropout ticks, {} ticks near snaps; {} vs {} sub-steps per tick differ by {:.4} N RMS; {:.0} us of wall time a tick",
         report.truth_max_force_n,
         report.truth_dropout_ticks,
         report.truth_snap_ticks,
         report.truth_check.substeps[0],
         report.truth_check.substeps[1],
-        report.truth_check.rms_difference_n
+        report.truth_check.rms_difference_n,
+        report.truth_check.truth_wall_us_per_tick
     );
     if let Some([t, s]) = &report.refinement {
         println!(
-            "refinement round the tool: the truth made {} meshes (at most {} tetrahedra), the simulation {} (at most {}){}{}",
+            "refinement round the tool: the truth made {} meshes (at most {} tetrahedra; {:.2} s of wall time, the longest {:.1} ms), the simulation {} (at most {}){}{}",
             t.rebuilds,
             t.most_tets,
+            t.rebuild_wall_s[0],
+            t.rebuild_wall_s[1] * 1e3,
             s.rebuilds,
             s.most_tets,
             if t.stopped_at_budget || s.stopped_at_budget {

@@ -261,6 +261,14 @@ pub const REFINE_RADIUS_M: KeyRange = key(
     [1e-3, 0.05],
     "a few tool radii",
 );
+/// `[contact] refine_cell_m`.
+pub const FOLLOW_CELL_M: KeyRange = key(
+    "refine_cell_m",
+    "m",
+    [1e-5, 1.0],
+    [1e-4, 0.1],
+    "about the tool radius",
+);
 /// `[[refine]] cell_m`.
 pub const REFINE_CELL_M: KeyRange = key(
     "cell_m",
@@ -349,6 +357,8 @@ pub const ALL: &[KeyRange] = &[
     MAX_TOOL_ACCEL_M_S2,
     ENTRY_SPEED_M_S,
     COROTATIONAL_RADIUS_M,
+    REFINE_RADIUS_M,
+    FOLLOW_CELL_M,
     REFINE_CELL_M,
     MESH_SCALE,
     LOAD_FORCE_N,

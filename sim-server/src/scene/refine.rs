@@ -244,7 +244,7 @@ pub(super) fn follow_settings(
     let cell_m = match &c.refine_cell_m {
         Some(h) => {
             let h0 = positive(src, h, "[contact] refine_cell_m")?;
-            super::ranges::REFINE_CELL_M.check(src, h, "[contact]", report)?;
+            super::ranges::FOLLOW_CELL_M.check(src, h, "[contact]", report)?;
             h0
         }
         None => smallest,
