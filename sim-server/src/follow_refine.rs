@@ -102,18 +102,112 @@ pub struct FollowReport {
     pub longest_rebuild_wall_s: f64,
 }
 
-/// The refinement that follows a scene's tools, between steps.
-pub struct FollowRefine {
+/// The scene a refined mesh is made from: everything a rebuild needs,
+/// movable to a worker thread.
+#[derive(Clone)]
+pub struct Builder {
     src: SceneSource,
-    spec: SceneSpec,
+    spec: std::sync::Arc<SceneSpec>,
     scene: FollowScene,
+}
+
+/// A scene made again on a mesh refined round the tools, ready to take
+/// the running one's place ([`swap`]).
+pub struct Rebuilt<S: Storage> {
+    /// The new integrator and tools (their state not yet carried).
+    pub prepared: Prepared<Explicit<S>>,
+    /// How the running mesh's vertices map onto the new one's.
+    pub transfer: VertexTransfer,
+    /// The centres it was refined round (per tool).
+    pub centres: Vec<Option<Vec3>>,
+    /// Whether the refinement stopped at `refine_max_tets`.
+    pub stopped_at_budget: bool,
+    /// Wall time it took (s).
+    pub wall_s: f64,
+}
+
+impl Builder {
+    /// The scene made again with the cells round `centres` refined, for
+    /// taking over from a running integrator on `running` (its mesh) at
+    /// step `dt_s`.
+    pub fn build<S: Storage>(
+        &self,
+        running: &crate::mesh::TetMesh,
+        tools: usize,
+        centres: Vec<Option<Vec3>>,
+        dt_s: Real,
+    ) -> Result<Rebuilt<S>, FollowError> {
+        let started = std::time::Instant::now();
+        let s = self.scene.settings;
+        let around: Vec<RefineAround> = (centres.iter().flatten())
+            .map(|c| RefineAround {
+                centre_m: *c,
+                radius_m: s.radius_m,
+                cell_m: s.cell_m,
+                max_tets: s.max_tets,
+            })
+            .collect();
+        let mut scene =
+            build_scene_around(&self.src, &self.spec, self.scene.base.clone(), &around)?;
+        if scene.tools.len() != tools {
+            return Err(FollowError::Tools {
+                before: tools,
+                now: scene.tools.len(),
+            });
+        }
+        let stopped_at_budget = scene.report.refined.iter().any(|r| r.stopped_at_budget);
+        scene.follow = None;
+        let prepared = prepare::<S>(scene, Some(dt_s))?;
+        let transfer = VertexTransfer::new(running, prepared.sim.model().mesh())?;
+        Ok(Rebuilt {
+            prepared,
+            transfer,
+            centres,
+            stopped_at_budget,
+            wall_s: started.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// Puts `new` in the place of the running `sim` and `tools`, their state
+/// carried across (displacements and velocities by rest position, the
+/// tools' motion); returns the old ones.
+pub fn swap<S: Storage>(
+    sim: &mut Explicit<S>,
+    tools: &mut crate::contact::Tools,
+    new: Prepared<Explicit<S>>,
+    transfer: &VertexTransfer,
+) -> (Explicit<S>, crate::contact::Tools) {
+    let Prepared {
+        sim: mut next_sim,
+        tools: mut next_tools,
+        ..
+    } = new;
+    let u: Vec<Vec3> = (sim.displacements().iter())
+        .map(|d| Vec3::from_array(*d))
+        .collect();
+    let v: Vec<Vec3> = (0..u.len())
+        .map(|k| sim.velocity(VertexId::from(k)))
+        .collect();
+    next_sim.set_motion(&transfer.carry(&u), &transfer.carry(&v));
+    next_tools.carry_from(tools, &transfer.new_of_old());
+    (
+        std::mem::replace(sim, next_sim),
+        std::mem::replace(tools, next_tools),
+    )
+}
+
+/// When the mesh should follow the tools: the material under each tip,
+/// looked at every [`CHECK_EVERY_S`].
+pub struct Follower {
+    builder: Builder,
     /// Per tool, the centre (at rest) its sphere is refined round.
     centres: Vec<Option<Vec3>>,
     since_check_s: Real,
     report: FollowReport,
 }
 
-impl FollowRefine {
+impl Follower {
     /// The refinement `scene` asks for (`None` when it asks for none),
     /// taking the mesh it refines from `scene`. `src` is the scene it was
     /// built from.
@@ -122,8 +216,11 @@ impl FollowRefine {
             return Ok(None);
         };
         Ok(Some(Self {
-            spec: src.parse()?,
-            src: src.clone(),
+            builder: Builder {
+                spec: std::sync::Arc::new(src.parse()?),
+                src: src.clone(),
+                scene: follow,
+            },
             centres: vec![None; scene.tools.len()],
             since_check_s: Real::INFINITY,
             report: FollowReport {
@@ -132,8 +229,12 @@ impl FollowRefine {
                 most_tets: scene.model.mesh().tet_count(),
                 ..FollowReport::default()
             },
-            scene: follow,
         }))
+    }
+
+    /// What makes the meshes.
+    pub fn builder(&self) -> &Builder {
+        &self.builder
     }
 
     /// Per tool, the centre (in the mesh at rest, m) its cells are refined
@@ -147,6 +248,110 @@ impl FollowRefine {
         &self.report
     }
 
+    /// After a step of `dt_s`: the centres the mesh should be refined round
+    /// now, when they differ from the running mesh's (at most every
+    /// [`CHECK_EVERY_S`]; `None` while a grip or a cut holds the mesh).
+    pub fn due<B: crate::backend::Backend>(
+        &mut self,
+        sim: &B,
+        tools: &crate::contact::Tools,
+        dt_s: Real,
+    ) -> Option<Vec<Option<Vec3>>> {
+        self.since_check_s += dt_s;
+        if self.since_check_s < CHECK_EVERY_S {
+            return None;
+        }
+        self.since_check_s = 0.0;
+        let wanted = self.wanted(sim, tools);
+        if !self.moved(&wanted) {
+            return None;
+        }
+        if let Some(why) = tools.pins_the_mesh() {
+            self.report.pinned.get_or_insert(why);
+            return None;
+        }
+        Some(wanted)
+    }
+
+    /// Records that a mesh refined round `centres` now runs in `sim`, made
+    /// in `wall_s` (and stopped at the budget if `stopped_at_budget`).
+    pub fn swapped<S: Storage>(
+        &mut self,
+        centres: Vec<Option<Vec3>>,
+        stopped_at_budget: bool,
+        wall_s: f64,
+        sim: &Explicit<S>,
+    ) {
+        let r = &mut self.report;
+        r.rebuilds += 1;
+        r.tets = sim.model().mesh().tet_count();
+        r.vertices = sim.model().vertex_count();
+        r.most_tets = r.most_tets.max(r.tets);
+        r.spheres = centres.iter().flatten().count();
+        r.stopped_at_budget |= stopped_at_budget;
+        r.rebuild_wall_s += wall_s;
+        r.longest_rebuild_wall_s = r.longest_rebuild_wall_s.max(wall_s);
+        self.centres = centres;
+    }
+
+    /// Per tool, the material point under its tip taken back to rest, if
+    /// the tip is within the radius of the tissue.
+    fn wanted<B: crate::backend::Backend>(
+        &self,
+        sim: &B,
+        tools: &crate::contact::Tools,
+    ) -> Vec<Option<Vec3>> {
+        let rest = sim.model().mesh().positions_m();
+        let u = sim.displacements();
+        let r2 = self.builder.scene.settings.radius_m.powi(2);
+        (0..self.centres.len())
+            .map(|i| {
+                let tip = tools.tool(i).pose()?.end_m;
+                let (v, d2) = (rest.iter().zip(u))
+                    .map(|(x, d)| (*x + Vec3::from_array(*d)).distance_squared(tip))
+                    .enumerate()
+                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
+                (d2 <= r2).then(|| tip - Vec3::from_array(u[v]))
+            })
+            .collect()
+    }
+
+    fn moved(&self, wanted: &[Option<Vec3>]) -> bool {
+        let step = MOVE_FRACTION * self.builder.scene.settings.radius_m;
+        (self.centres.iter().zip(wanted)).any(|(c, w)| match (c, w) {
+            (None, None) => false,
+            (Some(c), Some(w)) => c.distance(*w) > step,
+            _ => true,
+        })
+    }
+}
+
+/// The refinement that follows a scene's tools, made between two steps on
+/// the calling thread (offline: `hapbench extrapolation`, the examples;
+/// deterministic).
+pub struct FollowRefine {
+    follower: Follower,
+}
+
+impl FollowRefine {
+    /// The refinement `scene` asks for (`None` when it asks for none),
+    /// taking the mesh it refines from `scene`. `src` is the scene it was
+    /// built from.
+    pub fn new(src: &SceneSource, scene: &mut BuiltScene) -> Result<Option<Self>, SceneError> {
+        Ok(Follower::new(src, scene)?.map(|follower| Self { follower }))
+    }
+
+    /// Per tool, the centre (in the mesh at rest, m) its cells are refined
+    /// round now; `None` for a tool away from the tissue.
+    pub fn centres(&self) -> &[Option<Vec3>] {
+        self.follower.centres()
+    }
+
+    /// What it has done so far.
+    pub fn report(&self) -> &FollowReport {
+        self.follower.report()
+    }
+
     /// After a step of `dt_s`: where the tools touch now, and if that has
     /// moved, `p` made again on a mesh refined there with its state
     /// carried over; `configure` is then applied to the new `p` (what the
@@ -158,98 +363,30 @@ impl FollowRefine {
         dt_s: Real,
         configure: impl FnOnce(&mut Prepared<Explicit<S>>),
     ) -> Result<bool, FollowError> {
-        self.since_check_s += dt_s;
-        if self.since_check_s < CHECK_EVERY_S {
+        let Some(centres) = self.follower.due(&p.sim, &p.tools, dt_s) else {
             return Ok(false);
-        }
-        self.since_check_s = 0.0;
-        let wanted = self.wanted(p);
-        if !self.moved(&wanted) {
-            return Ok(false);
-        }
-        if let Some(why) = p.tools.pins_the_mesh() {
-            self.report.pinned.get_or_insert(why);
-            return Ok(false);
-        }
-        self.rebuild(p, wanted, configure)?;
-        Ok(true)
-    }
-
-    /// Per tool, the material point under its tip taken back to rest, if
-    /// the tip is within the radius of the tissue.
-    fn wanted<S: Storage>(&self, p: &Prepared<Explicit<S>>) -> Vec<Option<Vec3>> {
-        let rest = p.sim.model().mesh().positions_m();
-        let u = p.sim.displacements();
-        let r2 = self.scene.settings.radius_m.powi(2);
-        (0..self.centres.len())
-            .map(|i| {
-                let tip = p.tools.tool(i).pose()?.end_m;
-                let (v, d2) = (rest.iter().zip(u))
-                    .map(|(x, d)| (*x + Vec3::from_array(*d)).distance_squared(tip))
-                    .enumerate()
-                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
-                (d2 <= r2).then(|| tip - Vec3::from_array(u[v]))
-            })
-            .collect()
-    }
-
-    fn moved(&self, wanted: &[Option<Vec3>]) -> bool {
-        let step = MOVE_FRACTION * self.scene.settings.radius_m;
-        (self.centres.iter().zip(wanted)).any(|(c, w)| match (c, w) {
-            (None, None) => false,
-            (Some(c), Some(w)) => c.distance(*w) > step,
-            _ => true,
-        })
-    }
-
-    fn rebuild<S: Storage>(
-        &mut self,
-        p: &mut Prepared<Explicit<S>>,
-        wanted: Vec<Option<Vec3>>,
-        configure: impl FnOnce(&mut Prepared<Explicit<S>>),
-    ) -> Result<(), FollowError> {
+        };
+        let mut rebuilt = (self.follower.builder).build::<S>(
+            p.sim.model().mesh(),
+            p.tools.len(),
+            centres,
+            p.dt_s,
+        )?;
+        configure(&mut rebuilt.prepared);
         let started = std::time::Instant::now();
-        let s = self.scene.settings;
-        let around: Vec<RefineAround> = (wanted.iter().flatten())
-            .map(|c| RefineAround {
-                centre_m: *c,
-                radius_m: s.radius_m,
-                cell_m: s.cell_m,
-                max_tets: s.max_tets,
-            })
-            .collect();
-        let mut scene =
-            build_scene_around(&self.src, &self.spec, self.scene.base.clone(), &around)?;
-        if scene.tools.len() != p.tools.len() {
-            return Err(FollowError::Tools {
-                before: p.tools.len(),
-                now: scene.tools.len(),
-            });
-        }
-        self.report.stopped_at_budget |= scene.report.refined.iter().any(|r| r.stopped_at_budget);
-        scene.follow = None;
-        let mut next = prepare::<S>(scene, Some(p.dt_s))?;
-        configure(&mut next);
-        let transfer = VertexTransfer::new(p.sim.model().mesh(), next.sim.model().mesh())?;
-        let u: Vec<Vec3> = (p.sim.displacements().iter())
-            .map(|d| Vec3::from_array(*d))
-            .collect();
-        let v: Vec<Vec3> = (0..u.len())
-            .map(|k| p.sim.velocity(VertexId::from(k)))
-            .collect();
-        next.sim
-            .set_motion(&transfer.carry(&u), &transfer.carry(&v));
-        next.tools.carry_from(&p.tools, &transfer.new_of_old());
-        *p = next;
-        self.centres = wanted;
-        self.report.rebuilds += 1;
-        self.report.tets = p.sim.model().mesh().tet_count();
-        self.report.vertices = p.sim.model().vertex_count();
-        self.report.most_tets = self.report.most_tets.max(self.report.tets);
-        self.report.spheres = around.len();
-        let wall_s = started.elapsed().as_secs_f64();
-        self.report.rebuild_wall_s += wall_s;
-        self.report.longest_rebuild_wall_s = self.report.longest_rebuild_wall_s.max(wall_s);
-        Ok(())
+        let Rebuilt {
+            prepared,
+            transfer,
+            centres,
+            stopped_at_budget,
+            wall_s,
+        } = rebuilt;
+        p.original_vertex_ids
+            .clone_from(&prepared.original_vertex_ids);
+        drop(swap(&mut p.sim, &mut p.tools, prepared, &transfer));
+        let wall_s = wall_s + started.elapsed().as_secs_f64();
+        self.follower
+            .swapped(centres, stopped_at_budget, wall_s, &p.sim);
+        Ok(true)
     }
 }
