@@ -314,7 +314,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // The daemon starts once the backend is prepared (its scripted hand
     // runs on its own clock from then).
     let mut daemon = None;
-    let result = super::run_scene(scene, backend, &cfg, stop.clone(), || {
+    let result = super::run_scene(&src, scene, backend, &cfg, stop.clone(), || {
         let child = daemon_cmd
             .spawn()
             .with_context(|| format!("cannot start {}", daemon_bin.display()))?;

@@ -8,9 +8,11 @@ pub mod mesh;
 pub mod run;
 pub mod solve;
 
-use crate::server::{RunConfig, RunSummary, run};
+use crate::server::follow_live::{LiveFollow, LiveRemesh};
+use crate::server::{RunConfig, RunSummary, run, run_following};
 use anyhow::{Context, Result};
 use sim_server::backend::{Hybrid, HybridConfig, Implicit, ImplicitConfig, Precomputed};
+use sim_server::follow_refine::Follower;
 use sim_server::prepare::{prepare, prepare_with};
 use sim_server::scene::real_time::RealTime;
 use sim_server::scene::spec::BackendName;
@@ -77,7 +79,8 @@ pub fn implicit_step_iterations(n: usize) -> Option<usize> {
 /// responses on a machine without them in the cache: the grasp of the
 /// liver demo was over before the first step, and the hand felt nothing).
 pub fn run_scene(
-    scene: BuiltScene,
+    src: &SceneSource,
+    mut scene: BuiltScene,
     backend: Option<BackendName>,
     cfg: &RunConfig,
     stop: Arc<AtomicBool>,
@@ -87,11 +90,13 @@ pub fn run_scene(
     for w in &scene.report.warnings {
         eprintln!("warning: {w}");
     }
+    let backend = backend.unwrap_or(scene.settings.backend);
     anyhow::ensure!(
-        scene.follow.is_none(),
-        "[contact] refine_radius_m: the refinement that follows the tools runs offline (`hapbench extrapolation`, `sim_server::follow_refine`); `sim-server run` cannot yet change the mesh under its live streams (the viewer's frames and the daemon's contact problems are of one mesh): refine the working region at load with a [[refine]] instead"
+        scene.follow.is_none() || backend == BackendName::TensorMass,
+        "[contact] refine_radius_m needs the tensor-mass backend, which can change its mesh while it runs; --backend {} fixes its matrices when it starts",
+        backend.as_str()
     );
-    Ok(match backend.unwrap_or(scene.settings.backend) {
+    Ok(match backend {
         BackendName::Implicit => {
             // Stable at any step: the real-time step, not the explicit bound.
             let dt = real_time_step(&scene);
@@ -200,19 +205,35 @@ pub fn run_scene(
         }
         _ if scene.settings.single_precision => {
             let real_time = RealTime::of(&scene);
+            let follow = live_follow::<f32>(src, &mut scene)?;
             let prepared = prepare::<f32>(scene, None)?;
             warn_real_time(&real_time, prepared.sim.stable_step().dt_max_s);
             ready()?;
-            run(prepared, cfg, stop)?
+            run_following(prepared, follow, cfg, stop)?
         }
         _ => {
             let real_time = RealTime::of(&scene);
+            let follow = live_follow::<f64>(src, &mut scene)?;
             let prepared = prepare::<f64>(scene, None)?;
             warn_real_time(&real_time, prepared.sim.stable_step().dt_max_s);
             ready()?;
-            run(prepared, cfg, stop)?
+            run_following(prepared, follow, cfg, stop)?
         }
     })
+}
+
+/// The refinement that follows the tools, when `scene` asks for one,
+/// with its worker thread started.
+fn live_follow<S: sim_server::tensor_mass::Storage>(
+    src: &SceneSource,
+    scene: &mut BuiltScene,
+) -> Result<Option<Box<dyn LiveRemesh<sim_server::tensor_mass::Explicit<S>>>>> {
+    let Some(follower) = Follower::new(src, scene)? else {
+        return Ok(None);
+    };
+    let live =
+        LiveFollow::<S>::start(follower).context("cannot start the refinement's worker thread")?;
+    Ok(Some(Box::new(live)))
 }
 
 /// The warning (on stderr) that the explicit step `dt_max_s` cannot keep

@@ -122,7 +122,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         rt_priority: args.rt_priority,
         implicit_step_iterations: super::implicit_step_iterations(args.implicit_iterations),
     };
-    let summary = match super::run_scene(scene, backend, &cfg, stop, || Ok(())) {
+    let summary = match super::run_scene(&src, scene, backend, &cfg, stop, || Ok(())) {
         Ok(summary) => summary,
         Err(e) => {
             // A diverged run still writes its JSON (`finite`: false).

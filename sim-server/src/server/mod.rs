@@ -13,6 +13,7 @@
 //! missed time is dropped, not fast-forwarded. A pose older than
 //! [`RunConfig::pose_timeout_ns`], or whose publisher died, drives no tool.
 
+pub mod follow_live;
 pub mod local_out;
 mod loop_stats;
 pub mod outputs;
@@ -222,6 +223,26 @@ pub struct RunSummary {
     pub corotational_region_largest_tets: usize,
     /// See `corotational_region_largest_tets`: times the region changed.
     pub corotational_region_rebuilds: u64,
+    /// With `[contact] refine_radius_m`: meshes made again round the tools
+    /// and swapped in (0 without).
+    pub remesh_swaps: u64,
+    /// See `remesh_swaps`: the mesh's tetrahedra at the end, and the most.
+    pub remesh_tets: usize,
+    /// See `remesh_swaps`.
+    pub remesh_most_tets: usize,
+    /// See `remesh_swaps`: wall time of the loop's part (looking where the
+    /// tools are, swapping meshes in; s).
+    pub remesh_s: Real,
+    /// See `remesh_swaps`: the worker's wall time making the meshes, in all
+    /// and the longest (s).
+    pub remesh_build_wall_s: Real,
+    /// See `remesh_build_wall_s`.
+    pub remesh_longest_build_wall_s: Real,
+    /// See `remesh_swaps`: why the mesh once stayed when the tools moved
+    /// (a grip, a cut).
+    pub remesh_pinned: Option<&'static str>,
+    /// See `remesh_swaps`: whether a mesh stopped at `refine_max_tets`.
+    pub remesh_stopped_at_budget: bool,
     /// With `[simulation] multirate`: the vertices stepped at the fine
     /// step at the end of the run (0 without, or when it did not pay).
     pub multirate_fast_vertices: usize,
@@ -270,6 +291,14 @@ pub enum RunError {
         session: String,
     },
     /// A publish failed.
+    /// `--save-frames` with a mesh that follows the tools.
+    #[error(
+        "--save-frames {dir} records the frames of one mesh, and [contact] refine_radius_m makes the mesh again as the tools move: run without --save-frames, or refine the working region at load with a [[refine]]"
+    )]
+    FramesOfOneMesh {
+        /// The directory asked for.
+        dir: std::path::PathBuf,
+    },
     #[error("publishing {what} failed: {reason}")]
     Publish {
         /// What.
@@ -289,7 +318,19 @@ pub fn run<B: Backend>(
     cfg: &RunConfig,
     stop: Arc<AtomicBool>,
 ) -> Result<RunSummary, RunError> {
-    let mut l = run_loop::RunLoop::open(prepared, cfg, stop)?;
+    run_following(prepared, None, cfg, stop)
+}
+
+/// Runs a prepared scene whose mesh `follow` makes again round the tools
+/// as they move (`[contact] refine_radius_m`), until a stop condition or
+/// `stop` is set.
+pub fn run_following<B: Backend>(
+    prepared: Prepared<B>,
+    follow: Option<Box<dyn follow_live::LiveRemesh<B>>>,
+    cfg: &RunConfig,
+    stop: Arc<AtomicBool>,
+) -> Result<RunSummary, RunError> {
+    let mut l = run_loop::RunLoop::open(prepared, follow, cfg, stop)?;
     if cfg.rt_priority > 0 {
         // After the worker threads started (and, reset on fork, not
         // passed to any started later).
@@ -311,6 +352,7 @@ pub fn run<B: Backend>(
         if l.diverged() {
             break;
         }
+        l.remesh()?;
         l.status(pose, &step);
         l.pace();
     }

@@ -75,6 +75,16 @@ impl MeshOut {
         })
     }
 
+    /// Follows `sim` onto another mesh (the refinement round the tools):
+    /// its rest positions, and a new topology version so that the next
+    /// frame goes out with the new surface first.
+    pub fn rebind<B: Backend>(&mut self, sim: &B) {
+        self.rest_m.clear();
+        self.rest_m
+            .extend_from_slice(sim.model().mesh().positions_m());
+        self.topology_version += 1;
+    }
+
     /// Publishes the state of `sim` at `now_ns` (simulated `sim_t_s`):
     /// the topology first when it changed (else the kept one reaches
     /// viewers that joined since), then the positions; hands the frame to

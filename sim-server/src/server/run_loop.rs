@@ -7,6 +7,7 @@
 //! [`RunLoop::pace`] (real time: wait for the step's time or a fresh pose,
 //! drop the time a stall missed).
 
+use super::follow_live::LiveRemesh;
 use super::local_out::LocalOut;
 use super::loop_stats::LoopStats;
 use super::outputs::{self, MeshOut};
@@ -68,6 +69,8 @@ pub struct RunLoop<'a, B: Backend> {
     last_step_ns: u64,
     removed_total: u64,
     diverged_at: Option<u64>,
+    /// `[contact] refine_radius_m`: the mesh made again round the tools.
+    follow: Option<Box<dyn LiveRemesh<B>>>,
 }
 
 /// What the loop has told its user on stderr, so that each message comes
@@ -87,9 +90,15 @@ impl<'a, B: Backend> RunLoop<'a, B> {
     /// opens every stream, publishes the scene and starts the clock.
     pub fn open(
         prepared: Prepared<B>,
+        follow: Option<Box<dyn LiveRemesh<B>>>,
         cfg: &'a RunConfig,
         stop: Arc<AtomicBool>,
     ) -> Result<Self, RunError> {
+        if follow.is_some()
+            && let Some(dir) = &cfg.save_frames
+        {
+            return Err(RunError::FramesOfOneMesh { dir: dir.clone() });
+        }
         let Prepared {
             sim,
             tools: mut contacts,
@@ -179,6 +188,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             last_step_ns: start_ns,
             removed_total: 0,
             diverged_at: None,
+            follow,
         })
     }
 
@@ -306,6 +316,26 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             ..ForceMsg::default()
         });
         self.diverged_at = Some(s.steps);
+    }
+
+    /// With `[contact] refine_radius_m`, after the sample is out: a mesh
+    /// refined round where the tools are now swapped in when the worker
+    /// has finished one (the viewer's streams then carry the new mesh: its
+    /// rest state and original surface again, a new topology version), or
+    /// one asked for when the tools have moved.
+    pub fn remesh(&mut self) -> Result<(), RunError> {
+        let Some(f) = &mut self.follow else {
+            return Ok(());
+        };
+        let t0 = monotonic_ns();
+        if f.after_step(&mut self.sim, &mut self.contacts, self.dt_s) {
+            self.mesh_out.rebind(&self.sim);
+            self.scene_out
+                .send(&self.contacts, &self.sim, &self.cfg.scene_name)?;
+            self.summary.remesh_swaps += 1;
+        }
+        self.summary.remesh_s += (monotonic_ns() - t0) as Real * 1e-9;
+        Ok(())
     }
 
     /// Whether the run diverged (its displacements or a tool's force).
@@ -556,6 +586,15 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         if let Some(r) = self.contacts.corotational_region_stats() {
             summary.corotational_region_largest_tets = r.largest_tets;
             summary.corotational_region_rebuilds = r.rebuilds;
+        }
+        if let Some(f) = &self.follow {
+            let r = f.report();
+            summary.remesh_most_tets = r.most_tets;
+            summary.remesh_tets = r.tets;
+            summary.remesh_build_wall_s = r.rebuild_wall_s;
+            summary.remesh_longest_build_wall_s = r.longest_rebuild_wall_s;
+            summary.remesh_pinned = r.pinned;
+            summary.remesh_stopped_at_budget = r.stopped_at_budget;
         }
         summary.local_problems = self.local_out.published;
         summary.local_problems_dropped = self.local_out.dropped;

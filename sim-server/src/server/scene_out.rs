@@ -93,34 +93,50 @@ impl SceneOut {
         scene_name: &str,
     ) -> Result<Self, RunError> {
         let model = sim.model();
-        let scene = services::publisher(&services::scene_service(node, session)?)?;
-        scene
+        let (slice, _) = rest_slice(model);
+        let mut tris = Vec::new();
+        surface_into(model, &mut tris);
+        let out = Self {
+            scene: services::publisher(&services::scene_service(node, session)?)?,
+            rest: services::slice_publisher(&services::rest_service(node, session)?, slice.len())?,
+            surface0: services::slice_publisher(
+                &services::surface0_service(node, session)?,
+                tris.len(),
+            )?,
+        };
+        out.send(tools, sim, scene_name)?;
+        Ok(out)
+    }
+
+    /// Publishes `sim`'s scene (named `scene_name`): at start, and again
+    /// when the mesh has been made again round the tools (the streams keep
+    /// the newest, so a client joining later gets the mesh that runs).
+    pub fn send<B: Backend>(
+        &self,
+        tools: &Tools,
+        sim: &B,
+        scene_name: &str,
+    ) -> Result<(), RunError> {
+        let model = sim.model();
+        self.scene
             .send_copy(scene_info(tools, sim))
             .map_err(|e| publish_err("scene info")(format!("{e:?}")))?;
         let (slice, fibre_count) = rest_slice(model);
-        let rest = services::slice_publisher(&services::rest_service(node, session)?, slice.len())?;
         let mut header = RestHeader {
             vertex_count: model.vertex_count() as u32,
             fibre_count: fibre_count as u32,
             ..RestHeader::default()
         };
         header.set_name(scene_name);
-        send_slice(&rest, header, &slice, "rest positions")?;
+        send_slice(&self.rest, header, &slice, "rest positions")?;
         let mut tris = Vec::new();
         surface_into(model, &mut tris);
-        let surface0 =
-            services::slice_publisher(&services::surface0_service(node, session)?, tris.len())?;
         let header = TopologyHeader {
             version: PROTOCOL_VERSION,
             triangle_count: tris.len() as u32,
             topology_version: 1,
         };
-        send_slice(&surface0, header, &tris, "original surface")?;
-        Ok(Self {
-            scene,
-            rest,
-            surface0,
-        })
+        send_slice(&self.surface0, header, &tris, "original surface")
     }
 
     /// Delivers the history to clients that joined since (iceoryx2 sends
