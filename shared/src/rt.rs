@@ -22,6 +22,21 @@ pub fn set_fifo(priority: i32) -> Result<i32, String> {
     }
 }
 
+/// Puts the calling thread under SCHED_IDLE: it runs only on a core that
+/// nothing else wants, so background work (making a refined mesh while the
+/// tools move) never preempts the stepping loop or the haptic thread on a
+/// machine with few cores.
+pub fn background() -> Result<(), String> {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: `param` is valid for the call; pid 0 = the calling thread.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error().to_string())
+    }
+}
+
 /// Sets the calling thread's timer slack to 1 ns: by default Linux may wake
 /// a normal thread up to 50 us after its deadline to batch wake-ups (real-
 /// time threads already get none).

@@ -5,7 +5,8 @@
 //! a step), and the loop swaps it in at a step boundary, the state carried
 //! across; the old integrator and tools go back to the worker to be
 //! dropped (joining the old contact-stiffness worker is not the loop's
-//! business). One rebuild is in flight at a time; the tools keep moving
+//! business). The worker runs under SCHED_IDLE, on whatever a core has
+//! left after the loop and the haptic thread. One rebuild is in flight at a time; the tools keep moving
 //! meanwhile within the refined sphere (a rebuild is asked when the
 //! material under a tip has moved a quarter of the radius).
 
@@ -56,6 +57,8 @@ impl<S: Storage> LiveFollow<S> {
         let worker = std::thread::Builder::new()
             .name("follow-refine".into())
             .spawn(move || {
+                // Best effort: at normal priority it only competes more.
+                let _ = shared::rt::background();
                 while let Ok(job) = inbox.recv() {
                     match job {
                         Job::Build {
