@@ -201,7 +201,7 @@ fn report_scene(name: &str, b: &BuiltScene, json: Option<&Path>) -> Result<()> {
     }
     if let Some(f) = &b.follow {
         println!(
-            "[contact] refine_radius_m: cells up to {:.3} mm within {:.1} mm of each tool where it touches, made again as the tools move (at most {} tetrahedra; in `hapbench extrapolation` and the library, not `sim-server run`)",
+            "[contact] refine_radius_m: cells up to {:.3} mm within {:.1} mm of each tool where it touches, made again as the tools move (at most {} tetrahedra)",
             f.settings.cell_m * 1e3,
             f.settings.radius_m * 1e3,
             f.settings.max_tets
