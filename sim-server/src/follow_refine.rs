@@ -172,7 +172,7 @@ impl Builder {
 /// Puts `new` in the place of the running `sim` and `tools`, their state
 /// carried across (displacements and velocities by rest position, the
 /// tools' motion); returns the old ones.
-pub fn swap<S: Storage>(
+fn swap<S: Storage>(
     sim: &mut Explicit<S>,
     tools: &mut crate::contact::Tools,
     new: Prepared<Explicit<S>>,
@@ -273,15 +273,25 @@ impl Follower {
         Some(wanted)
     }
 
-    /// Records that a mesh refined round `centres` now runs in `sim`, made
-    /// in `wall_s` (and stopped at the budget if `stopped_at_budget`).
-    pub fn swapped<S: Storage>(
+    /// Puts `rebuilt` in the place of the running `sim` and `tools`, their
+    /// state carried across (displacements and velocities by rest
+    /// position, the tools' motion), and records it; returns the old ones.
+    pub fn install<S: Storage>(
         &mut self,
-        centres: Vec<Option<Vec3>>,
-        stopped_at_budget: bool,
-        wall_s: f64,
-        sim: &Explicit<S>,
-    ) {
+        rebuilt: Rebuilt<S>,
+        sim: &mut Explicit<S>,
+        tools: &mut crate::contact::Tools,
+    ) -> (Explicit<S>, crate::contact::Tools) {
+        let started = std::time::Instant::now();
+        let Rebuilt {
+            prepared,
+            transfer,
+            centres,
+            stopped_at_budget,
+            wall_s,
+        } = rebuilt;
+        let old = swap(sim, tools, prepared, &transfer);
+        let wall_s = wall_s + started.elapsed().as_secs_f64();
         let r = &mut self.report;
         r.rebuilds += 1;
         r.tets = sim.model().mesh().tet_count();
@@ -292,6 +302,7 @@ impl Follower {
         r.rebuild_wall_s += wall_s;
         r.longest_rebuild_wall_s = r.longest_rebuild_wall_s.max(wall_s);
         self.centres = centres;
+        old
     }
 
     /// Per tool, the material point under its tip taken back to rest, if
@@ -373,20 +384,9 @@ impl FollowRefine {
             p.dt_s,
         )?;
         configure(&mut rebuilt.prepared);
-        let started = std::time::Instant::now();
-        let Rebuilt {
-            prepared,
-            transfer,
-            centres,
-            stopped_at_budget,
-            wall_s,
-        } = rebuilt;
         p.original_vertex_ids
-            .clone_from(&prepared.original_vertex_ids);
-        drop(swap(&mut p.sim, &mut p.tools, prepared, &transfer));
-        let wall_s = wall_s + started.elapsed().as_secs_f64();
-        self.follower
-            .swapped(centres, stopped_at_budget, wall_s, &p.sim);
+            .clone_from(&rebuilt.prepared.original_vertex_ids);
+        drop(self.follower.install(rebuilt, &mut p.sim, &mut p.tools));
         Ok(true)
     }
 }

@@ -15,31 +15,19 @@ use sim_server::prepare::{Prepared, prepare};
 use sim_server::scene::{SceneSource, build_scene};
 use sim_server::tensor_mass::Explicit;
 
+/// The soft box of the slide measurements (tests/data/box-probe-soft.toml:
+/// 60 x 40 x 20 mm of 5 mm cells, E 3 kPa, bottom fixed, a 2.5 mm probe)
+/// with `extra` after it.
 fn source(extra: &str) -> SceneSource {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/box-probe-soft.toml"
+    );
+    let base = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
     SceneSource {
         name: "follow.toml".into(),
         dir: std::path::PathBuf::from("."),
-        text: format!(
-            r#"
-[mesh]
-generate = {{ shape = "box", size_m = [0.06, 0.04, 0.02], cell_m = 0.005 }}
-[material]
-young_pa = 3000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 20.0
-[[fixed]]
-select = {{ box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }}
-[[tool]]
-name = "probe"
-kind = "hook"
-fulcrum_m = [0.03, 0.02, 0.15]
-length_m = 0.3
-radius_m = 0.0025
-tip_length_m = 0.01
-{extra}
-"#
-        ),
+        text: format!("{base}\n{extra}\n"),
     }
 }
 
@@ -186,15 +174,15 @@ fn the_mesh_follows_the_probe_and_coarsens_back_when_it_leaves() {
 
 #[test]
 fn the_keys_are_checked_at_their_line() {
-    let refused = |extra: &str, says: &str| {
-        let src = source(extra);
+    let refused_src = |src: SceneSource, says: &str| {
         let e = build_scene(&src, &src.parse().unwrap())
             .err()
             .map(|e| e.to_string());
-        let e = e.unwrap_or_else(|| panic!("{extra} was accepted"));
-        assert!(e.contains(says), "{extra}: {e}");
+        let e = e.unwrap_or_else(|| panic!("{} was accepted", src.text));
+        assert!(e.contains(says), "{e}");
         assert!(e.starts_with("follow.toml:"), "{e}");
     };
+    let refused = |extra: &str, says: &str| refused_src(source(extra), says);
     refused("[contact]\nrefine_radius_m = -0.01\n", "refine_radius_m");
     refused(
         "[contact]\nrefine_cell_m = 0.001\n",
@@ -204,10 +192,11 @@ fn the_keys_are_checked_at_their_line() {
         "[contact]\nrefine_radius_m = 0.01\nlaw = \"projection\"\n",
         "penalty law",
     );
-    refused(
-        "[contact]\nrefine_radius_m = 0.01\n[simulation]\nbackend = \"implicit\"\n",
-        "tensor-mass backend",
-    );
+    let mut implicit = source("[contact]\nrefine_radius_m = 0.01\n");
+    implicit.text = implicit
+        .text
+        .replace("[simulation]", "[simulation]\nbackend = \"implicit\"");
+    refused_src(implicit, "tensor-mass backend");
     refused(
         "[contact]\nrefine_radius_m = 0.01\nrefine_max_tets = 0\n",
         "refine_max_tets",

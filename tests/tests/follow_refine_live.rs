@@ -11,28 +11,13 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 use system_tests::{daemon_run, finish, read_json, run_err, scratch_dir, spawn_sim_server};
 
-const SCENE: &str = r#"
-[mesh]
-generate = { shape = "box", size_m = [0.06, 0.04, 0.02], cell_m = 0.005 }
-[material]
-young_pa = 3000.0
-poisson = 0.45
-density_kg_m3 = 1000.0
-damping_per_s = 20.0
-[[fixed]]
-select = { box_m = [[-0.001, -0.001, -0.001], [0.061, 0.041, 0.0001]] }
-[[tool]]
-name = "probe"
-kind = "hook"
-fulcrum_m = [0.03, 0.02, 0.15]
-length_m = 0.3
-radius_m = 0.0025
-tip_length_m = 0.01
-[contact]
-refine_radius_m = 0.008
-[simulation]
-dt_s = 0.001
-"#;
+/// The soft box of the slide measurements (60 x 40 x 20 mm of 5 mm cells,
+/// E 3 kPa, a 2.5 mm probe) with the mesh following the probe.
+fn scene_text() -> String {
+    let path = system_tests::workspace_root().join("tests/data/box-probe-soft.toml");
+    let base = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    format!("{base}\n[contact]\nrefine_radius_m = 0.008\n")
+}
 
 /// The box's tetrahedra and vertices as generated.
 const BASE_TETS: u64 = 2304;
@@ -42,7 +27,7 @@ const BASE_VERTICES: u32 = 585;
 fn the_live_mesh_follows_the_probe_and_the_streams_carry_it() {
     let dir = scratch_dir("follow-live");
     let scene = dir.join("box.toml");
-    std::fs::write(&scene, SCENE).unwrap();
+    std::fs::write(&scene, scene_text()).unwrap();
     // Above the top at x = 20 mm, down 5 mm into it, 20 mm along x in 2 s,
     // up and away.
     let top = 0.02 + 0.0025;
@@ -123,7 +108,7 @@ fn the_live_mesh_follows_the_probe_and_the_streams_carry_it() {
 fn frames_of_one_mesh_are_refused_with_a_following_mesh() {
     let dir = scratch_dir("follow-frames");
     let scene = dir.join("box.toml");
-    std::fs::write(&scene, SCENE).unwrap();
+    std::fs::write(&scene, scene_text()).unwrap();
     let session = format!("followframes{}", std::process::id());
     let e = run_err(
         std::process::Command::new(system_tests::binary("sim-server")).args([

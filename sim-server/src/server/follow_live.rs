@@ -12,9 +12,10 @@
 
 use sim_server::backend::Backend;
 use sim_server::contact::Tools;
-use sim_server::follow_refine::{Builder, FollowError, FollowReport, Follower, Rebuilt, swap};
+use sim_server::follow_refine::{Builder, FollowError, FollowReport, Follower, Rebuilt};
 use sim_server::math::{Real, Vec3};
 use sim_server::mesh::TetMesh;
+use sim_server::prepare::Prepared;
 use sim_server::tensor_mass::{Explicit, Storage};
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 
@@ -110,22 +111,14 @@ impl<S: Storage> LiveRemesh<Explicit<S>> for LiveFollow<S> {
         match self.done.try_recv() {
             Ok(Ok(rebuilt)) => {
                 self.in_flight = false;
-                let Rebuilt {
-                    prepared,
-                    transfer,
-                    centres,
-                    stopped_at_budget,
-                    wall_s,
-                } = rebuilt;
                 if tools.pins_the_mesh().is_some() {
                     // A grip or a cut since it was asked: it is of a mesh
                     // that no longer runs.
-                    self.send(Job::Drop(Box::new((prepared.sim, prepared.tools))));
+                    let Prepared { sim, tools, .. } = rebuilt.prepared;
+                    self.send(Job::Drop(Box::new((sim, tools))));
                 } else {
-                    let old = swap(sim, tools, prepared, &transfer);
+                    let old = self.follower.install(rebuilt, sim, tools);
                     self.send(Job::Drop(Box::new(old)));
-                    self.follower
-                        .swapped(centres, stopped_at_budget, wall_s, sim);
                     swapped = true;
                 }
             }
