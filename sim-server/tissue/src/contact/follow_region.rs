@@ -71,6 +71,14 @@ impl FollowRegion {
         }
     }
 
+    /// Takes over `old`'s counts (times changed, most tetrahedra) as the
+    /// same region over another mesh of the tissue: the counts are of the
+    /// run, not of one mesh.
+    pub(crate) fn carry_counts(&mut self, old: &FollowRegion) {
+        self.rebuilds = old.rebuilds;
+        self.largest = old.largest;
+    }
+
     /// Times the region changed, and the most tetrahedra it held at once.
     pub(crate) fn stats(&self) -> RegionStats {
         RegionStats {

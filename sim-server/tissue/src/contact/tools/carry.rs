@@ -18,7 +18,7 @@ impl Tools {
     /// handed over and the step count; the vertices they touched are
     /// renumbered by `new_of_old`. The contact points are selected again
     /// at the next step, and the corotational region round the tips is
-    /// rebuilt on the new mesh at the next update.
+    /// rebuilt on the new mesh at the next update (its counts carried on).
     pub fn carry_from(&mut self, old: &Tools, new_of_old: &[Option<VertexId>]) {
         for (new, old) in self.tools.iter_mut().zip(&old.tools) {
             new.carry_from(old, new_of_old);
@@ -30,6 +30,9 @@ impl Tools {
         self.local.spec = old.local.spec;
         if let (Some(new), Some(old)) = (&mut self.stiffness, &old.stiffness) {
             new.set_solves(old.solves());
+        }
+        if let (Some(new), Some(old)) = (&mut self.follow, &old.follow) {
+            new.carry_counts(old);
         }
     }
 }
