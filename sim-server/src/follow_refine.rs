@@ -31,7 +31,6 @@
 //! grips or has cut, the mesh stays as it is (their state is on one mesh's
 //! vertices and elements) and the report says so once.
 
-use crate::contact::ContactError;
 use crate::ids::VertexId;
 use crate::math::{Real, Vec3};
 use crate::mesh::transfer::{TransferError, VertexTransfer};
@@ -71,12 +70,6 @@ pub enum FollowError {
     },
 }
 
-impl From<ContactError> for FollowError {
-    fn from(e: ContactError) -> Self {
-        Self::Prepare(PrepareError::Contact(e))
-    }
-}
-
 /// What the refinement that follows the tools has done.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FollowReport {
@@ -112,7 +105,7 @@ pub struct Builder {
 }
 
 /// A scene made again on a mesh refined round the tools, ready to take
-/// the running one's place ([`swap`]).
+/// the running one's place ([`Follower::install`]).
 pub struct Rebuilt<S: Storage> {
     /// The new integrator and tools (their state not yet carried).
     pub prepared: Prepared<Explicit<S>>,
@@ -147,8 +140,7 @@ impl Builder {
                 max_tets: s.max_tets,
             })
             .collect();
-        let mut scene =
-            build_scene_around(&self.src, &self.spec, self.scene.base.clone(), &around)?;
+        let scene = build_scene_around(&self.src, &self.spec, self.scene.base.clone(), &around)?;
         if scene.tools.len() != tools {
             return Err(FollowError::Tools {
                 before: tools,
@@ -156,7 +148,6 @@ impl Builder {
             });
         }
         let stopped_at_budget = scene.report.refined.iter().any(|r| r.stopped_at_budget);
-        scene.follow = None;
         let prepared = prepare::<S>(scene, Some(dt_s))?;
         let transfer = VertexTransfer::new(running, prepared.sim.model().mesh())?;
         Ok(Rebuilt {

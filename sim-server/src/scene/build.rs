@@ -53,19 +53,22 @@ pub struct BuiltScene {
 pub fn build_scene(src: &SceneSource, spec: &SceneSpec) -> Result<BuiltScene, SceneError> {
     let mut report = SceneReport::default();
     let base = load_base(src, spec, &mut report)?;
-    build_from(src, spec, base, &[], report)
+    // Kept only when the scene asks for a refinement that follows the tools.
+    let keep = (spec.contact.as_ref()).is_some_and(|c| c.get_ref().refine_radius_m.is_some());
+    build_from(src, spec, base, &[], keep, report)
 }
 
 /// Builds everything `spec` declares on `base` (the scene's mesh before
 /// refinement, [`BuiltScene::follow`]) with the cells in `around` refined
-/// too: the same scene with its mesh refined where the tools are now.
+/// too: the same scene with its mesh refined where the tools are now
+/// (its [`BuiltScene::follow`] is `None`: the caller has the base).
 pub fn build_scene_around(
     src: &SceneSource,
     spec: &SceneSpec,
     base: BaseMesh,
     around: &[RefineAround],
 ) -> Result<BuiltScene, SceneError> {
-    build_from(src, spec, base, around, SceneReport::default())
+    build_from(src, spec, base, around, false, SceneReport::default())
 }
 
 fn build_from(
@@ -73,12 +76,10 @@ fn build_from(
     spec: &SceneSpec,
     base: BaseMesh,
     around: &[RefineAround],
+    keep_base: bool,
     mut report: SceneReport,
 ) -> Result<BuiltScene, SceneError> {
-    // Kept only when the scene asks for a refinement that follows the tools.
-    let kept = (spec.contact.as_ref())
-        .is_some_and(|c| c.get_ref().refine_radius_m.is_some())
-        .then(|| base.clone());
+    let kept = keep_base.then(|| base.clone());
     let LoadedMesh {
         mesh,
         physical,

@@ -253,7 +253,7 @@ pub(super) fn follow_settings(
         Some(m) if *m.get_ref() == 0 => {
             return Err(src.error(
                 m.span(),
-                "[contact] refine_max_tets must be at least the mesh's tetrahedra",
+                "[contact] refine_max_tets must be a positive number of tetrahedra",
             ));
         }
         Some(m) => *m.get_ref(),
