@@ -60,6 +60,10 @@ impl<S: Storage> LiveFollow<S> {
             .spawn(move || {
                 // Best effort: at normal priority it only competes more.
                 let _ = shared::rt::background();
+                // The build's parallel parts (the elements' step bounds)
+                // would otherwise run on rayon's global pool, whose threads
+                // are at normal priority and took the loop's core.
+                let pool = idle_pool().ok();
                 while let Ok(job) = inbox.recv() {
                     match job {
                         Job::Build {
@@ -68,7 +72,11 @@ impl<S: Storage> LiveFollow<S> {
                             centres,
                             dt_s,
                         } => {
-                            let r = builder.build::<S>(&running, tools, centres, dt_s);
+                            let build = || builder.build::<S>(&running, tools, centres, dt_s);
+                            let r = match &pool {
+                                Some(pool) => pool.install(build),
+                                None => build(),
+                            };
                             if outbox.send(r).is_err() {
                                 return;
                             }
@@ -103,6 +111,22 @@ impl<S: Storage> LiveFollow<S> {
         }
         self.failed = true;
     }
+}
+
+/// The worker's own rayon pool: one thread, under SCHED_IDLE (best
+/// effort, as [`shared::rt::background`]), so that the parallel parts of a
+/// build (`ElasticModel::element_lambdas`, 12 x 12 eigenproblems for every
+/// element) run where the worker itself runs and not on the global pool's
+/// threads at normal priority, which competed with the stepping loop for
+/// its core (the step's p99 on the refined liver).
+pub fn idle_pool() -> Result<rayon::ThreadPool, rayon::ThreadPoolBuildError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .thread_name(|_| "follow-refine-pool".into())
+        .start_handler(|_| {
+            let _ = shared::rt::background();
+        })
+        .build()
 }
 
 impl<S: Storage> LiveRemesh<Explicit<S>> for LiveFollow<S> {
@@ -161,5 +185,31 @@ impl<S: Storage> Drop for LiveFollow<S> {
         if let Some(w) = self.worker.take() {
             let _ = w.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::idle_pool;
+    use rayon::prelude::*;
+
+    /// Parallel work installed in the worker's pool stays on its one
+    /// thread, and that thread is under SCHED_IDLE (which any thread may
+    /// lower itself to on Linux).
+    #[test]
+    fn builds_run_on_one_idle_thread() {
+        let pool = idle_pool().expect("a one-thread pool");
+        let (threads, indices, policy) = pool.install(|| {
+            let indices: Vec<Option<usize>> = (0..64)
+                .into_par_iter()
+                .map(|_| rayon::current_thread_index())
+                .collect();
+            // SAFETY: pid 0 = the calling thread; no pointers.
+            let policy = unsafe { libc::sched_getscheduler(0) };
+            (rayon::current_num_threads(), indices, policy)
+        });
+        assert_eq!(threads, 1);
+        assert!(indices.iter().all(|i| *i == Some(0)), "{indices:?}");
+        assert_eq!(policy, libc::SCHED_IDLE);
     }
 }
