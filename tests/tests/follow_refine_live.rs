@@ -91,6 +91,12 @@ fn the_live_mesh_follows_the_probe_and_the_streams_carry_it() {
     assert_eq!(s["finite"], true, "{s}");
     let swaps = s["remesh_swaps"].as_u64().unwrap();
     assert!(swaps >= 3, "{s}");
+    // Each mesh swapped in had its first step timed apart.
+    assert_eq!(
+        s["remesh_first_step_us"]["count"].as_u64(),
+        Some(swaps),
+        "{s}"
+    );
     assert!(s["remesh_most_tets"].as_u64().unwrap() > BASE_TETS, "{s}");
     // The probe has gone: the scene's own mesh, and the streams say so.
     assert_eq!(s["remesh_tets"].as_u64().unwrap(), BASE_TETS, "{s}");

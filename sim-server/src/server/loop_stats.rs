@@ -23,6 +23,10 @@ pub(crate) struct LoopStats {
     /// The loop's wall time per step's work, from its wake-up to the end
     /// of the next step's prediction (`step_work_us`).
     pub work: LoopHistogram,
+    /// The first step on each mesh swapped in (`remesh_first_step_us`).
+    pub first_after_swap: LoopHistogram,
+    /// Whether the next step is the first on a mesh swapped in.
+    pub swapped: bool,
 }
 
 impl LoopStats {
@@ -34,5 +38,6 @@ impl LoopStats {
         summary.turnaround_us = self.turnaround.percentiles_us();
         summary.hand_over_us = self.hand_over.percentiles_us();
         summary.pose_wait_us = self.pose_wait.percentiles_us();
+        summary.remesh_first_step_us = self.first_after_swap.percentiles_us();
     }
 }

@@ -238,6 +238,9 @@ pub struct RunSummary {
     pub remesh_build_wall_s: Real,
     /// See `remesh_build_wall_s`.
     pub remesh_longest_build_wall_s: Real,
+    /// See `remesh_swaps`: the first step on each mesh swapped in, apart
+    /// (its share of `step_us`'s tail: a new mesh's buffers are cold).
+    pub remesh_first_step_us: StepPercentiles,
     /// See `remesh_swaps`: why the mesh once stayed when the tools moved
     /// (a grip, a cut).
     pub remesh_pinned: Option<&'static str>,

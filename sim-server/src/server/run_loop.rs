@@ -245,6 +245,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let t1 = monotonic_ns();
         self.summary.step_s += (t1 - t0) as Real * 1e-9;
         self.stats.step.record_elapsed_ns(t1 - t0);
+        if std::mem::take(&mut self.stats.swapped) {
+            self.stats.first_after_swap.record_elapsed_ns(t1 - t0);
+        }
         let outcome = StepOutcome {
             flags: sim_server::wire::tool_flags(reports),
             any_contact: reports.iter().any(|r| r.contact),
@@ -333,6 +336,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             self.scene_out
                 .send(&self.contacts, &self.sim, &self.cfg.scene_name)?;
             self.summary.remesh_swaps += 1;
+            self.stats.swapped = true;
         }
         self.summary.remesh_s += (monotonic_ns() - t0) as Real * 1e-9;
         Ok(())
