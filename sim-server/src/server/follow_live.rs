@@ -119,7 +119,7 @@ impl<S: Storage> LiveFollow<S> {
 /// element) run where the worker itself runs and not on the global pool's
 /// threads at normal priority, which competed with the stepping loop for
 /// its core (the step's p99 on the refined liver).
-pub fn idle_pool() -> Result<rayon::ThreadPool, rayon::ThreadPoolBuildError> {
+fn idle_pool() -> Result<rayon::ThreadPool, rayon::ThreadPoolBuildError> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .thread_name(|_| "follow-refine-pool".into())

@@ -239,7 +239,7 @@ pub struct RunSummary {
     /// See `remesh_build_wall_s`.
     pub remesh_longest_build_wall_s: Real,
     /// See `remesh_swaps`: the first step on each mesh swapped in, apart
-    /// (its share of `step_us`'s tail: a new mesh's buffers are cold).
+    /// (also in `step_us`): whether the swaps make the step's tail.
     pub remesh_first_step_us: StepPercentiles,
     /// See `remesh_swaps`: why the mesh once stayed when the tools moved
     /// (a grip, a cut).
