@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{TOP_M, scene};
+use common::{TOP_M, scene, scene_block};
 use sim_server::contact::ToolInput;
 use sim_server::prelude::*;
 use sim_server::prepare::Prepared;
@@ -104,6 +104,34 @@ fn the_same_with_explicit_springs_and_with_friction() {
         "the whole passes must be exercised: {rows} of {full}"
     );
     press_slide_withdraw("friction_static = 0.6\nfriction_dynamic = 0.4\n", true);
+}
+
+#[test]
+fn the_same_with_multirate_stepping_on_a_refined_block() {
+    // A 160 x 80 x 20 mm block refined to 2.5 mm round the path: the
+    // refined cells' vertices (and the contact's) are sub-stepped, the
+    // rest keeps a longer step; the prediction is that multirate step.
+    let extra = "[[refine]]\nselect = { sphere_m = [0.084, 0.04, 0.02, 0.006] }\ncell_m = 0.0025\n\n\
+                 [simulation]\nmultirate = true\n";
+    let make = || scene_block([0.16, 0.08, 0.02], "hook", extra, 1e-3);
+    let first = make();
+    let report = first.sim.multirate().expect("multirate asked for");
+    assert!(report.engaged, "{report:?}");
+    assert!(report.coarse_substeps < report.fine_substeps, "{report:?}");
+    let shift = Vec3::new(0.0625, 0.0325, 0.0);
+    let (p, peak) = lockstep(first, make(), 700, |k| path(k) + shift, |_| 1.0);
+    assert!(peak > 0.05, "the tool must press: {peak} N");
+    assert!(
+        p.sim.predicted_steps() > 600,
+        "{} of 700 steps predicted",
+        p.sim.predicted_steps()
+    );
+    let full = p.sim.predicted_steps() * (p.sim.substeps() * p.sim.model().vertex_count()) as u64;
+    assert!(
+        p.sim.predicted_rows() * 3 < full,
+        "{} rows recomputed against {full} in full passes",
+        p.sim.predicted_rows()
+    );
 }
 
 #[test]

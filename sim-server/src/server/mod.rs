@@ -247,7 +247,9 @@ pub struct RunSummary {
     /// See `remesh_swaps`: whether a mesh stopped at `refine_max_tets`.
     pub remesh_stopped_at_budget: bool,
     /// With `[simulation] multirate`: the vertices stepped at the fine
-    /// step at the end of the run (0 without, or when it did not pay).
+    /// step, in the largest partition of the run (the end's, or with
+    /// `[contact] refine_radius_m` the largest over the meshes; 0 without,
+    /// or when it did not pay).
     pub multirate_fast_vertices: usize,
     /// See `multirate_fast_vertices`: whole passes a step (coarse sub-steps).
     pub multirate_coarse_substeps: usize,

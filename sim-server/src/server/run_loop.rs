@@ -22,6 +22,7 @@ use sim_server::backend::Backend;
 use sim_server::contact::Tools;
 use sim_server::frames::FrameRecorder;
 use sim_server::math::{Real, Vec3};
+use sim_server::tensor_mass::MultirateReport;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -68,6 +69,9 @@ pub struct RunLoop<'a, B: Backend> {
     frame_every: u64,
     last_step_ns: u64,
     removed_total: u64,
+    /// Steps finished from a prediction, and their rows, on the meshes
+    /// swapped out (each integrator counts its own).
+    predicted_before: (u64, u64),
     diverged_at: Option<u64>,
     /// `[contact] refine_radius_m`: the mesh made again round the tools.
     follow: Option<Box<dyn LiveRemesh<B>>>,
@@ -187,6 +191,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             },
             last_step_ns: start_ns,
             removed_total: 0,
+            predicted_before: (0, 0),
             diverged_at: None,
             follow,
         })
@@ -331,7 +336,15 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             return Ok(());
         };
         let t0 = monotonic_ns();
+        let predicted = self.sim.predicted();
+        let partition = self.sim.multirate();
         if f.after_step(&mut self.sim, &mut self.contacts, self.dt_s) {
+            // What the mesh swapped out counted goes on with the run's.
+            if let Some((steps, rows)) = predicted {
+                self.predicted_before.0 += steps;
+                self.predicted_before.1 += rows;
+            }
+            note_partition(&mut self.summary, partition);
             self.mesh_out.rebind(&self.sim);
             self.scene_out
                 .send(&self.contacts, &self.sim, &self.cfg.scene_name)?;
@@ -570,7 +583,8 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         summary.steps_per_s = summary.steps as Real / secs;
         summary.sim_time_s = summary.steps as Real * self.dt_s;
         if let Some((steps, rows)) = self.sim.predicted() {
-            (summary.predicted_steps, summary.predicted_rows) = (steps, rows);
+            summary.predicted_steps = self.predicted_before.0 + steps;
+            summary.predicted_rows = self.predicted_before.1 + rows;
         }
         summary.tets_removed = self.removed_total;
         summary.contact_fraction =
@@ -582,11 +596,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             self.solve_iterations as Real / (summary.steps.max(1)) as Real;
         summary.dropped_time_s = self.pacing.dropped_ns() as Real * 1e-9;
         summary.stalls = self.pacing.stalls();
-        if let Some(m) = self.sim.multirate().filter(|m| m.engaged) {
-            summary.multirate_fast_vertices = m.fast_vertices;
-            summary.multirate_coarse_substeps = m.coarse_substeps;
-            summary.multirate_fine_substeps = m.fine_substeps;
-        }
+        note_partition(&mut summary, self.sim.multirate());
         if let Some(r) = self.contacts.corotational_region_stats() {
             summary.corotational_region_largest_tets = r.largest_tets;
             summary.corotational_region_rebuilds = r.rebuilds;
@@ -617,5 +627,17 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             }),
             None => Ok(summary),
         }
+    }
+}
+
+/// Keeps the largest engaged multirate partition of the run in `summary`
+/// (each mesh the tools are followed with has its own).
+fn note_partition(summary: &mut RunSummary, partition: Option<MultirateReport>) {
+    if let Some(m) = partition.filter(|m| m.engaged)
+        && m.fast_vertices >= summary.multirate_fast_vertices
+    {
+        summary.multirate_fast_vertices = m.fast_vertices;
+        summary.multirate_coarse_substeps = m.coarse_substeps;
+        summary.multirate_fine_substeps = m.fine_substeps;
     }
 }

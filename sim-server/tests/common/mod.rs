@@ -22,10 +22,24 @@ pub fn scene(kind: &str, extra: &str) -> Prepared<Explicit<f64>> {
 
 /// [`scene`] stepped `dt_s` at a time.
 pub fn scene_stepped(kind: &str, extra: &str, dt_s: f64) -> Prepared<Explicit<f64>> {
+    scene_block([0.04, 0.02, 0.02], kind, extra, dt_s)
+}
+
+/// [`scene_stepped`] on a block of `size_m` (its top at [`TOP_M`] when
+/// the height is 2 cm), the tool's fulcrum above its centre.
+pub fn scene_block(
+    size_m: [f64; 3],
+    kind: &str,
+    extra: &str,
+    dt_s: f64,
+) -> Prepared<Explicit<f64>> {
+    let [x, y, z] = size_m;
+    let (fx, fy, fz) = (x / 2.0, y / 2.0, z + 0.13);
+    let (bx, by) = (x + 0.001, y + 0.001);
     let text = format!(
         r#"
 [mesh]
-generate = {{ shape = "box", size_m = [0.04, 0.02, 0.02], cell_m = 0.005 }}
+generate = {{ shape = "box", size_m = [{x}, {y}, {z}], cell_m = 0.005 }}
 
 [material]
 young_pa = 5000.0
@@ -35,12 +49,12 @@ damping_per_s = 40.0
 
 [[fixed]]
 name = "bottom"
-select = {{ box_m = [[-0.001, -0.001, -0.001], [0.041, 0.021, 0.0001]] }}
+select = {{ box_m = [[-0.001, -0.001, -0.001], [{bx}, {by}, 0.0001]] }}
 
 [[tool]]
 name = "tool"
 kind = "{kind}"
-fulcrum_m = [0.02, 0.01, 0.15]
+fulcrum_m = [{fx}, {fy}, {fz}]
 length_m = 0.3
 radius_m = 0.0025
 tip_length_m = 0.01

@@ -316,7 +316,7 @@ impl<S: Storage> Explicit<S> {
     /// Computes now what the next step can before its tools are known, so
     /// that a server loop spends its wait for the next pose on it and
     /// answers the pose sooner. Where every row's force is the linear
-    /// kernel's (no nonlinear elements or membrane): the whole step without
+    /// kernel's (no nonlinear elements or membrane; multirate or not): the whole step without
     /// the tools, which the step then finishes by recomputing only the rows
     /// the tools' forces, prescribed vertices and changed loads reach, one
     /// ring of neighbours a sub-step (`tensor_mass/explicit/predicted/`). Otherwise: the
@@ -339,7 +339,6 @@ impl<S: Storage> Explicit<S> {
             .resample_every_s
             .is_some_and(|r| ((r / h).floor() as usize).max(1) < self.size.substeps);
         if self.large.is_none()
-            && self.fine_per_coarse() == 1
             && self.capsule_vertices.is_empty()
             && self.kernel.is_elastic()
             && self.size.substeps <= PREDICTED_SUBSTEPS_MAX

@@ -154,7 +154,7 @@ pub const MAX_SUBSTEPS: usize = 4096;
 /// Sub-steps at most for which [`Explicit::prepare_step`] predicts the
 /// whole step (it keeps an array per sub-step); above, it computes the
 /// first sub-step's K U ahead.
-pub const PREDICTED_SUBSTEPS_MAX: usize = 8;
+pub const PREDICTED_SUBSTEPS_MAX: usize = 16;
 
 /// How fast the sub-steps a stretched nonlinear body needed are given back
 /// once it eases (per step): each change of the count rescales U(t-1) to

@@ -28,6 +28,18 @@
 //! about 90 rows against 5,289 for three passes. Once the rows reach half
 //! the mesh (many sub-steps) the rest of the step runs whole passes.
 //!
+//! With multirate stepping (`multirate.rs`) the prediction is the
+//! multirate step itself: whole passes at the coarse sub-steps (each
+//! vertex by its own step: a slow one reads its U(t - H), kept in the
+//! trajectory m slots back), the fast rows alone at the fine ones (the
+//! interface interpolated in place, as the plain step does); a slow row
+//! is the previous slot's copy between two coarse sub-steps. The
+//! correction grows one ring into the fast vertices at a fine sub-step
+//! (only they move there) and one ring into all at a coarse one, so on a
+//! refined organ it stays within the fast region and a few rings of coarse
+//! cells round it: the slow rows of the whole passes come from the
+//! prediction.
+//!
 //! Used where every row's force is the linear kernel's: one part (no
 //! worker threads), no nonlinear elements, no nonlinear membrane, and no
 //! re-selection of contact points inside the step (a step longer than the
@@ -62,6 +74,101 @@ fn whole_pass<S: Storage>(
             spill: &mut [],
         },
     );
+}
+
+/// The multirate partition as a predicted step reads it (`m == 1`: one
+/// step for all, every vertex fast).
+pub(in crate::tensor_mass) struct Levels<'a> {
+    /// Fine sub-steps per coarse one.
+    pub m: usize,
+    /// Per vertex: fast (empty when `m == 1`).
+    pub is_fast: &'a [bool],
+    /// Fast vertices, ascending.
+    pub fast: &'a [u32],
+    /// Slow vertices next to a fast one.
+    pub interface: &'a [u32],
+    /// Their U(t + H) while they hold interpolated values (`interface`'s length).
+    pub saved: &'a mut [V3],
+}
+
+impl Levels<'_> {
+    /// One step for all.
+    pub(in crate::tensor_mass) fn uniform() -> Levels<'static> {
+        Levels {
+            m: 1,
+            is_fast: &[],
+            fast: &[],
+            interface: &[],
+            saved: &mut [],
+        }
+    }
+
+    /// Whether sub-step `k` recomputes the fast rows alone.
+    fn fine(&self, k: usize) -> bool {
+        self.m > 1 && !k.is_multiple_of(self.m)
+    }
+
+    fn is_fast(&self, i: usize) -> bool {
+        self.m == 1 || self.is_fast[i]
+    }
+
+    /// The slot a slow vertex's U(t - H) is in at coarse sub-step `k`
+    /// (U(t_k - h) of every vertex at `k`: slot `k`). Between two coarse
+    /// sub-steps a slow vertex's slots are copies, so m slots back holds
+    /// its value before the last coarse pass; the step's first sub-step
+    /// reads the state's own U(t - H) (slot 0).
+    fn slow_prev(&self, k: usize) -> usize {
+        if k >= self.m { k + 1 - self.m } else { 0 }
+    }
+
+    /// The coarse sub-step `k`'s U(t_k - h) of every vertex by its own
+    /// step, into `out`.
+    fn coarse_prev(&self, before: &[Vec<V3>], k: usize, out: &mut [V3]) {
+        out.copy_from_slice(&before[self.slow_prev(k)]);
+        if self.m > 1 {
+            for &i in self.fast {
+                out[i as usize] = before[k][i as usize];
+            }
+        }
+    }
+
+    /// Fine sub-step `k`: the interface vertices of slot `k + 1` set to
+    /// their values at the fraction of the coarse sub-step (the plain
+    /// step's `interpolate_interface`, the same arithmetic), U(t + H) kept.
+    fn interpolate(&mut self, before: &mut [Vec<V3>], k: usize) {
+        let k0 = k - k % self.m;
+        let s = (k % self.m) as Real / self.m as Real;
+        let (base, rest) = before.split_at_mut(k + 1);
+        let (start, now) = (&base[k0 + 1], &mut rest[0]);
+        for (saved, &j) in self.saved.iter_mut().zip(self.interface) {
+            let j = j as usize;
+            *saved = now[j];
+            for d in 0..3 {
+                now[j][d] = start[j][d] + s * (now[j][d] - start[j][d]);
+            }
+        }
+    }
+
+    /// The interface's U(t + H) back into `now`.
+    fn restore(&self, now: &mut [V3]) {
+        for (saved, &j) in self.saved.iter().zip(self.interface) {
+            now[j as usize] = *saved;
+        }
+    }
+}
+
+/// Row `i` of a sub-step: U(t_k + h) from `now` and its own U(t_k - h).
+fn row<S: Storage>(
+    kernel: &Kernel<S>,
+    lower: &LowerRows,
+    inputs: &StepInputs<'_>,
+    i: usize,
+    prev: V3,
+) -> V3 {
+    let ku = row_product(kernel, lower, inputs.u, i);
+    let mut next = prev;
+    inputs.integrate(i, ku, &mut next);
+    next
 }
 
 /// The predicted step and the bookkeeping of its correction, allocated at
@@ -121,16 +228,20 @@ impl Prediction {
         }
     }
 
-    /// Computes P_1 .. P_S from U(t-1) = `prev`, U(t) = `now`, `run(u,
-    /// next)` being one kernel pass without contact forces that writes
-    /// U(t+1) over U(t-1) (held in `next`) from U(t) = `u`.
+    /// Computes P_1 .. P_S from U(t-1) = `prev`, U(t) = `now` with
+    /// `base`'s coefficients and forces (its `u` is ignored): each sub-step
+    /// a kernel pass (`ring` its accumulator), or with multirate `levels`
+    /// the fast rows alone at the fine sub-steps.
+    #[allow(clippy::too_many_arguments)]
     pub(in crate::tensor_mass) fn predict<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
         substeps: usize,
+        levels: &mut Levels<'_>,
+        base: &StepInputs<'_>,
+        ring: &mut [R4],
         prev: &mut Vec<V3>,
         now: &mut Vec<V3>,
-        mut run: impl FnMut(&[V3], &mut [V3]),
     ) {
         let n = now.len();
         if !self.lower.fits(n) {
@@ -154,10 +265,29 @@ impl Prediction {
         std::mem::swap(prev, &mut self.traj[0]);
         std::mem::swap(now, &mut self.traj[1]);
         for k in 0..substeps {
-            // P_(k+1) over a copy of P_(k-1), from P_k.
+            // P_(k+1) from P_k and each vertex's own previous value.
             let (before, after) = self.traj.split_at_mut(k + 2);
-            after[0].copy_from_slice(&before[k]);
-            run(&before[k + 1], &mut after[0]);
+            let out = &mut after[0];
+            if levels.fine(k) {
+                out.copy_from_slice(&before[k + 1]);
+                levels.interpolate(before, k);
+                let inputs = StepInputs {
+                    u: &before[k + 1],
+                    ..*base
+                };
+                for &i in levels.fast {
+                    let i = i as usize;
+                    out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
+                }
+                levels.restore(&mut before[k + 1]);
+            } else {
+                levels.coarse_prev(before, k, out);
+                let inputs = StepInputs {
+                    u: &before[k + 1],
+                    ..*base
+                };
+                whole_pass(kernel, &inputs, ring, out);
+            }
         }
         std::mem::swap(prev, &mut self.traj[0]);
         std::mem::swap(now, &mut self.traj[1]);
@@ -194,20 +324,35 @@ impl Prediction {
         }
     }
 
-    /// Adds the neighbours of every marked row (the next sub-step's rows).
-    pub(in crate::tensor_mass) fn grow<S: Storage>(&mut self, kernel: &Kernel<S>) {
+    /// Adds the neighbours of every marked row (sub-step `k`'s rows): at
+    /// a fine sub-step only the fast ones, the only rows it moves (a slow
+    /// neighbour reads the change at the next coarse sub-step, when every
+    /// neighbour of the marked rows is added).
+    pub(in crate::tensor_mass) fn grow<S: Storage>(
+        &mut self,
+        kernel: &Kernel<S>,
+        k: usize,
+        levels: &Levels<'_>,
+    ) {
         if self.whole {
             return;
         }
+        let fine = levels.fine(k);
         let (_, _, edges) = kernel.parts();
         let count = self.rows.len();
         for r in 0..count {
             let i = self.rows[r] as usize;
             for slot in kernel.row(i) {
-                self.mark(edges[slot].col);
+                let j = edges[slot].col;
+                if !fine || levels.is_fast(j as usize) {
+                    self.mark(j);
+                }
             }
             for e in 0..self.lower.of(i).len() {
-                self.mark(self.lower.of(i)[e][0]);
+                let j = self.lower.of(i)[e][0];
+                if !fine || levels.is_fast(j as usize) {
+                    self.mark(j);
+                }
             }
         }
     }
@@ -220,50 +365,104 @@ impl Prediction {
     }
 
     /// Recomputes the marked rows of sub-step `k`: U(t_k + h) from U(t_k)
-    /// and U(t_k - h) with `base`'s coefficients, constraints and forces
-    /// (its `u` is ignored); once they are half the mesh, every row by the
-    /// kernel's pass (with its accumulator `ring`).
+    /// and each row's own U(t_k - h) with `base`'s coefficients,
+    /// constraints and forces (its `u` is ignored); once they are half the
+    /// mesh, every row by the kernel's pass (with its accumulator `ring`).
+    /// At a fine sub-step the marked slow rows take the previous slot's
+    /// value and the fast ones are recomputed against the interpolated
+    /// interface. (The contact field, evaluated before, reads only its
+    /// points' vertices, which `multirate_cover` made fast: it never sees
+    /// the interface, interpolated or not.)
     pub(in crate::tensor_mass) fn correct_rows<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
         k: usize,
+        levels: &mut Levels<'_>,
         base: &StepInputs<'_>,
         ring: &mut [R4],
     ) {
         let n = self.in_rows.len();
         self.whole |= 2 * self.rows.len() > n;
         let (before, after) = self.traj.split_at_mut(k + 2);
-        let (prev, now, out) = (&before[k], &before[k + 1], &mut after[0]);
+        let out = &mut after[0];
+        if levels.fine(k) {
+            if self.whole {
+                out.copy_from_slice(&before[k + 1]);
+            } else {
+                for &r in &self.rows {
+                    let i = r as usize;
+                    if !levels.is_fast(i) {
+                        out[i] = before[k + 1][i];
+                    }
+                }
+            }
+            levels.interpolate(before, k);
+            let inputs = StepInputs {
+                u: &before[k + 1],
+                ..*base
+            };
+            if self.whole {
+                self.rows_total += levels.fast.len() as u64;
+                for &i in levels.fast {
+                    let i = i as usize;
+                    out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
+                }
+            } else {
+                for &r in &self.rows {
+                    let i = r as usize;
+                    if levels.is_fast(i) {
+                        self.rows_total += 1;
+                        out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
+                    }
+                }
+            }
+            levels.restore(&mut before[k + 1]);
+            return;
+        }
         let inputs = StepInputs {
-            u: now,
-            coef: base.coef,
-            kind: base.kind,
-            target: base.target,
-            fext: base.fext,
-            fmem: base.fmem,
-            fnl: base.fnl,
+            u: &before[k + 1],
+            ..*base
         };
         if self.whole {
             self.rows_total += n as u64;
-            // The plain step's pass: U(t_k - h) overwritten in place.
-            out.copy_from_slice(prev);
+            // The plain step's pass: each row's U(t_k - h) overwritten in place.
+            levels.coarse_prev(before, k, out);
             whole_pass(kernel, &inputs, ring, out);
             return;
         }
         self.rows_total += self.rows.len() as u64;
+        let slow = levels.slow_prev(k);
         for &r in &self.rows {
             let i = r as usize;
-            let ku = row_product(kernel, &self.lower, now, i);
-            let mut next = prev[i];
-            inputs.integrate(i, ku, &mut next);
-            out[i] = next;
+            let prev = if levels.is_fast(i) {
+                before[k][i]
+            } else {
+                before[slow][i]
+            };
+            out[i] = row(kernel, &self.lower, &inputs, i, prev);
         }
     }
 
     /// Ends the step: U(t) and U(t-1) back to the state (`now`, `prev`:
     /// P_S and P_(S-1)), the other arrays kept for the next prediction.
-    pub(in crate::tensor_mass) fn end(&mut self, prev: &mut Vec<V3>, now: &mut Vec<V3>) {
+    /// With multirate `levels`, a slow vertex's U(t-1) is its value
+    /// before the last coarse pass (m slots back), as the plain step leaves it.
+    pub(in crate::tensor_mass) fn end(
+        &mut self,
+        levels: &Levels<'_>,
+        prev: &mut Vec<V3>,
+        now: &mut Vec<V3>,
+    ) {
         let s = self.made_for.unwrap_or(self.traj.len() - 2);
+        if levels.m > 1 {
+            let (before, after) = self.traj.split_at_mut(s);
+            let (back, last) = (&before[s + 1 - levels.m], &mut after[0]);
+            for (i, fast) in levels.is_fast.iter().enumerate() {
+                if !fast {
+                    last[i] = back[i];
+                }
+            }
+        }
         std::mem::swap(now, &mut self.traj[s + 1]);
         std::mem::swap(prev, &mut self.traj[s]);
         // The two emptied slots become 0 and 1.
@@ -290,6 +489,7 @@ impl<S: Storage> Explicit<S> {
         if self.ahead.prediction.ready(self.size.substeps) {
             return;
         }
+        let m = self.fine_per_coarse();
         let Self {
             kernel,
             u,
@@ -301,21 +501,21 @@ impl<S: Storage> Explicit<S> {
             parts: Parts { buffers, .. },
             ahead: Ahead { prediction, .. },
             size: StepSize { substeps, .. },
+            multirate,
             ..
         } = self;
+        let mut levels = levels(m, multirate.as_mut());
+        let base = StepInputs {
+            u: &[],
+            coef,
+            kind,
+            target,
+            fext,
+            fmem: &[],
+            fnl: &[],
+        };
         let ring = &mut buffers[0].ring;
-        prediction.predict(kernel, *substeps, next, u, |now, out| {
-            let inputs = StepInputs {
-                u: now,
-                coef,
-                kind,
-                target,
-                fext,
-                fmem: &[],
-                fnl: &[],
-            };
-            whole_pass(kernel, &inputs, ring, out);
-        });
+        prediction.predict(kernel, *substeps, &mut levels, &base, ring, next, u);
     }
 
     /// The predicted step finished with the tools: `field`'s forces (if
@@ -324,6 +524,7 @@ impl<S: Storage> Explicit<S> {
     pub(super) fn finish_predicted<F: ForceTerm>(&mut self, mut field: Option<&mut F>) {
         let substeps = self.size.substeps;
         let h = self.size.dt_s / substeps as Real;
+        let m = self.fine_per_coarse();
         let Self {
             kernel,
             u,
@@ -337,8 +538,10 @@ impl<S: Storage> Explicit<S> {
             model,
             size: StepSize { dt_s, .. },
             parts: Parts { buffers, .. },
+            multirate,
             ..
         } = self;
+        let mut levels = levels(m, multirate.as_mut());
         let contact = field
             .as_deref()
             .into_iter()
@@ -346,7 +549,7 @@ impl<S: Storage> Explicit<S> {
         prediction.begin(next, u, contact);
         for k in 0..substeps {
             if k > 0 {
-                prediction.grow(kernel);
+                prediction.grow(kernel, k, &levels);
             }
             if let Some(field) = field.as_deref_mut() {
                 field.zero(fmem);
@@ -368,7 +571,7 @@ impl<S: Storage> Explicit<S> {
                 fmem,
                 fnl: &[],
             };
-            prediction.correct_rows(kernel, k, &base, &mut buffers[0].ring);
+            prediction.correct_rows(kernel, k, &mut levels, &base, &mut buffers[0].ring);
             if let Some(field) = field.as_deref_mut()
                 && field.implicit_springs()
             {
@@ -377,10 +580,24 @@ impl<S: Storage> Explicit<S> {
                 field.correct_implicit(inverse_d, now, out);
             }
         }
-        prediction.end(next, u);
+        prediction.end(&levels, next, u);
         self.ahead.predicted_steps += 1;
         self.steps += 1;
         self.follow_tangent();
+    }
+}
+
+/// The partition's levels for `m` fine sub-steps per coarse one.
+fn levels(m: usize, plan: Option<&mut super::multirate::Multirate>) -> Levels<'_> {
+    match plan {
+        Some(p) if m > 1 => Levels {
+            m,
+            is_fast: &p.is_fast,
+            fast: &p.fast,
+            interface: &p.interface,
+            saved: &mut p.saved,
+        },
+        _ => Levels::uniform(),
     }
 }
 
