@@ -26,15 +26,30 @@ fn path(k: usize) -> Vec3 {
 }
 
 /// Steps `plain` and `prepared` side by side over `steps` steps, the
-/// prepared one preparing before each pose; every state and force equal.
+/// prepared one preparing before each pose; every state and force equal
+/// (the forces read before [`Explicit::finish_step`], the states after).
 fn lockstep(
+    plain: Prepared<Explicit<f64>>,
+    prepared: Prepared<Explicit<f64>>,
+    steps: usize,
+    tip: impl Fn(usize) -> Vec3,
+    jaw: impl Fn(usize) -> f64,
+) -> (Prepared<Explicit<f64>>, f64) {
+    let (p, peak, _) = lockstep_counting(plain, prepared, steps, tip, jaw);
+    (p, peak)
+}
+
+/// [`lockstep`], also counting the steps whose state before
+/// [`Explicit::finish_step`] was not yet the plain one's (rows deferred).
+fn lockstep_counting(
     mut plain: Prepared<Explicit<f64>>,
     mut prepared: Prepared<Explicit<f64>>,
     steps: usize,
     tip: impl Fn(usize) -> Vec3,
     jaw: impl Fn(usize) -> f64,
-) -> (Prepared<Explicit<f64>>, f64) {
+) -> (Prepared<Explicit<f64>>, f64, usize) {
     let mut peak: f64 = 0.0;
+    let mut unfinished = 0;
     for k in 0..steps {
         prepared.sim.prepare_step();
         let input = [Some(ToolInput {
@@ -56,11 +71,24 @@ fn lockstep(
                 .map(|x| x.to_bits())
                 .collect()
         };
+        if bits(&plain) != bits(&prepared) {
+            unfinished += 1;
+        }
+        prepared.sim.finish_step();
         assert!(bits(&plain) == bits(&prepared), "state at step {k}");
         peak = peak.max(forces[0].length());
     }
     assert_eq!(plain.sim.predicted_steps(), 0);
-    (prepared, peak)
+    (prepared, peak, unfinished)
+}
+
+/// A 160 x 80 x 20 mm block refined to 2.5 mm within 6 mm of its top's
+/// centre, multirate: the refined cells' vertices (and the contact's)
+/// sub-stepped, the rest at a longer step.
+fn refined_block() -> Prepared<Explicit<f64>> {
+    let extra = "[[refine]]\nselect = { sphere_m = [0.084, 0.04, 0.02, 0.006] }\ncell_m = 0.0025\n\n\
+                 [simulation]\nmultirate = true\n";
+    scene_block([0.16, 0.08, 0.02], "hook", extra, 1e-3)
 }
 
 /// `local`: the correction must stay well below full passes (with
@@ -111,9 +139,7 @@ fn the_same_with_multirate_stepping_on_a_refined_block() {
     // A 160 x 80 x 20 mm block refined to 2.5 mm round the path: the
     // refined cells' vertices (and the contact's) are sub-stepped, the
     // rest keeps a longer step; the prediction is that multirate step.
-    let extra = "[[refine]]\nselect = { sphere_m = [0.084, 0.04, 0.02, 0.006] }\ncell_m = 0.0025\n\n\
-                 [simulation]\nmultirate = true\n";
-    let make = || scene_block([0.16, 0.08, 0.02], "hook", extra, 1e-3);
+    let make = refined_block;
     let first = make();
     let report = first.sim.multirate().expect("multirate asked for");
     assert!(report.engaged, "{report:?}");
@@ -135,6 +161,27 @@ fn the_same_with_multirate_stepping_on_a_refined_block() {
 }
 
 #[test]
+fn the_far_rows_left_until_the_force_is_out_change_neither_force_nor_state() {
+    // The hook on the plain block, and on the refined multirate block:
+    // each step's force is read before the far rows are recomputed.
+    let shift = Vec3::new(0.0625, 0.0325, 0.0);
+    type Sim = Prepared<Explicit<f64>>;
+    let cases: [(Sim, Sim, Vec3); 2] = [
+        (scene("hook", ""), scene("hook", ""), Vec3::ZERO),
+        (refined_block(), refined_block(), shift),
+    ];
+    for (plain, mut prepared, shift) in cases {
+        prepared.sim.defer_far_rows(true);
+        let (p, peak, unfinished) =
+            lockstep_counting(plain, prepared, 700, |k| path(k) + shift, |_| 1.0);
+        assert!(peak > 0.05, "the tool must press: {peak} N");
+        assert!(p.sim.predicted_steps() > 600);
+        // Rows were left for after the force in most contact steps.
+        assert!(unfinished > 300, "{unfinished} of 700 steps left rows");
+    }
+}
+
+#[test]
 fn gripping_lifting_and_cutting_after_a_prediction_change_nothing() {
     // Down 2 mm, close the jaws (grip), lift 3 mm, close below 0.1 (cut).
     let tip = |k: usize| {
@@ -149,8 +196,14 @@ fn gripping_lifting_and_cutting_after_a_prediction_change_nothing() {
         300..600 => 0.3,
         _ => 0.05,
     };
-    let (p, _) = lockstep(scene("grasper", ""), scene("grasper", ""), 620, tip, jaw);
-    assert!(p.sim.model().topology().alive_count() < p.sim.model().mesh().tet_count());
-    // The cut's step too: its elements' rows are recomputed, not the step.
-    assert_eq!(p.sim.predicted_steps(), 620);
+    // Also with the far rows left until the force is out: the grip's
+    // force reads the elastic force at its vertices, one ring further.
+    for defer in [false, true] {
+        let mut prepared = scene("grasper", "");
+        prepared.sim.defer_far_rows(defer);
+        let (p, _) = lockstep(scene("grasper", ""), prepared, 620, tip, jaw);
+        assert!(p.sim.model().topology().alive_count() < p.sim.model().mesh().tet_count());
+        // The cut's step too: its elements' rows are recomputed, not the step.
+        assert_eq!(p.sim.predicted_steps(), 620);
+    }
 }

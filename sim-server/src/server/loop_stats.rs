@@ -14,6 +14,8 @@ pub(crate) struct LoopStats {
     pub turnaround: LoopHistogram,
     /// The contact stiffness's hand-over after the sample (`hand_over_us`).
     pub hand_over: LoopHistogram,
+    /// The rest of the step after its sample (`step_rest_us`).
+    pub rest: LoopHistogram,
     /// From a new pose's device read to the loop's wake-up for it
     /// (`pose_wait_us`).
     pub pose_wait: LoopHistogram,
@@ -37,6 +39,7 @@ impl LoopStats {
         summary.step_work_us = self.work.percentiles_us();
         summary.turnaround_us = self.turnaround.percentiles_us();
         summary.hand_over_us = self.hand_over.percentiles_us();
+        summary.step_rest_us = self.rest.percentiles_us();
         summary.pose_wait_us = self.pose_wait.percentiles_us();
         summary.remesh_first_step_us = self.first_after_swap.percentiles_us();
     }

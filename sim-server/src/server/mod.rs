@@ -162,6 +162,10 @@ pub struct RunSummary {
     /// every few steps, nearly nothing otherwise): work that ran inside
     /// the step, before the sample, until 2026-11-26.
     pub hand_over_us: StepPercentiles,
+    /// The rest of each step, after its force sample went out: the rows
+    /// of a predicted step too far from the tools for the force to depend
+    /// on them (`Backend::defer_far_rows`; 0 for backends without).
+    pub step_rest_us: StepPercentiles,
     /// From a pose's device read (its `t_ns`) to the loop waking for the
     /// step that takes it, over the steps that took a new pose: the pose's
     /// transport plus the loop's wake-up, or the step in progress it waited

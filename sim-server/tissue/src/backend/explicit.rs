@@ -22,6 +22,12 @@ impl<S: Storage> Backend for Explicit<S> {
     fn prepare_step(&mut self) {
         Explicit::prepare_step(self);
     }
+    fn defer_far_rows(&mut self, on: bool) {
+        Explicit::defer_far_rows(self, on);
+    }
+    fn finish_step(&mut self) {
+        Explicit::finish_step(self);
+    }
     fn predicted(&self) -> Option<(u64, u64)> {
         Some((self.predicted_steps(), self.predicted_rows()))
     }

@@ -121,6 +121,17 @@ pub trait Backend {
     /// the step's result is unchanged. A loop
     /// calls it while it waits for the next pose. Others: nothing.
     fn prepare_step(&mut self) {}
+    /// Has each step leave what its force cannot depend on until
+    /// [`Backend::finish_step`], so that a loop sends the force first (the
+    /// explicit backend: the rows of a predicted step far from the tools).
+    /// Reading the state before the step is finished sees those parts as
+    /// predicted; stepping or changing anything finishes it first. Others:
+    /// nothing.
+    fn defer_far_rows(&mut self, on: bool) {
+        let _ = on;
+    }
+    /// Finishes the step [`Backend::defer_far_rows`] left pending.
+    fn finish_step(&mut self) {}
     /// Steps finished from a whole-step prediction ([`Backend::prepare_step`]),
     /// and the rows they recomputed (summed over sub-steps); `None` for
     /// backends that do not predict.

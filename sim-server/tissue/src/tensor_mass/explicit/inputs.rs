@@ -19,6 +19,7 @@ impl<S: Storage> Explicit<S> {
 
     /// Imposes displacement `d_m` on vertex `v` from the next step on.
     pub fn prescribe(&mut self, v: VertexId, d_m: Vec3) {
+        self.finish_step();
         self.constraint[v.idx()] = kind::PRESCRIBED;
         self.target[v.idx()] = d_m.to_array();
         self.refresh_vertex(v.idx());
@@ -27,6 +28,7 @@ impl<S: Storage> Explicit<S> {
 
     /// Frees vertex `v` (its current displacement and velocity are kept).
     pub fn release(&mut self, v: VertexId) {
+        self.finish_step();
         self.constraint[v.idx()] = kind::FREE;
         self.refresh_vertex(v.idx());
         self.ahead.prediction.touch(v.idx());
@@ -35,6 +37,7 @@ impl<S: Storage> Explicit<S> {
     /// Sets the external force (N) on vertex `v`. The first call allocates the
     /// force array; a simulation without loads never reads one.
     pub fn set_external_force(&mut self, v: VertexId, f_n: Vec3) {
+        self.finish_step();
         if self.fext.is_empty() {
             self.fext = huge_vec(self.u.len(), [0.0; 3]);
         }
@@ -82,6 +85,7 @@ impl<S: Storage> Explicit<S> {
     /// change. Allocates (the region's rest data): call when the region
     /// changes, not every step.
     pub fn set_corotational_region(&mut self, corotational: &[bool]) {
+        self.finish_step();
         if self
             .large
             .as_ref()
@@ -112,6 +116,7 @@ impl<S: Storage> Explicit<S> {
 
     /// Removes tetrahedron `t` (10 tensor updates in the model, copied to the kernel).
     pub fn remove_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        self.finish_step();
         let change = self.model.remove_tet(t)?;
         self.after_cut(t, false, &change);
         Ok(change)
@@ -119,6 +124,7 @@ impl<S: Storage> Explicit<S> {
 
     /// Adds a removed tetrahedron back.
     pub fn restore_tet(&mut self, t: TetId) -> Result<CutChange, CutError> {
+        self.finish_step();
         let change = self.model.restore_tet(t)?;
         self.after_cut(t, true, &change);
         Ok(change)

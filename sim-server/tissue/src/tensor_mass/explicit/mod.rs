@@ -129,6 +129,7 @@ impl<S: Storage> Explicit<S> {
 
     /// Advances by `dt_s` (in `substeps()` equal sub-steps).
     pub fn step(&mut self) {
+        self.finish_step();
         if self.ahead.prediction.ready(self.size.substeps) {
             self.finish_predicted(None::<&mut NoForce>);
             return;
@@ -222,6 +223,7 @@ impl<S: Storage> Explicit<S> {
         resample_every_s: Real,
         resample: &mut R,
     ) {
+        self.finish_step();
         if field.is_idle() {
             self.step();
             return;
@@ -327,6 +329,7 @@ impl<S: Storage> Explicit<S> {
     /// sub-step count, cleared loads or [`Explicit::set_state`] discard it.
     /// The first call allocates its arrays.
     pub fn prepare_step(&mut self) {
+        self.finish_step();
         if self.parts.plans.len() != 1 || self.ahead.ku_ready {
             return;
         }
@@ -373,6 +376,7 @@ impl<S: Storage> Explicit<S> {
     /// Drops what [`Explicit::prepare_step`] computed (the state or the
     /// model changed under it).
     fn forget_prepared(&mut self) {
+        self.finish_step();
         self.ahead.ku_ready = false;
         self.ahead.prediction.forget();
     }

@@ -349,6 +349,7 @@ impl<S: Storage> Explicit<S> {
     /// in use only when it pays ([`MultirateReport::engaged`]). Allocates:
     /// call at setup.
     pub fn set_multirate(&mut self, on: bool) -> Result<Option<MultirateReport>, MultirateError> {
+        self.finish_step();
         if !on {
             // One step for all at the count the bounds need (not the
             // multiple of the coarse count it was rounded to).

@@ -53,6 +53,7 @@ use crate::tensor_mass::huge_pages::huge_vec;
 use crate::tensor_mass::kernel::{
     Kernel, LowerRows, Part, R4, StepInputs, Storage, V3, kind, row_product,
 };
+use reach::Reach;
 
 /// One part's pass over every row (the single-part plan: nothing deferred,
 /// nothing spilled): U(t+1) over U(t-1) in `next`.
@@ -196,6 +197,28 @@ pub(in crate::tensor_mass) struct Prediction {
     /// The rows reached half the mesh: the rest of the step runs whole
     /// passes (streaming every row beats gathering most of them).
     whole: bool,
+    /// `rows[..counts[k]]` are sub-step `k`'s (the list only grows).
+    counts: Vec<u32>,
+    /// Leave the rows the step's force cannot depend on for
+    /// [`Prediction::finish`] (`Explicit::defer_far_rows`).
+    pub(in crate::tensor_mass) defer: bool,
+    /// How far each row is from the step's first rows.
+    reach: Reach,
+    /// Sub-steps before this one have far rows left (the whole passes
+    /// after it computed every row).
+    far_until: usize,
+    /// The step's near rows are done and in the state; its far ones wait.
+    pending: bool,
+}
+
+/// Which of a sub-step's marked rows a pass recomputes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Share {
+    All,
+    /// Those within reach of the step's force ([`Reach::near`]).
+    Near,
+    /// The rest.
+    Far,
 }
 
 impl Prediction {
@@ -251,12 +274,14 @@ impl Prediction {
             // Each lists a vertex at most once: no step allocates.
             self.rows = Vec::with_capacity(n);
             self.changed = Vec::with_capacity(n);
+            self.reach = Reach::new(n);
         }
         // Never shrunk: a sub-step count that comes and goes (explicit
         // contact springs) reuses its arrays instead of reallocating them.
         if self.traj.len() < substeps + 2 {
             self.traj.resize_with(substeps + 2, Vec::new);
         }
+        self.counts.reserve(substeps);
         for b in &mut self.traj[2..substeps + 2] {
             if b.len() != n {
                 *b = huge_vec(n, [0.0; 3]);
@@ -297,8 +322,9 @@ impl Prediction {
     /// Starts finishing the predicted step: takes the state's arrays
     /// (U(t-1), U(t)) into the trajectory and marks the first sub-step's
     /// rows: the changed vertices and `contact` ones.
-    pub(in crate::tensor_mass) fn begin(
+    pub(in crate::tensor_mass) fn begin<S: Storage>(
         &mut self,
+        kernel: &Kernel<S>,
         prev: &mut Vec<V3>,
         now: &mut Vec<V3>,
         contact: impl Iterator<Item = u32>,
@@ -314,6 +340,12 @@ impl Prediction {
         self.changed.clear();
         for v in contact {
             self.mark(v);
+        }
+        self.far_until = usize::MAX;
+        if self.defer {
+            let substeps = self.made_for.unwrap_or(0);
+            self.reach
+                .measure(kernel, &self.lower, &self.rows, substeps / 2);
         }
     }
 
@@ -372,7 +404,9 @@ impl Prediction {
     /// value and the fast ones are recomputed against the interpolated
     /// interface. (The contact field, evaluated before, reads only its
     /// points' vertices, which `multirate_cover` made fast: it never sees
-    /// the interface, interpolated or not.)
+    /// the interface, interpolated or not.) With `defer`, only the rows
+    /// the step's force can depend on ([`Reach`]); the others wait for
+    /// [`Prediction::finish`].
     pub(in crate::tensor_mass) fn correct_rows<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
@@ -382,16 +416,57 @@ impl Prediction {
         ring: &mut [R4],
     ) {
         let n = self.in_rows.len();
-        self.whole |= 2 * self.rows.len() > n;
+        if !self.whole && 2 * self.rows.len() > n {
+            self.whole = true;
+            // The whole passes read every row: the sub-steps before
+            // finish their far rows first.
+            if self.defer {
+                for j in 0..k {
+                    self.recompute(kernel, j, levels, base, ring, Share::Far);
+                }
+            }
+            self.far_until = k;
+        }
+        if self.whole {
+            self.recompute(kernel, k, levels, base, ring, Share::All);
+            return;
+        }
+        self.counts.push(self.rows.len() as u32);
+        let share = if self.defer { Share::Near } else { Share::All };
+        self.recompute(kernel, k, levels, base, ring, share);
+    }
+
+    /// Sub-step `k`'s `share` of its rows (every row, by whole passes,
+    /// when `whole` and `share` is [`Share::All`]).
+    fn recompute<S: Storage>(
+        &mut self,
+        kernel: &Kernel<S>,
+        k: usize,
+        levels: &mut Levels<'_>,
+        base: &StepInputs<'_>,
+        ring: &mut [R4],
+        share: Share,
+    ) {
+        let n = self.in_rows.len();
+        let whole = self.whole && share == Share::All;
+        let budget = self.made_for.unwrap_or(0).saturating_sub(k);
+        let count = if whole { 0 } else { self.counts[k] as usize };
+        let (reach, rows) = (&self.reach, &self.rows[..count]);
+        let take = |i: usize| match share {
+            Share::All => true,
+            Share::Near => reach.near(i, budget),
+            Share::Far => !reach.near(i, budget),
+        };
+        let mut done = 0u64;
         let (before, after) = self.traj.split_at_mut(k + 2);
         let out = &mut after[0];
         if levels.fine(k) {
-            if self.whole {
+            if whole {
                 out.copy_from_slice(&before[k + 1]);
             } else {
-                for &r in &self.rows {
+                for &r in rows {
                     let i = r as usize;
-                    if !levels.is_fast(i) {
+                    if !levels.is_fast(i) && take(i) {
                         out[i] = before[k + 1][i];
                     }
                 }
@@ -401,46 +476,89 @@ impl Prediction {
                 u: &before[k + 1],
                 ..*base
             };
-            if self.whole {
-                self.rows_total += levels.fast.len() as u64;
+            if whole {
+                done += levels.fast.len() as u64;
                 for &i in levels.fast {
                     let i = i as usize;
                     out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
                 }
             } else {
-                for &r in &self.rows {
+                for &r in rows {
                     let i = r as usize;
-                    if levels.is_fast(i) {
-                        self.rows_total += 1;
+                    if levels.is_fast(i) && take(i) {
+                        done += 1;
                         out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
                     }
                 }
             }
             levels.restore(&mut before[k + 1]);
-            return;
-        }
-        let inputs = StepInputs {
-            u: &before[k + 1],
-            ..*base
-        };
-        if self.whole {
-            self.rows_total += n as u64;
-            // The plain step's pass: each row's U(t_k - h) overwritten in place.
-            levels.coarse_prev(before, k, out);
-            whole_pass(kernel, &inputs, ring, out);
-            return;
-        }
-        self.rows_total += self.rows.len() as u64;
-        let slow = levels.slow_prev(k);
-        for &r in &self.rows {
-            let i = r as usize;
-            let prev = if levels.is_fast(i) {
-                before[k][i]
-            } else {
-                before[slow][i]
+        } else {
+            let inputs = StepInputs {
+                u: &before[k + 1],
+                ..*base
             };
-            out[i] = row(kernel, &self.lower, &inputs, i, prev);
+            if whole {
+                done += n as u64;
+                // The plain step's pass: each row's U(t_k - h) overwritten in place.
+                levels.coarse_prev(before, k, out);
+                whole_pass(kernel, &inputs, ring, out);
+            } else {
+                let slow = levels.slow_prev(k);
+                for &r in rows {
+                    let i = r as usize;
+                    if !take(i) {
+                        continue;
+                    }
+                    done += 1;
+                    let prev = if levels.is_fast(i) {
+                        before[k][i]
+                    } else {
+                        before[slow][i]
+                    };
+                    out[i] = row(kernel, &self.lower, &inputs, i, prev);
+                }
+            }
         }
+        self.rows_total += done;
+    }
+
+    /// Whether a step's far rows wait for [`Prediction::finish`].
+    pub(in crate::tensor_mass) fn pending(&self) -> bool {
+        self.pending
+    }
+
+    /// The step's near rows are done (with `defer`): U(t) and U(t-1) go
+    /// to the state (`now`, `prev`), which readers of the force see; the
+    /// rows far from the tools keep the prediction until
+    /// [`Prediction::finish`].
+    pub(in crate::tensor_mass) fn hold(&mut self, prev: &mut Vec<V3>, now: &mut Vec<V3>) {
+        let s = self.made_for.unwrap_or(self.traj.len() - 2);
+        std::mem::swap(now, &mut self.traj[s + 1]);
+        std::mem::swap(prev, &mut self.traj[s]);
+        self.pending = true;
+    }
+
+    /// Recomputes the far rows of every sub-step, in order, and ends the
+    /// step ([`Prediction::end`]): the state is then the plain step's.
+    pub(in crate::tensor_mass) fn finish<S: Storage>(
+        &mut self,
+        kernel: &Kernel<S>,
+        levels: &mut Levels<'_>,
+        base: &StepInputs<'_>,
+        ring: &mut [R4],
+        prev: &mut Vec<V3>,
+        now: &mut Vec<V3>,
+    ) {
+        if !std::mem::take(&mut self.pending) {
+            return;
+        }
+        let s = self.made_for.unwrap_or(self.traj.len() - 2);
+        std::mem::swap(now, &mut self.traj[s + 1]);
+        std::mem::swap(prev, &mut self.traj[s]);
+        for k in 0..s.min(self.far_until) {
+            self.recompute(kernel, k, levels, base, ring, Share::Far);
+        }
+        self.end(levels, prev, now);
     }
 
     /// Ends the step: U(t) and U(t-1) back to the state (`now`, `prev`:
@@ -477,6 +595,8 @@ impl Prediction {
             self.in_rows[r as usize] = false;
         }
         self.rows.clear();
+        self.counts.clear();
+        self.reach.clear();
         self.whole = false;
         self.made_for = None;
     }
@@ -546,7 +666,7 @@ impl<S: Storage> Explicit<S> {
             .as_deref()
             .into_iter()
             .flat_map(|f| f.points().iter().flat_map(|p| p.vertices()));
-        prediction.begin(next, u, contact);
+        prediction.begin(kernel, next, u, contact);
         for k in 0..substeps {
             if k > 0 {
                 prediction.grow(kernel, k, &levels);
@@ -580,10 +700,64 @@ impl<S: Storage> Explicit<S> {
                 field.correct_implicit(inverse_d, now, out);
             }
         }
-        prediction.end(&levels, next, u);
+        if prediction.defer {
+            prediction.hold(next, u);
+        } else {
+            prediction.end(&levels, next, u);
+        }
         self.ahead.predicted_steps += 1;
         self.steps += 1;
         self.follow_tangent();
+    }
+}
+
+impl<S: Storage> Explicit<S> {
+    /// Has each predicted step leave the rows its force cannot depend on
+    /// (those far from the tools, [`reach`]) until
+    /// [`Explicit::finish_step`], so that a live loop sends the force
+    /// first and finishes the step after: the state is the plain step's
+    /// once finished, and until then its far rows hold the prediction.
+    /// Every call that steps, prepares or changes the model or its inputs
+    /// finishes a pending step first.
+    pub fn defer_far_rows(&mut self, on: bool) {
+        self.finish_step();
+        self.ahead.prediction.defer = on;
+    }
+
+    /// Finishes a step [`Explicit::defer_far_rows`] left pending (nothing
+    /// otherwise).
+    pub fn finish_step(&mut self) {
+        if !self.ahead.prediction.pending() {
+            return;
+        }
+        let m = self.fine_per_coarse();
+        let Self {
+            kernel,
+            u,
+            next,
+            coef,
+            kind,
+            target,
+            fext,
+            fmem,
+            ahead: Ahead { prediction, .. },
+            parts: Parts { buffers, .. },
+            multirate,
+            ..
+        } = self;
+        let mut levels = levels(m, multirate.as_mut());
+        // The far rows never carry a contact force (the field writes only
+        // its points' vertices, all near): `fmem` is as it was in the step.
+        let base = StepInputs {
+            u: &[],
+            coef,
+            kind,
+            target,
+            fext,
+            fmem,
+            fnl: &[],
+        };
+        prediction.finish(kernel, &mut levels, &base, &mut buffers[0].ring, next, u);
     }
 }
 
@@ -601,5 +775,6 @@ fn levels(m: usize, plan: Option<&mut super::multirate::Multirate>) -> Levels<'_
     }
 }
 
+mod reach;
 #[cfg(test)]
 mod tests;
