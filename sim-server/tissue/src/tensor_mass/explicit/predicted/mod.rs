@@ -199,6 +199,10 @@ pub(in crate::tensor_mass) struct Prediction {
     whole: bool,
     /// `rows[..counts[k]]` are sub-step `k`'s (the list only grows).
     counts: Vec<u32>,
+    /// `rows[..grown_all]` have had every neighbour marked,
+    /// `rows[..grown_fast]` their fast ones ([`Prediction::grow`]).
+    grown_all: usize,
+    grown_fast: usize,
     /// Leave the rows the step's force cannot depend on for
     /// [`Prediction::finish`] (`Explicit::defer_far_rows`).
     pub(in crate::tensor_mass) defer: bool,
@@ -359,7 +363,10 @@ impl Prediction {
     /// Adds the neighbours of every marked row (sub-step `k`'s rows): at
     /// a fine sub-step only the fast ones, the only rows it moves (a slow
     /// neighbour reads the change at the next coarse sub-step, when every
-    /// neighbour of the marked rows is added).
+    /// neighbour of the marked rows is added). Only the rows marked since
+    /// the last such growth are visited: the older ones' neighbours are in
+    /// already (the list only grows), which keeps a step of many sub-steps
+    /// linear in its rows.
     pub(in crate::tensor_mass) fn grow<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
@@ -372,7 +379,8 @@ impl Prediction {
         let fine = levels.fine(k);
         let (_, _, edges) = kernel.parts();
         let count = self.rows.len();
-        for r in 0..count {
+        let from = if fine { self.grown_fast } else { self.grown_all };
+        for r in from..count {
             let i = self.rows[r] as usize;
             for slot in kernel.row(i) {
                 let j = edges[slot].col;
@@ -386,6 +394,10 @@ impl Prediction {
                     self.mark(j);
                 }
             }
+        }
+        self.grown_fast = count;
+        if !fine {
+            self.grown_all = count;
         }
     }
 
@@ -596,6 +608,7 @@ impl Prediction {
         }
         self.rows.clear();
         self.counts.clear();
+        (self.grown_all, self.grown_fast) = (0, 0);
         self.reach.clear();
         self.whole = false;
         self.made_for = None;
