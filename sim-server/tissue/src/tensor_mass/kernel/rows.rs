@@ -56,8 +56,29 @@ impl LowerRows {
 /// which the AVX2 pass equals to the bit): the lower rows' K_ji^T u_j in
 /// ascending j into a zeroed accumulator, then the row's own products,
 /// entry by entry, reduced once and added.
+///
+/// With AVX2, the pass's own vectors (`avx2::row_product`, the same bits):
+/// a gathered row cost about 3 streamed ones in scalar code, and the
+/// predicted step's correction after the pose is all gathered rows.
 #[inline]
 pub(in crate::tensor_mass) fn row_product<S: Storage>(
+    kernel: &Kernel<S>,
+    lower: &LowerRows,
+    u: &[V3],
+    i: usize,
+) -> V3 {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { super::avx2::row_product(kernel, lower, u, i) };
+    }
+    row_product_portable(kernel, lower, u, i)
+}
+
+/// [`row_product`] without the AVX2 dispatch (the path of CPUs without
+/// AVX2; the tests check both agree bit for bit).
+#[inline]
+pub(in crate::tensor_mass) fn row_product_portable<S: Storage>(
     kernel: &Kernel<S>,
     lower: &LowerRows,
     u: &[V3],

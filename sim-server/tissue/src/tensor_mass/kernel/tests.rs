@@ -69,12 +69,18 @@ fn check_passes<S: Storage>() {
     // does, to the bit: -K U is what the pass wrote.
     let lower = LowerRows::new(&kernel);
     for (i, negated) in a.iter().enumerate() {
-        let row = row_product(&kernel, &lower, &u, i);
-        assert_eq!(
-            row.map(f64::to_bits),
-            negated.map(|x| (-x).to_bits()),
-            "row {i} alone against the pass"
-        );
+        // The dispatched row (AVX2 where the CPU has it) and the portable one.
+        let rows = [
+            row_product(&kernel, &lower, &u, i),
+            super::rows::row_product_portable(&kernel, &lower, &u, i),
+        ];
+        for row in rows {
+            assert_eq!(
+                row.map(f64::to_bits),
+                negated.map(|x| (-x).to_bits()),
+                "row {i} alone against the pass"
+            );
+        }
     }
     let mut ku = vec![[0.0; 3]; n];
     kernel.apply(&u, &mut ku);

@@ -379,7 +379,11 @@ impl Prediction {
         let fine = levels.fine(k);
         let (_, _, edges) = kernel.parts();
         let count = self.rows.len();
-        let from = if fine { self.grown_fast } else { self.grown_all };
+        let from = if fine {
+            self.grown_fast
+        } else {
+            self.grown_all
+        };
         for r in from..count {
             let i = self.rows[r] as usize;
             for slot in kernel.row(i) {
