@@ -15,7 +15,9 @@ pub use multirate::MultirateReport;
 use partition::{PartBuffers, PartPlan, run_parts};
 use predicted::Prediction;
 pub use step_size::{DtPolicy, ExplicitConfig, ExplicitError, MultirateError, substeps_for};
-pub use step_size::{MAX_SUBSTEPS, MAX_THREADS, PREDICTED_SUBSTEPS_MAX};
+pub use step_size::{
+    MAX_SUBSTEPS, MAX_THREADS, PREDICTED_FINE_SUBSTEPS_MAX, PREDICTED_SUBSTEPS_MAX,
+};
 
 /// What a kernel pass reads ([`StepInputs`]) and, borrowed apart from it,
 /// what it writes.
@@ -344,7 +346,8 @@ impl<S: Storage> Explicit<S> {
         if self.large.is_none()
             && self.capsule_vertices.is_empty()
             && self.kernel.is_elastic()
-            && self.size.substeps <= PREDICTED_SUBSTEPS_MAX
+            && self.size.substeps / self.fine_per_coarse() <= PREDICTED_SUBSTEPS_MAX
+            && self.size.substeps <= PREDICTED_FINE_SUBSTEPS_MAX
             && !resamples
         {
             self.predict();

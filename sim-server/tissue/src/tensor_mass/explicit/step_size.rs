@@ -151,10 +151,18 @@ pub const MAX_THREADS: usize = 256;
 /// never ends).
 pub const MAX_SUBSTEPS: usize = 4096;
 
-/// Sub-steps at most for which [`Explicit::prepare_step`] predicts the
-/// whole step (it keeps an array per sub-step); above, it computes the
-/// first sub-step's K U ahead.
-pub const PREDICTED_SUBSTEPS_MAX: usize = 16;
+/// Whole passes (coarse sub-steps) at most for which
+/// [`Explicit::prepare_step`] predicts the whole step; above, it computes
+/// the first sub-step's K U. The correction after the pose grows one ring
+/// of rows over the whole mesh a whole pass, so past this many it reaches
+/// most of the mesh and costs the step again on top of the prediction
+/// (a refined liver at 9 sub-steps a step dropped time); multirate's fine
+/// sub-steps grow it only into the fast rows.
+pub const PREDICTED_SUBSTEPS_MAX: usize = 8;
+
+/// Sub-steps at most for which a multirate step is predicted (an array
+/// each; its whole passes are bounded by [`PREDICTED_SUBSTEPS_MAX`]).
+pub const PREDICTED_FINE_SUBSTEPS_MAX: usize = 32;
 
 /// How fast the sub-steps a stretched nonlinear body needed are given back
 /// once it eases (per step): each change of the count rescales U(t-1) to

@@ -154,8 +154,9 @@ fn check_changes<S: Storage>() {
 
 #[test]
 fn many_sub_steps_compute_only_the_first_ahead() {
-    // Above PREDICTED_SUBSTEPS_MAX a whole step is not predicted (an array
-    // a sub-step): the first sub-step's K U is, and the step is unchanged.
+    // Above PREDICTED_SUBSTEPS_MAX whole passes a step is not predicted
+    // (its correction would reach most of the mesh): the first sub-step's
+    // K U is, and the step is unchanged.
     let (mut plain, mut prepared) = (block_at::<f32>(0.03), block_at::<f32>(0.03));
     assert!(prepared.substeps() > crate::tensor_mass::explicit::PREDICTED_SUBSTEPS_MAX);
     for k in 0..10 {
