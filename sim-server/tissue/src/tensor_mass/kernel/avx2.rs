@@ -13,7 +13,7 @@
 //!
 //! No shuffles in the edge loop.
 
-use super::{Kernel, LowerRows, Part, StepInputs, Storage, V3};
+use super::{Kernel, Part, StepInputs, Storage, V3};
 use std::arch::x86_64::*;
 
 /// [x0 x1 x2 0] from a 3-vector, without reading past it (also the
@@ -29,7 +29,7 @@ pub(in crate::tensor_mass) fn load3(v: &V3) -> __m256d {
 /// The three lanes of `v` in an array.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn lanes(v: __m256d) -> [f64; 4] {
+pub(super) fn lanes(v: __m256d) -> [f64; 4] {
     let mut out = [0.0; 4];
     // SAFETY: `out` holds 4 f64.
     unsafe { _mm256_storeu_pd(out.as_mut_ptr(), v) };
@@ -149,57 +149,4 @@ pub(super) unsafe fn run_part<S: Storage>(
         *sp = [slot[0], slot[1], slot[2]];
         *slot = [0.0; 4];
     }
-}
-
-/// One row of the pass computed alone (`rows::row_product`, the
-/// predicted step's correction and the multirate fine rows), with the
-/// pass's vectors: the lower rows' K_ji^T u_j added in ascending j into a
-/// zeroed accumulator, then the row's own products reduced once, the same
-/// operations in the same order as the portable row, so the same bits.
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[target_feature(enable = "avx2")]
-pub(super) unsafe fn row_product<S: Storage>(
-    kernel: &Kernel<S>,
-    lower: &LowerRows,
-    u: &[V3],
-    i: usize,
-) -> V3 {
-    let (diag, _, edges) = kernel.parts();
-    let mut acc = _mm256_setzero_pd();
-    for &[j, slot] in lower.of(i) {
-        let uj = &u[j as usize];
-        // SAFETY: AVX2 is enabled for this function.
-        let (k0, k1, k2) = unsafe { S::rows(&edges[slot as usize].k) };
-        // (t0 + t3) + t6 and so on: the portable row's order.
-        let kt = _mm256_add_pd(
-            _mm256_add_pd(
-                _mm256_mul_pd(k0, _mm256_set1_pd(uj[0])),
-                _mm256_mul_pd(k1, _mm256_set1_pd(uj[1])),
-            ),
-            _mm256_mul_pd(k2, _mm256_set1_pd(uj[2])),
-        );
-        acc = _mm256_add_pd(acc, kt);
-    }
-    let wi = load3(&u[i]);
-    // SAFETY: AVX2 is enabled for this function.
-    let (d0, d1, d2) = unsafe { S::rows(&diag[i]) };
-    let mut m0 = _mm256_mul_pd(d0, wi);
-    let mut m1 = _mm256_mul_pd(d1, wi);
-    let mut m2 = _mm256_mul_pd(d2, wi);
-    for e in &edges[kernel.row(i)] {
-        let wj = load3(&u[e.col as usize]);
-        // SAFETY: AVX2 is enabled for this function.
-        let (k0, k1, k2) = unsafe { S::rows(&e.k) };
-        m0 = _mm256_add_pd(m0, _mm256_mul_pd(k0, wj));
-        m1 = _mm256_add_pd(m1, _mm256_mul_pd(k1, wj));
-        m2 = _mm256_add_pd(m2, _mm256_mul_pd(k2, wj));
-    }
-    let (s, a, b, c) = (lanes(acc), lanes(m0), lanes(m1), lanes(m2));
-    [
-        s[0] + (a[0] + a[1] + a[2]),
-        s[1] + (b[0] + b[1] + b[2]),
-        s[2] + (c[0] + c[1] + c[2]),
-    ]
 }

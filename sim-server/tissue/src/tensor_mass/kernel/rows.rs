@@ -4,7 +4,11 @@
 //! ([`super::membrane`]), each of which must equal the whole pass to the
 //! bit.
 
+#[cfg(target_arch = "x86_64")]
+use super::avx2::{lanes, load3};
 use super::{Kernel, Storage, V3, widen};
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::*;
 
 /// The kernel's edges seen from their column: for each vertex `i`, the
 /// rows `j < i` whose stored edge reaches it, ascending (the order in
@@ -57,7 +61,7 @@ impl LowerRows {
 /// ascending j into a zeroed accumulator, then the row's own products,
 /// entry by entry, reduced once and added.
 ///
-/// With AVX2, the pass's own vectors (`avx2::row_product`, the same bits):
+/// With AVX2, the pass's own vectors (`row_product_avx2`, the same bits):
 /// a gathered row cost about 3 streamed ones in scalar code, and the
 /// predicted step's correction after the pose is all gathered rows.
 #[inline]
@@ -70,7 +74,7 @@ pub(in crate::tensor_mass) fn row_product<S: Storage>(
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { super::avx2::row_product(kernel, lower, u, i) };
+        return unsafe { row_product_avx2(kernel, lower, u, i) };
     }
     row_product_portable(kernel, lower, u, i)
 }
@@ -118,4 +122,57 @@ pub(in crate::tensor_mass) fn row_product_portable<S: Storage>(
     acc[1] += m[3] + m[4] + m[5];
     acc[2] += m[6] + m[7] + m[8];
     acc
+}
+
+#[cfg(target_arch = "x86_64")]
+/// [`row_product`] with the pass's vectors (`avx2.rs`): the lower rows'
+/// K_ji^T u_j added in ascending j into a zeroed accumulator, then the
+/// row's own products reduced once, the same operations in the same order
+/// as the portable row, so the same bits.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[target_feature(enable = "avx2")]
+unsafe fn row_product_avx2<S: Storage>(
+    kernel: &Kernel<S>,
+    lower: &LowerRows,
+    u: &[V3],
+    i: usize,
+) -> V3 {
+    let (diag, _, edges) = kernel.parts();
+    let mut acc = _mm256_setzero_pd();
+    for &[j, slot] in lower.of(i) {
+        let uj = &u[j as usize];
+        // SAFETY: AVX2 is enabled for this function.
+        let (k0, k1, k2) = unsafe { S::rows(&edges[slot as usize].k) };
+        // (t0 + t3) + t6 and so on: the portable row's order.
+        let kt = _mm256_add_pd(
+            _mm256_add_pd(
+                _mm256_mul_pd(k0, _mm256_set1_pd(uj[0])),
+                _mm256_mul_pd(k1, _mm256_set1_pd(uj[1])),
+            ),
+            _mm256_mul_pd(k2, _mm256_set1_pd(uj[2])),
+        );
+        acc = _mm256_add_pd(acc, kt);
+    }
+    let wi = load3(&u[i]);
+    // SAFETY: AVX2 is enabled for this function.
+    let (d0, d1, d2) = unsafe { S::rows(&diag[i]) };
+    let mut m0 = _mm256_mul_pd(d0, wi);
+    let mut m1 = _mm256_mul_pd(d1, wi);
+    let mut m2 = _mm256_mul_pd(d2, wi);
+    for e in &edges[kernel.row(i)] {
+        let wj = load3(&u[e.col as usize]);
+        // SAFETY: AVX2 is enabled for this function.
+        let (k0, k1, k2) = unsafe { S::rows(&e.k) };
+        m0 = _mm256_add_pd(m0, _mm256_mul_pd(k0, wj));
+        m1 = _mm256_add_pd(m1, _mm256_mul_pd(k1, wj));
+        m2 = _mm256_add_pd(m2, _mm256_mul_pd(k2, wj));
+    }
+    let (s, a, b, c) = (lanes(acc), lanes(m0), lanes(m1), lanes(m2));
+    [
+        s[0] + (a[0] + a[1] + a[2]),
+        s[1] + (b[0] + b[1] + b[2]),
+        s[2] + (c[0] + c[1] + c[2]),
+    ]
 }
