@@ -329,6 +329,7 @@ impl Prediction {
     pub(in crate::tensor_mass) fn begin<S: Storage>(
         &mut self,
         kernel: &Kernel<S>,
+        levels: &Levels<'_>,
         prev: &mut Vec<V3>,
         now: &mut Vec<V3>,
         contact: impl Iterator<Item = u32>,
@@ -349,7 +350,7 @@ impl Prediction {
         if self.defer {
             let substeps = self.made_for.unwrap_or(0);
             self.reach
-                .measure(kernel, &self.lower, &self.rows, substeps / 2);
+                .measure(kernel, &self.lower, levels, &self.rows, substeps);
         }
     }
 
@@ -465,13 +466,12 @@ impl Prediction {
     ) {
         let n = self.in_rows.len();
         let whole = self.whole && share == Share::All;
-        let budget = self.made_for.unwrap_or(0).saturating_sub(k);
         let count = if whole { 0 } else { self.counts[k] as usize };
         let (reach, rows) = (&self.reach, &self.rows[..count]);
         let take = |i: usize| match share {
             Share::All => true,
-            Share::Near => reach.near(i, budget),
-            Share::Far => !reach.near(i, budget),
+            Share::Near => reach.near(i, k),
+            Share::Far => !reach.near(i, k),
         };
         let mut done = 0u64;
         let (before, after) = self.traj.split_at_mut(k + 2);
@@ -683,7 +683,7 @@ impl<S: Storage> Explicit<S> {
             .as_deref()
             .into_iter()
             .flat_map(|f| f.points().iter().flat_map(|p| p.vertices()));
-        prediction.begin(kernel, next, u, contact);
+        prediction.begin(kernel, &levels, next, u, contact);
         for k in 0..substeps {
             if k > 0 {
                 prediction.grow(kernel, k, &levels);
