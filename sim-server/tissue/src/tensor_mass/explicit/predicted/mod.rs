@@ -626,6 +626,22 @@ impl<S: Storage> Explicit<S> {
         if self.ahead.prediction.ready(self.size.substeps) {
             return;
         }
+        let substeps = self.size.substeps;
+        let mut p = self.split(false);
+        p.prediction.predict(
+            p.kernel,
+            substeps,
+            &mut p.levels,
+            &p.base,
+            p.ring,
+            p.next,
+            p.u,
+        );
+    }
+
+    /// The prediction beside the step's inputs (`base`'s contact forces
+    /// only `with_contact`), borrowed apart.
+    fn split(&mut self, with_contact: bool) -> Split<'_, S> {
         let m = self.fine_per_coarse();
         let Self {
             kernel,
@@ -635,24 +651,29 @@ impl<S: Storage> Explicit<S> {
             kind,
             target,
             fext,
+            fmem,
             parts: Parts { buffers, .. },
             ahead: Ahead { prediction, .. },
-            size: StepSize { substeps, .. },
             multirate,
             ..
         } = self;
-        let mut levels = levels(m, multirate.as_mut());
-        let base = StepInputs {
-            u: &[],
-            coef,
-            kind,
-            target,
-            fext,
-            fmem: &[],
-            fnl: &[],
-        };
-        let ring = &mut buffers[0].ring;
-        prediction.predict(kernel, *substeps, &mut levels, &base, ring, next, u);
+        Split {
+            kernel,
+            prediction,
+            levels: levels(m, multirate.as_mut()),
+            base: StepInputs {
+                u: &[],
+                coef,
+                kind,
+                target,
+                fext,
+                fmem: if with_contact { fmem } else { &[] },
+                fnl: &[],
+            },
+            ring: &mut buffers[0].ring,
+            next,
+            u,
+        }
     }
 
     /// The predicted step finished with the tools: `field`'s forces (if
@@ -747,35 +768,23 @@ impl<S: Storage> Explicit<S> {
         if !self.ahead.prediction.pending() {
             return;
         }
-        let m = self.fine_per_coarse();
-        let Self {
-            kernel,
-            u,
-            next,
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            ahead: Ahead { prediction, .. },
-            parts: Parts { buffers, .. },
-            multirate,
-            ..
-        } = self;
-        let mut levels = levels(m, multirate.as_mut());
         // The far rows never carry a contact force (the field writes only
         // its points' vertices, all near): `fmem` is as it was in the step.
-        let base = StepInputs {
-            u: &[],
-            coef,
-            kind,
-            target,
-            fext,
-            fmem,
-            fnl: &[],
-        };
-        prediction.finish(kernel, &mut levels, &base, &mut buffers[0].ring, next, u);
+        let mut p = self.split(true);
+        p.prediction
+            .finish(p.kernel, &mut p.levels, &p.base, p.ring, p.next, p.u);
     }
+}
+
+/// [`Explicit::split`]: what a prediction pass borrows.
+struct Split<'a, S: Storage> {
+    kernel: &'a Kernel<S>,
+    prediction: &'a mut Prediction,
+    levels: Levels<'a>,
+    base: StepInputs<'a>,
+    ring: &'a mut [R4],
+    next: &'a mut Vec<V3>,
+    u: &'a mut Vec<V3>,
 }
 
 /// The partition's levels for `m` fine sub-steps per coarse one.
