@@ -53,6 +53,7 @@ use crate::tensor_mass::huge_pages::huge_vec;
 use crate::tensor_mass::kernel::{
     Kernel, LowerRows, Part, R4, StepInputs, Storage, V3, kind, row_product,
 };
+use levels::{Levels, levels};
 use reach::Reach;
 
 /// One part's pass over every row (the single-part plan: nothing deferred,
@@ -75,87 +76,6 @@ fn whole_pass<S: Storage>(
             spill: &mut [],
         },
     );
-}
-
-/// The multirate partition as a predicted step reads it (`m == 1`: one
-/// step for all, every vertex fast).
-pub(in crate::tensor_mass) struct Levels<'a> {
-    /// Fine sub-steps per coarse one.
-    pub m: usize,
-    /// Per vertex: fast (empty when `m == 1`).
-    pub is_fast: &'a [bool],
-    /// Fast vertices, ascending.
-    pub fast: &'a [u32],
-    /// Slow vertices next to a fast one.
-    pub interface: &'a [u32],
-    /// Their U(t + H) while they hold interpolated values (`interface`'s length).
-    pub saved: &'a mut [V3],
-}
-
-impl Levels<'_> {
-    /// One step for all.
-    pub(in crate::tensor_mass) fn uniform() -> Levels<'static> {
-        Levels {
-            m: 1,
-            is_fast: &[],
-            fast: &[],
-            interface: &[],
-            saved: &mut [],
-        }
-    }
-
-    /// Whether sub-step `k` recomputes the fast rows alone.
-    fn fine(&self, k: usize) -> bool {
-        self.m > 1 && !k.is_multiple_of(self.m)
-    }
-
-    fn is_fast(&self, i: usize) -> bool {
-        self.m == 1 || self.is_fast[i]
-    }
-
-    /// The slot a slow vertex's U(t - H) is in at coarse sub-step `k`
-    /// (U(t_k - h) of every vertex at `k`: slot `k`). Between two coarse
-    /// sub-steps a slow vertex's slots are copies, so m slots back holds
-    /// its value before the last coarse pass; the step's first sub-step
-    /// reads the state's own U(t - H) (slot 0).
-    fn slow_prev(&self, k: usize) -> usize {
-        if k >= self.m { k + 1 - self.m } else { 0 }
-    }
-
-    /// The coarse sub-step `k`'s U(t_k - h) of every vertex by its own
-    /// step, into `out`.
-    fn coarse_prev(&self, before: &[Vec<V3>], k: usize, out: &mut [V3]) {
-        out.copy_from_slice(&before[self.slow_prev(k)]);
-        if self.m > 1 {
-            for &i in self.fast {
-                out[i as usize] = before[k][i as usize];
-            }
-        }
-    }
-
-    /// Fine sub-step `k`: the interface vertices of slot `k + 1` set to
-    /// their values at the fraction of the coarse sub-step (the plain
-    /// step's `interpolate_interface`, the same arithmetic), U(t + H) kept.
-    fn interpolate(&mut self, before: &mut [Vec<V3>], k: usize) {
-        let k0 = k - k % self.m;
-        let s = (k % self.m) as Real / self.m as Real;
-        let (base, rest) = before.split_at_mut(k + 1);
-        let (start, now) = (&base[k0 + 1], &mut rest[0]);
-        for (saved, &j) in self.saved.iter_mut().zip(self.interface) {
-            let j = j as usize;
-            *saved = now[j];
-            for d in 0..3 {
-                now[j][d] = start[j][d] + s * (now[j][d] - start[j][d]);
-            }
-        }
-    }
-
-    /// The interface's U(t + H) back into `now`.
-    fn restore(&self, now: &mut [V3]) {
-        for (saved, &j) in self.saved.iter().zip(self.interface) {
-            now[j as usize] = *saved;
-        }
-    }
 }
 
 /// Row `i` of a sub-step: U(t_k + h) from `now` and its own U(t_k - h).
@@ -787,20 +707,7 @@ struct Split<'a, S: Storage> {
     u: &'a mut Vec<V3>,
 }
 
-/// The partition's levels for `m` fine sub-steps per coarse one.
-fn levels(m: usize, plan: Option<&mut super::multirate::Multirate>) -> Levels<'_> {
-    match plan {
-        Some(p) if m > 1 => Levels {
-            m,
-            is_fast: &p.is_fast,
-            fast: &p.fast,
-            interface: &p.interface,
-            saved: &mut p.saved,
-        },
-        _ => Levels::uniform(),
-    }
-}
-
+mod levels;
 mod reach;
 #[cfg(test)]
 mod tests;
