@@ -102,19 +102,22 @@ fn press_slide_withdraw(extra: &str, local: bool) -> (u64, u64) {
         |_| 1.0,
     );
     assert!(peak > 0.05, "the tool must press: {peak} N");
+    predicted_rows(&p, 650, local)
+}
+
+/// Checks that more than `at_least` of the 700 steps were predicted and,
+/// when `local`, that the correction stayed local (far fewer rows than
+/// full passes); the rows recomputed and those of full passes.
+fn predicted_rows(p: &Prepared<Explicit<f64>>, at_least: u64, local: bool) -> (u64, u64) {
+    let steps = p.sim.predicted_steps();
+    assert!(steps > at_least, "{steps} of 700 steps predicted");
+    let full = steps * (p.sim.substeps() * p.sim.model().vertex_count()) as u64;
+    let rows = p.sim.predicted_rows();
     assert!(
-        p.sim.predicted_steps() > 650,
-        "{} of 700 steps predicted",
-        p.sim.predicted_steps()
+        !local || rows * 3 < full,
+        "{rows} rows recomputed against {full} in full passes"
     );
-    // The correction stays local: far fewer rows than full passes.
-    let full = p.sim.predicted_steps() * (p.sim.substeps() * p.sim.model().vertex_count()) as u64;
-    assert!(
-        !local || p.sim.predicted_rows() * 3 < full,
-        "{} rows recomputed against {full} in full passes",
-        p.sim.predicted_rows()
-    );
-    (p.sim.predicted_rows(), full)
+    (rows, full)
 }
 
 #[test]
@@ -147,17 +150,7 @@ fn the_same_with_multirate_stepping_on_a_refined_block() {
     let shift = Vec3::new(0.0625, 0.0325, 0.0);
     let (p, peak) = lockstep(first, make(), 700, |k| path(k) + shift, |_| 1.0);
     assert!(peak > 0.05, "the tool must press: {peak} N");
-    assert!(
-        p.sim.predicted_steps() > 600,
-        "{} of 700 steps predicted",
-        p.sim.predicted_steps()
-    );
-    let full = p.sim.predicted_steps() * (p.sim.substeps() * p.sim.model().vertex_count()) as u64;
-    assert!(
-        p.sim.predicted_rows() * 3 < full,
-        "{} rows recomputed against {full} in full passes",
-        p.sim.predicted_rows()
-    );
+    predicted_rows(&p, 600, true);
 }
 
 #[test]

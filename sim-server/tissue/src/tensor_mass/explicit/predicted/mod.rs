@@ -92,6 +92,46 @@ fn row<S: Storage>(
     next
 }
 
+/// Sub-step `k` whole, into `out` from `before`'s slots (the plain
+/// step's arithmetic): a kernel pass over every row at a coarse sub-step
+/// (each row's own U(t_k - h) written first), the fast rows alone at a
+/// fine one (the slow rows the previous slot's copy, the interface
+/// interpolated). Returns the rows computed.
+#[allow(clippy::too_many_arguments)]
+fn whole_substep<S: Storage>(
+    kernel: &Kernel<S>,
+    lower: &LowerRows,
+    levels: &mut Levels<'_>,
+    base: &StepInputs<'_>,
+    ring: &mut [R4],
+    before: &mut [Vec<V3>],
+    out: &mut [V3],
+    k: usize,
+) -> u64 {
+    if levels.fine(k) {
+        out.copy_from_slice(&before[k + 1]);
+        levels.interpolate(before, k);
+        let inputs = StepInputs {
+            u: &before[k + 1],
+            ..*base
+        };
+        for &i in levels.fast {
+            let i = i as usize;
+            out[i] = row(kernel, lower, &inputs, i, before[k][i]);
+        }
+        levels.restore(&mut before[k + 1]);
+        levels.fast.len() as u64
+    } else {
+        levels.coarse_prev(before, k, out);
+        let inputs = StepInputs {
+            u: &before[k + 1],
+            ..*base
+        };
+        whole_pass(kernel, &inputs, ring, out);
+        out.len() as u64
+    }
+}
+
 /// The predicted step and the bookkeeping of its correction, allocated at
 /// the first prediction and reused.
 #[derive(Debug, Default)]
@@ -216,27 +256,16 @@ impl Prediction {
         for k in 0..substeps {
             // P_(k+1) from P_k and each vertex's own previous value.
             let (before, after) = self.traj.split_at_mut(k + 2);
-            let out = &mut after[0];
-            if levels.fine(k) {
-                out.copy_from_slice(&before[k + 1]);
-                levels.interpolate(before, k);
-                let inputs = StepInputs {
-                    u: &before[k + 1],
-                    ..*base
-                };
-                for &i in levels.fast {
-                    let i = i as usize;
-                    out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
-                }
-                levels.restore(&mut before[k + 1]);
-            } else {
-                levels.coarse_prev(before, k, out);
-                let inputs = StepInputs {
-                    u: &before[k + 1],
-                    ..*base
-                };
-                whole_pass(kernel, &inputs, ring, out);
-            }
+            whole_substep(
+                kernel,
+                &self.lower,
+                levels,
+                base,
+                ring,
+                before,
+                &mut after[0],
+                k,
+            );
         }
         std::mem::swap(prev, &mut self.traj[0]);
         std::mem::swap(now, &mut self.traj[1]);
@@ -384,7 +413,6 @@ impl Prediction {
         ring: &mut [R4],
         share: Share,
     ) {
-        let n = self.in_rows.len();
         let whole = self.whole && share == Share::All;
         let count = if whole { 0 } else { self.counts[k] as usize };
         let (reach, rows) = (&self.reach, &self.rows[..count]);
@@ -393,18 +421,19 @@ impl Prediction {
             Share::Near => reach.near(i, k),
             Share::Far => !reach.near(i, k),
         };
-        let mut done = 0u64;
         let (before, after) = self.traj.split_at_mut(k + 2);
         let out = &mut after[0];
+        if whole {
+            self.rows_total +=
+                whole_substep(kernel, &self.lower, levels, base, ring, before, out, k);
+            return;
+        }
+        let mut done = 0u64;
         if levels.fine(k) {
-            if whole {
-                out.copy_from_slice(&before[k + 1]);
-            } else {
-                for &r in rows {
-                    let i = r as usize;
-                    if !levels.is_fast(i) && take(i) {
-                        out[i] = before[k + 1][i];
-                    }
+            for &r in rows {
+                let i = r as usize;
+                if !levels.is_fast(i) && take(i) {
+                    out[i] = before[k + 1][i];
                 }
             }
             levels.interpolate(before, k);
@@ -412,19 +441,11 @@ impl Prediction {
                 u: &before[k + 1],
                 ..*base
             };
-            if whole {
-                done += levels.fast.len() as u64;
-                for &i in levels.fast {
-                    let i = i as usize;
+            for &r in rows {
+                let i = r as usize;
+                if levels.is_fast(i) && take(i) {
+                    done += 1;
                     out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
-                }
-            } else {
-                for &r in rows {
-                    let i = r as usize;
-                    if levels.is_fast(i) && take(i) {
-                        done += 1;
-                        out[i] = row(kernel, &self.lower, &inputs, i, before[k][i]);
-                    }
                 }
             }
             levels.restore(&mut before[k + 1]);
@@ -433,26 +454,19 @@ impl Prediction {
                 u: &before[k + 1],
                 ..*base
             };
-            if whole {
-                done += n as u64;
-                // The plain step's pass: each row's U(t_k - h) overwritten in place.
-                levels.coarse_prev(before, k, out);
-                whole_pass(kernel, &inputs, ring, out);
-            } else {
-                let slow = levels.slow_prev(k);
-                for &r in rows {
-                    let i = r as usize;
-                    if !take(i) {
-                        continue;
-                    }
-                    done += 1;
-                    let prev = if levels.is_fast(i) {
-                        before[k][i]
-                    } else {
-                        before[slow][i]
-                    };
-                    out[i] = row(kernel, &self.lower, &inputs, i, prev);
+            let slow = levels.slow_prev(k);
+            for &r in rows {
+                let i = r as usize;
+                if !take(i) {
+                    continue;
                 }
+                done += 1;
+                let prev = if levels.is_fast(i) {
+                    before[k][i]
+                } else {
+                    before[slow][i]
+                };
+                out[i] = row(kernel, &self.lower, &inputs, i, prev);
             }
         }
         self.rows_total += done;
