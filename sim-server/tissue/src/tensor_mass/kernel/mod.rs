@@ -13,7 +13,7 @@
 use super::huge_pages::collect_huge;
 use super::model::{CutChange, ElasticModel};
 use crate::math::Real;
-pub(in crate::tensor_mass) use rows::{LowerRows, row_product};
+pub(in crate::tensor_mass) use rows::{LowerRows, Neighbours, row_product};
 #[cfg(target_arch = "x86_64")]
 pub use storage::Windows;
 use storage::pack;

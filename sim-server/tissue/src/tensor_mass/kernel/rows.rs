@@ -56,6 +56,42 @@ impl LowerRows {
     }
 }
 
+/// Each vertex's neighbours through the kernel's edges, both directions,
+/// as one compact list: the correction's bookkeeping walks these for every
+/// row it marks, and reading them from the edge records (40 bytes a block
+/// in f32) and the lower rows pulled the whole tensor stream through the
+/// cache for four bytes of each record.
+#[derive(Clone, Debug, Default)]
+pub(in crate::tensor_mass) struct Neighbours {
+    start: Vec<u32>,
+    of: Vec<u32>,
+}
+
+impl Neighbours {
+    /// Built once per kernel, beside its [`LowerRows`] (cuts change the
+    /// tensors' values, never the edges' places): row `i`'s upper columns
+    /// ascending, then its lower rows ascending.
+    pub(in crate::tensor_mass) fn new<S: Storage>(kernel: &Kernel<S>, lower: &LowerRows) -> Self {
+        let n = kernel.rows();
+        let (_, _, edges) = kernel.parts();
+        let mut start = Vec::with_capacity(n + 1);
+        let mut of = Vec::with_capacity(2 * edges.len());
+        start.push(0);
+        for i in 0..n {
+            of.extend(edges[kernel.row(i)].iter().map(|e| e.col));
+            of.extend(lower.of(i).iter().map(|&[j, _]| j));
+            start.push(of.len() as u32);
+        }
+        Self { start, of }
+    }
+
+    /// Vertex `i`'s neighbours.
+    #[inline]
+    pub(in crate::tensor_mass) fn of(&self, i: usize) -> &[u32] {
+        &self.of[self.start[i] as usize..self.start[i + 1] as usize]
+    }
+}
+
 /// (K u)_i, added up exactly as the fused pass does (`Kernel::run_part_body`,
 /// which the AVX2 pass equals to the bit): the lower rows' K_ji^T u_j in
 /// ascending j into a zeroed accumulator, then the row's own products,

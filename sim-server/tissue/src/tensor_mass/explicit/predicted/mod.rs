@@ -51,7 +51,7 @@ use crate::math::Real;
 use crate::tensor_mass::force_term::{ForcePoint, ForceTerm, SubStep};
 use crate::tensor_mass::huge_pages::huge_vec;
 use crate::tensor_mass::kernel::{
-    Kernel, LowerRows, Part, R4, StepInputs, Storage, V3, kind, row_product,
+    Kernel, LowerRows, Neighbours, Part, R4, StepInputs, Storage, V3, kind, row_product,
 };
 use levels::{Levels, levels};
 use reach::Reach;
@@ -144,6 +144,8 @@ pub(in crate::tensor_mass) struct Prediction {
     /// The sub-step count it was made for; `None`: no prediction.
     made_for: Option<usize>,
     lower: LowerRows,
+    /// The same edges as one compact list, for the bookkeeping.
+    neighbours: Neighbours,
     /// Vertices whose constraint, target or load changed since.
     changed: Vec<u32>,
     /// Per vertex: in `rows`.
@@ -233,6 +235,7 @@ impl Prediction {
         let n = now.len();
         if !self.lower.fits(n) {
             self.lower = LowerRows::new(kernel);
+            self.neighbours = Neighbours::new(kernel, &self.lower);
             self.in_rows = vec![false; n];
             self.in_changed = vec![false; n];
             // Each lists a vertex at most once: no step allocates.
@@ -275,9 +278,8 @@ impl Prediction {
     /// Starts finishing the predicted step: takes the state's arrays
     /// (U(t-1), U(t)) into the trajectory and marks the first sub-step's
     /// rows: the changed vertices and `contact` ones.
-    pub(in crate::tensor_mass) fn begin<S: Storage>(
+    pub(in crate::tensor_mass) fn begin(
         &mut self,
-        kernel: &Kernel<S>,
         levels: &Levels<'_>,
         prev: &mut Vec<V3>,
         now: &mut Vec<V3>,
@@ -299,7 +301,7 @@ impl Prediction {
         if self.defer {
             let substeps = self.made_for.unwrap_or(0);
             self.reach
-                .measure(kernel, &self.lower, levels, &self.rows, substeps);
+                .measure(&self.neighbours, levels, &self.rows, substeps);
         }
     }
 
@@ -317,17 +319,11 @@ impl Prediction {
     /// the last such growth are visited: the older ones' neighbours are in
     /// already (the list only grows), which keeps a step of many sub-steps
     /// linear in its rows.
-    pub(in crate::tensor_mass) fn grow<S: Storage>(
-        &mut self,
-        kernel: &Kernel<S>,
-        k: usize,
-        levels: &Levels<'_>,
-    ) {
+    pub(in crate::tensor_mass) fn grow(&mut self, k: usize, levels: &Levels<'_>) {
         if self.whole {
             return;
         }
         let fine = levels.fine(k);
-        let (_, _, edges) = kernel.parts();
         let count = self.rows.len();
         let from = if fine {
             self.grown_fast
@@ -336,16 +332,10 @@ impl Prediction {
         };
         for r in from..count {
             let i = self.rows[r] as usize;
-            for slot in kernel.row(i) {
-                let j = edges[slot].col;
-                if !fine || levels.is_fast(j as usize) {
-                    self.mark(j);
-                }
-            }
-            for e in 0..self.lower.of(i).len() {
-                let j = self.lower.of(i)[e][0];
-                if !fine || levels.is_fast(j as usize) {
-                    self.mark(j);
+            for &j in self.neighbours.of(i) {
+                if (!fine || levels.is_fast(j as usize)) && !self.in_rows[j as usize] {
+                    self.in_rows[j as usize] = true;
+                    self.rows.push(j);
                 }
             }
         }
@@ -638,10 +628,10 @@ impl<S: Storage> Explicit<S> {
             .as_deref()
             .into_iter()
             .flat_map(|f| f.points().iter().flat_map(|p| p.vertices()));
-        prediction.begin(kernel, &levels, next, u, contact);
+        prediction.begin(&levels, next, u, contact);
         for k in 0..substeps {
             if k > 0 {
-                prediction.grow(kernel, k, &levels);
+                prediction.grow(k, &levels);
             }
             if let Some(field) = field.as_deref_mut() {
                 field.zero(fmem);

@@ -27,7 +27,7 @@
 //! is the outer part of its cone.
 
 use super::Levels;
-use crate::tensor_mass::kernel::{Kernel, LowerRows, Storage};
+use crate::tensor_mass::kernel::Neighbours;
 
 /// Not needed by the force at any sub-step.
 const NEVER: i32 = -1;
@@ -54,10 +54,9 @@ impl Reach {
 
     /// Finds every row's last needed sub-step for a step of `substeps`
     /// whose first rows are `from` (see the module docs).
-    pub(super) fn measure<S: Storage>(
+    pub(super) fn measure(
         &mut self,
-        kernel: &Kernel<S>,
-        lower: &LowerRows,
+        neighbours: &Neighbours,
         levels: &Levels<'_>,
         from: &[u32],
         substeps: usize,
@@ -67,17 +66,13 @@ impl Reach {
             return;
         }
         let end = substeps as i32 - 1;
-        let (_, _, edges) = kernel.parts();
         for &v in from {
             self.raise(v, end);
         }
         // Their neighbours at the end (a grip's elastic force).
         for f in 0..self.found.len() {
             let i = self.found[f] as usize;
-            for e in &edges[kernel.row(i)] {
-                self.raise(e.col, end);
-            }
-            for &[j, _] in lower.of(i) {
+            for &j in neighbours.of(i) {
                 self.raise(j, end);
             }
         }
@@ -99,10 +94,7 @@ impl Reach {
                 if read_at < 1 {
                     continue;
                 }
-                for e in &edges[kernel.row(i)] {
-                    self.raise(e.col, read_at - 1);
-                }
-                for &[j, _] in lower.of(i) {
+                for &j in neighbours.of(i) {
                     self.raise(j, read_at - 1);
                 }
             }
