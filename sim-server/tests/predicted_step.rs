@@ -171,6 +171,10 @@ fn the_far_rows_left_until_the_force_is_out_change_neither_force_nor_state() {
         assert!(p.sim.predicted_steps() > 600);
         // Rows were left for after the force in most contact steps.
         assert!(unfinished > 300, "{unfinished} of 700 steps left rows");
+        // And most steps found their rows kept from the step before (the
+        // lockstep above checks that they are the right ones).
+        let reused = p.sim.predicted_steps_reusing_rows();
+        assert!(reused > 300, "{reused} of 700 steps reused their rows");
     }
 }
 
@@ -198,5 +202,9 @@ fn gripping_lifting_and_cutting_after_a_prediction_change_nothing() {
         assert!(p.sim.model().topology().alive_count() < p.sim.model().mesh().tet_count());
         // The cut's step too: its elements' rows are recomputed, not the step.
         assert_eq!(p.sim.predicted_steps(), 620);
+        // Held, lifted and cut on rows kept from step to step: the cut's
+        // step found new ones, and the steps after it again.
+        let reused = p.sim.predicted_steps_reusing_rows();
+        assert!(reused > 500, "{reused} of 620 steps reused their rows");
     }
 }

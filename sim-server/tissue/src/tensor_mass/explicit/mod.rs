@@ -308,6 +308,12 @@ impl<S: Storage> Explicit<S> {
         self.ahead.prediction.rows_total()
     }
 
+    /// Predicted steps whose correction found its rows kept from the step
+    /// before (the same first rows: the tools' contact points unchanged).
+    pub fn predicted_steps_reusing_rows(&self) -> u64 {
+        self.ahead.prediction.reused_total()
+    }
+
     fn membrane_step(&mut self) {
         if !self.capsule_vertices.is_empty() {
             for &v in &self.capsule_vertices {

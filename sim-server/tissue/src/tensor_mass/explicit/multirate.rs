@@ -93,6 +93,9 @@ pub(super) struct Multirate {
     pub(super) coarse_base: usize,
     /// Whether the partition is in use.
     pub(super) engaged: bool,
+    /// Counts the changes of the fast set (a predicted step's rows are
+    /// reused only while it stays the same).
+    pub(super) generation: u64,
 }
 
 /// Each vertex's neighbours through the kernel's edges (both directions).
@@ -183,6 +186,7 @@ impl Multirate {
             fresh: Vec::new(),
             coarse_base: cand.coarse_base,
             engaged,
+            generation: 0,
         };
         plan.rebuild_lists(kernel);
         plan
@@ -228,6 +232,7 @@ impl Multirate {
 
     /// Rebuilds the fast and interface lists from `is_fast`.
     fn rebuild_lists<S: Storage>(&mut self, kernel: &Kernel<S>) {
+        self.generation += 1;
         self.fast.clear();
         self.interface.clear();
         let n = self.is_fast.len();

@@ -19,6 +19,9 @@ pub(in crate::tensor_mass) struct Levels<'a> {
     pub interface: &'a [u32],
     /// Their U(t + H) while they hold interpolated values (`interface`'s length).
     pub saved: &'a mut [V3],
+    /// The fast set's generation (`Multirate::generation`; 0 for one step
+    /// for all).
+    pub generation: u64,
 }
 
 impl Levels<'_> {
@@ -30,6 +33,7 @@ impl Levels<'_> {
             fast: &[],
             interface: &[],
             saved: &mut [],
+            generation: 0,
         }
     }
 
@@ -96,6 +100,7 @@ pub(super) fn levels(m: usize, plan: Option<&mut Multirate>) -> Levels<'_> {
             fast: &p.fast,
             interface: &p.interface,
             saved: &mut p.saved,
+            generation: p.generation,
         },
         _ => Levels::uniform(),
     }

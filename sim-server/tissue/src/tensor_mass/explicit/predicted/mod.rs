@@ -175,6 +175,29 @@ pub(in crate::tensor_mass) struct Prediction {
     far_until: usize,
     /// The step's near rows are done and in the state; its far ones wait.
     pending: bool,
+    /// The first rows of the step whose rows, counts and reach are kept
+    /// (each once, in marking order), and what else they were made for:
+    /// while the tools' contact points stay the same (their selection
+    /// holds for many steps) the next step's rows are the same, and
+    /// finding them again cost about a sixth of the step after the pose.
+    kept: Vec<u32>,
+    kept_for: Option<KeptFor>,
+    /// This step reuses the kept rows.
+    reused: bool,
+    /// Steps that reused their rows.
+    reused_total: u64,
+    /// The first rows being gathered (scratch) and a flag per vertex.
+    first: Vec<u32>,
+    in_first: Vec<bool>,
+}
+
+/// What a step's rows depend on besides its first rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct KeptFor {
+    substeps: usize,
+    m: usize,
+    generation: u64,
+    defer: bool,
 }
 
 /// Which of a sub-step's marked rows a pass recomputes.
@@ -196,6 +219,11 @@ impl Prediction {
     /// Rows recomputed over all finished steps (each sub-step's counted).
     pub(in crate::tensor_mass) fn rows_total(&self) -> u64 {
         self.rows_total
+    }
+
+    /// Steps that reused the rows kept from the step before.
+    pub(in crate::tensor_mass) fn reused_total(&self) -> u64 {
+        self.reused_total
     }
 
     /// Drops the prediction (a new state, a new sub-step count, cleared loads).
@@ -238,8 +266,12 @@ impl Prediction {
             self.neighbours = Neighbours::new(kernel, &self.lower);
             self.in_rows = vec![false; n];
             self.in_changed = vec![false; n];
+            self.in_first = vec![false; n];
             // Each lists a vertex at most once: no step allocates.
             self.rows = Vec::with_capacity(n);
+            self.first = Vec::with_capacity(n);
+            self.kept = Vec::with_capacity(n);
+            self.kept_for = None;
             self.changed = Vec::with_capacity(n);
             self.reach = Reach::new(n);
         }
@@ -277,7 +309,10 @@ impl Prediction {
 
     /// Starts finishing the predicted step: takes the state's arrays
     /// (U(t-1), U(t)) into the trajectory and marks the first sub-step's
-    /// rows: the changed vertices and `contact` ones.
+    /// rows: the changed vertices and `contact` ones. When they, the
+    /// sub-steps and the fast set are the last kept step's, its rows
+    /// (every sub-step's) and reach serve again: they depend on nothing
+    /// else (the edges' places never change).
     pub(in crate::tensor_mass) fn begin(
         &mut self,
         levels: &Levels<'_>,
@@ -290,19 +325,63 @@ impl Prediction {
         for c in 0..self.changed.len() {
             let v = self.changed[c];
             self.in_changed[v as usize] = false;
-            self.mark(v);
+            self.gather_first(v);
         }
         // Cleared, not taken: its capacity serves every step.
         self.changed.clear();
         for v in contact {
-            self.mark(v);
+            self.gather_first(v);
+        }
+        for &v in &self.first {
+            self.in_first[v as usize] = false;
         }
         self.far_until = usize::MAX;
+        let substeps = self.made_for.unwrap_or(0);
+        let now_for = KeptFor {
+            substeps,
+            m: levels.m,
+            generation: levels.generation,
+            defer: self.defer,
+        };
+        self.reused = self.kept_for == Some(now_for) && self.first == self.kept;
+        if self.reused {
+            self.reused_total += 1;
+            self.first.clear();
+            return;
+        }
+        self.drop_rows();
+        for f in 0..self.first.len() {
+            let v = self.first[f];
+            self.mark(v);
+        }
+        std::mem::swap(&mut self.first, &mut self.kept);
+        self.first.clear();
+        self.kept_for = Some(now_for);
         if self.defer {
-            let substeps = self.made_for.unwrap_or(0);
             self.reach
                 .measure(&self.neighbours, levels, &self.rows, substeps);
         }
+    }
+
+    /// Adds `v` to the step's first rows (once).
+    fn gather_first(&mut self, v: u32) {
+        if !self.in_first[v as usize] {
+            self.in_first[v as usize] = true;
+            self.first.push(v);
+        }
+    }
+
+    /// Forgets the kept rows, counts and reach (only the vertices set are
+    /// reset).
+    fn drop_rows(&mut self) {
+        for &r in &self.rows {
+            self.in_rows[r as usize] = false;
+        }
+        self.rows.clear();
+        self.counts.clear();
+        (self.grown_all, self.grown_fast) = (0, 0);
+        self.reach.clear();
+        self.kept_for = None;
     }
 
     fn mark(&mut self, v: u32) {
@@ -320,7 +399,7 @@ impl Prediction {
     /// already (the list only grows), which keeps a step of many sub-steps
     /// linear in its rows.
     pub(in crate::tensor_mass) fn grow(&mut self, k: usize, levels: &Levels<'_>) {
-        if self.whole {
+        if self.whole || self.reused {
             return;
         }
         let fine = levels.fine(k);
@@ -372,8 +451,16 @@ impl Prediction {
         ring: &mut [R4],
     ) {
         let n = self.in_rows.len();
+        if self.reused {
+            // Its rows never reached half the mesh (the kept ones would not
+            // have been kept), and its counts are all there.
+            let share = if self.defer { Share::Near } else { Share::All };
+            self.recompute(kernel, k, levels, base, ring, share);
+            return;
+        }
         if !self.whole && 2 * self.rows.len() > n {
             self.whole = true;
+            self.kept_for = None;
             // The whole passes read every row: the sub-steps before
             // finish their far rows first.
             if self.defer {
@@ -531,14 +618,13 @@ impl Prediction {
                 empty += 1;
             }
         }
-        for &r in &self.rows {
-            self.in_rows[r as usize] = false;
+        // The rows are kept for the next step unless it went whole (or
+        // stopped short of its sub-steps).
+        if self.kept_for.is_none() || self.counts.len() != s {
+            self.drop_rows();
         }
-        self.rows.clear();
-        self.counts.clear();
-        (self.grown_all, self.grown_fast) = (0, 0);
-        self.reach.clear();
         self.whole = false;
+        self.reused = false;
         self.made_for = None;
     }
 }
