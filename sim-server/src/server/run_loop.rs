@@ -348,6 +348,16 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             }
             note_partition(&mut self.summary, partition);
             self.sim.defer_far_rows(true);
+            // The new mesh's next step predicted now, as `publish` did for
+            // the old one's: otherwise the first step on every mesh swapped
+            // in ran whole after its pose (300-600 us on the refined
+            // liver, a tail of its own in `step_us`). Counted in `step_s`
+            // like every prediction, not in `remesh_s`.
+            let t1 = monotonic_ns();
+            self.sim.prepare_step();
+            let predicted_ns = monotonic_ns() - t1;
+            self.summary.step_s += predicted_ns as Real * 1e-9;
+            self.summary.remesh_s -= predicted_ns as Real * 1e-9;
             self.mesh_out.rebind(&self.sim);
             self.scene_out
                 .send(&self.contacts, &self.sim, &self.cfg.scene_name)?;
