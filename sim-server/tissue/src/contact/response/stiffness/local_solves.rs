@@ -3,9 +3,8 @@
 //! [`LocalContact`]), from the factor's cached K^-1 columns.
 
 use super::{LocalContact, Solver};
-use crate::math::{Real, Vec3};
+use crate::math::Real;
 use crate::tensor_mass::ElasticModel;
-use std::collections::HashMap;
 
 impl Solver {
     /// Adds the compliance at `lc`'s vertices and, when its velocities were
@@ -69,30 +68,26 @@ impl Solver {
         // so that they vectorise (each block 9 x 3n multiply-adds: all 300
         // blocks of 24 vertices of the liver took half of a core at a
         // problem every 8 ms).
-        // The blocks were built with the masses of one topology: a cut
+        // The blocks were made with the masses of one topology: a cut
         // changes the masses at once (the factor, and the columns with it,
         // only when its rebuild is done).
-        let topology = model.topology_changes();
-        if self.blocks_for != topology {
-            self.mass_blocks.clear();
-            self.blocks_for = topology;
-        }
-        let (columns, blocks, weighted) =
-            (&self.columns, &mut self.mass_blocks, &mut self.weighted);
+        self.columns.blocks_at(model.topology_changes());
+        let (columns, weighted) = (&mut self.columns, &mut self.weighted);
         for (i, &a) in verts.iter().enumerate() {
             // M times a's three columns, made once when a block is missing.
             let mut weighted_ready = false;
             for (j, &b) in verts.iter().enumerate().skip(i) {
-                let key = (a.min(b), a.max(b));
+                let (lo, hi) = (a.min(b), a.max(b));
                 // Stored as (lo's axes) x (hi's axes).
-                let stored = match blocks.get(&key) {
-                    Some(block) => *block,
+                let stored = match columns.block(lo, hi) {
+                    Some(block) => block,
                     None => {
                         if !weighted_ready {
                             weighted.clear();
                             for axis in 0..3 {
                                 weighted.extend(
-                                    flat(columns, n, a, axis)
+                                    columns
+                                        .flat(a, axis)
                                         .iter()
                                         .enumerate()
                                         .map(|(k, x)| m[k / 3] * x),
@@ -104,11 +99,11 @@ impl Solver {
                         for r in 0..3 {
                             let wr = &weighted[r * 3 * n..(r + 1) * 3 * n];
                             for c in 0..3 {
-                                ab[3 * r + c] = dot(wr, flat(columns, n, b, c));
+                                ab[3 * r + c] = dot(wr, columns.flat(b, c));
                             }
                         }
                         let block = if a <= b { ab } else { transpose3(ab) };
-                        blocks.insert(key, block);
+                        columns.set_block(lo, hi, block);
                         block
                     }
                 };
@@ -146,10 +141,4 @@ fn dot(a: &[Real], b: &[Real]) -> Real {
 /// A 3x3 block (row-major) transposed.
 fn transpose3(b: [Real; 9]) -> [Real; 9] {
     [b[0], b[3], b[6], b[1], b[4], b[7], b[2], b[5], b[8]]
-}
-
-/// Vertex `v`'s K^-1 column for `axis` among `columns` (n vertices) as
-/// flat reals.
-fn flat(columns: &HashMap<u32, Vec<Vec3>>, n: usize, v: u32, axis: usize) -> &[Real] {
-    bytemuck::cast_slice::<Vec3, Real>(&columns[&v][axis * n..(axis + 1) * n])
 }

@@ -28,7 +28,8 @@
 //! a dense solve of size 3|V|. K is factorised once (sparse Cholesky,
 //! [`crate::static_solve::Factorized`]) at start; the three columns of
 //! K^-1 of each touched vertex are solved for the first time it is touched
-//! and kept (a bounded cache, emptied when full). A cut changes K: the
+//! and kept ([`columns::ColumnCache`]: 16 MiB claimed when the factor is
+//! made, emptied when full). A cut changes K: the
 //! factor is rebuilt on a worker thread and the old one serves until it is
 //! ready. Meshes above [`MAX_FACTOR_VERTICES`] (where a factor costs
 //! seconds and the columns megabytes) use S = blockdiag(K_ii)^-1 instead,
@@ -53,13 +54,13 @@ use crate::tensor_mass::ElasticModel;
 use std::collections::HashMap;
 use std::thread::JoinHandle;
 
+mod columns;
 mod local_solves;
+
+use columns::ColumnCache;
 
 /// Above this many vertices the stiffness uses the diagonal blocks only.
 pub const MAX_FACTOR_VERTICES: usize = 60_000;
-/// At most this many vertices' columns are kept (about 150 kB each on the
-/// embedded liver).
-const MAX_CACHED: usize = 256;
 
 /// One active contact point as the solver needs it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -110,8 +111,9 @@ pub(in crate::contact) struct Solver {
     /// `ElasticModel::topology_changes` the factor was built for.
     built_for: u64,
     pending: Option<(u64, JoinHandle<Option<Factorized>>)>,
-    /// Per vertex: K^-1 columns for its x, y and z (3 n vectors).
-    columns: HashMap<u32, Vec<Vec3>>,
+    /// Per touched vertex: K^-1 columns for its x, y and z (3 n vectors),
+    /// and the column mass's blocks between them.
+    columns: ColumnCache,
     // Scratch reused across steps.
     verts: Vec<u32>,
     slot: HashMap<u32, usize>,
@@ -123,11 +125,6 @@ pub(in crate::contact) struct Solver {
     unit: Vec<Vec3>,
     /// M times a vertex's three K^-1 columns (3 x 3n).
     weighted: Vec<Real>,
-    /// The column mass's 3x3 blocks by vertex pair (lower id first),
-    /// emptied with `columns` and after a cut (`blocks_for`: the model's
-    /// `topology_changes` they were built at).
-    mass_blocks: HashMap<(u32, u32), [Real; 9]>,
-    blocks_for: u64,
 }
 
 impl Solver {
@@ -139,7 +136,7 @@ impl Solver {
             factor: None,
             built_for: model.topology_changes(),
             pending: None,
-            columns: HashMap::new(),
+            columns: ColumnCache::unsized_for(model.topology_changes()),
             verts: Vec::new(),
             slot: HashMap::new(),
             h: Vec::new(),
@@ -149,13 +146,28 @@ impl Solver {
             x: Vec::new(),
             unit: Vec::new(),
             weighted: Vec::new(),
-            mass_blocks: HashMap::new(),
-            blocks_for: model.topology_changes(),
         };
         if model.vertex_count() <= MAX_FACTOR_VERTICES {
             out.factor = build(model, &out.dirichlet);
         }
+        if out.factor.is_some() {
+            out.size_scratch(model);
+        }
         out
+    }
+
+    /// The columns' cache and the per-vertex scratch for `model`'s vertex
+    /// count, claimed (and touched) now: at start or when a factor for a
+    /// changed mesh comes in, not as contacts touch new vertices.
+    fn size_scratch(&mut self, model: &ElasticModel) {
+        let n = model.vertex_count();
+        if self.columns.vertex_count() != n || self.columns.slots() == 0 {
+            self.columns = ColumnCache::new(n, model.topology_changes());
+        }
+        self.unit.clear();
+        self.unit.resize(n, Vec3::ZERO);
+        self.weighted.clear();
+        self.weighted.resize(9 * n, 0.0);
     }
 
     /// Whether K_eff uses the tissue's full compliance (else the diagonal
@@ -178,7 +190,7 @@ impl Solver {
                 self.factor = Some(f);
                 self.built_for = version;
                 self.columns.clear();
-                self.mass_blocks.clear();
+                self.size_scratch(model);
             }
         }
         if now != self.built_for
@@ -328,25 +340,28 @@ impl Solver {
         let new = self
             .verts
             .iter()
-            .filter(|v| !self.columns.contains_key(v))
+            .filter(|v| !self.columns.contains(**v))
             .count();
-        if self.columns.len() + new > MAX_CACHED {
-            self.columns.clear();
-            self.mass_blocks.clear();
+        if self.columns.vertex_count() != n {
+            // A cut changed the vertex count before its factor came in.
+            self.columns = ColumnCache::new(n, model.topology_changes());
         }
+        self.columns.make_room(new, self.verts.len());
+        self.unit.clear();
+        self.unit.resize(n, Vec3::ZERO);
         for &v in &self.verts {
-            if self.columns.contains_key(&v) {
+            if self.columns.contains(v) {
                 continue;
             }
-            let mut cols = vec![Vec3::ZERO; 3 * n];
-            self.unit.clear();
-            self.unit.resize(n, Vec3::ZERO);
-            for axis in 0..3 {
-                self.unit[v as usize] = Vec3::ZERO;
-                self.unit[v as usize][axis] = 1.0;
-                factor.solve_into(&self.unit, &mut cols[axis * n..(axis + 1) * n]);
-            }
-            self.columns.insert(v, cols);
+            let unit = &mut self.unit;
+            self.columns.insert_with(v, |cols| {
+                for axis in 0..3 {
+                    unit[v as usize] = Vec3::ZERO;
+                    unit[v as usize][axis] = 1.0;
+                    factor.solve_into(unit, &mut cols[axis * n..(axis + 1) * n]);
+                }
+                unit[v as usize] = Vec3::ZERO;
+            });
         }
     }
 
@@ -370,11 +385,9 @@ impl Solver {
             return;
         }
         self.ensure_columns(model);
-        let n = model.vertex_count();
-        for (sj, vj) in self.verts.iter().enumerate() {
-            let cols = &self.columns[vj];
+        for (sj, &vj) in self.verts.iter().enumerate() {
             for c in 0..3 {
-                let col = &cols[c * n..(c + 1) * n];
+                let col = self.columns.column(vj, c);
                 for (si, vi) in self.verts.iter().enumerate() {
                     let x = col[*vi as usize];
                     for r in 0..3 {
