@@ -169,6 +169,25 @@ fn a_stalled_simulation_drops_the_missed_time_and_is_live_again_at_once() {
         cpu_max < 0.5 * dropped * 1e6,
         "step_cpu_us {cpu}, dropped {dropped} s"
     );
+    // The step after the pose on the CPU clock: one sample per step, never
+    // the stall, and step by step no longer than on the wall clock (to the
+    // two clock reads between the spans: a few microseconds).
+    let own = &s["step_after_pose_cpu_us"];
+    assert_eq!(own["count"], s["step_us"]["count"], "{s}");
+    assert!(
+        own["max"].as_f64().unwrap() < 0.5 * dropped * 1e6,
+        "step_after_pose_cpu_us {own}, dropped {dropped} s"
+    );
+    for key in ["p50", "p99", "p999", "max"] {
+        let (c, st) = (
+            own[key].as_f64().unwrap(),
+            s["step_us"][key].as_f64().unwrap(),
+        );
+        assert!(
+            c.is_finite() && c <= st + 5.0,
+            "step_after_pose_cpu_us.{key} {c} against step_us.{key} {st}: {s}"
+        );
+    }
     // The wall time of a step's whole work contains its step after the
     // pose, step by step, so every percentile is at least the step's.
     let work = &s["step_work_us"];

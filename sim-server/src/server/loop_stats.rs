@@ -10,6 +10,8 @@ use sim_server::step_time::LoopHistogram;
 pub(crate) struct LoopStats {
     /// The step after its pose (`step_us`).
     pub step: LoopHistogram,
+    /// The same step's CPU time (`step_after_pose_cpu_us`).
+    pub step_cpu: LoopHistogram,
     /// From the loop's wake-up to its force sample sent (`turnaround_us`).
     pub turnaround: LoopHistogram,
     /// The contact stiffness's hand-over after the sample (`hand_over_us`).
@@ -36,6 +38,7 @@ impl LoopStats {
     pub fn write_into(&self, summary: &mut RunSummary) {
         summary.step_us = self.step.percentiles_us();
         summary.step_cpu_us = self.work_cpu.percentiles_us();
+        summary.step_after_pose_cpu_us = self.step_cpu.percentiles_us();
         summary.step_work_us = self.work.percentiles_us();
         summary.turnaround_us = self.turnaround.percentiles_us();
         summary.hand_over_us = self.hand_over.percentiles_us();

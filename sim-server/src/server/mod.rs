@@ -144,6 +144,11 @@ pub struct RunSummary {
     /// away (preemption by other threads or the hypervisor): a long step
     /// here is the simulation's own work, a long `step_us` alone is not.
     pub step_cpu_us: StepPercentiles,
+    /// The stepping thread's CPU time for the step after the pose alone
+    /// (the span of `step_us`): what of a long `step_us` was the
+    /// simulation's own work; the rest was the machine (other threads,
+    /// the hypervisor).
+    pub step_after_pose_cpu_us: StepPercentiles,
     /// Wall time of each step's whole work (us): from the loop's wake-up
     /// (a pose or the step's due time) to the end of the next step's
     /// prediction, the same work as `step_cpu_us` but on the wall clock

@@ -239,6 +239,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
     /// counts as the step's), timed; cuts counted, a refused cut told once.
     pub fn step(&mut self) -> StepOutcome {
         let t0 = monotonic_ns();
+        let c0 = shared::thread_cpu_ns();
         let reports = self.contacts.step(&mut self.sim);
         if let Some(r) = self.sim.large_strain() {
             self.summary.max_barrier_elements = self.summary.max_barrier_elements.max(r.collapsed);
@@ -252,6 +253,9 @@ impl<'a, B: Backend> RunLoop<'a, B> {
         let t1 = monotonic_ns();
         self.summary.step_s += (t1 - t0) as Real * 1e-9;
         self.stats.step.record_elapsed_ns(t1 - t0);
+        self.stats
+            .step_cpu
+            .record_elapsed_ns(shared::thread_cpu_ns().saturating_sub(c0));
         if std::mem::take(&mut self.stats.swapped) {
             self.stats.first_after_swap.record_elapsed_ns(t1 - t0);
         }
