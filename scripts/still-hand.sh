@@ -7,6 +7,9 @@
 #
 #   scripts/still-hand.sh SCENE TOP_Z_M X_M Y_M DEPTH_M [daemon flags...]
 #
+# AXIS=y presses along -y instead (the embedded liver's tools come down
+# along -y): then TOP is the surface's y and the other two are x and z.
+#
 # Needs the release binaries (cargo build --release -p sim-server -p haptic-daemon).
 set -euo pipefail
 scene=$1 top=$2 x=$3 y=$4 depth=$5
@@ -15,11 +18,15 @@ here=$(cd "$(dirname "$0")/.." && pwd)
 bin=$here/target/release
 dir=$(mktemp -d)
 session=still$$
-python3 - "$dir/hand.csv" "$top" "$x" "$y" "$depth" <<'PY'
+python3 - "$dir/hand.csv" "$top" "$x" "$y" "$depth" "${AXIS:-z}" <<'PY'
 import sys
-out, top, x, y, depth = sys.argv[1], *map(float, sys.argv[2:])
+out, top, a, b, depth = sys.argv[1], *map(float, sys.argv[2:6])
+axis = sys.argv[6]
+if axis not in ("y", "z"):
+    sys.exit(f"AXIS={axis}: y or z")
 rows = [(0, top + 0.003), (0.5, top + 0.003), (2.0, top - depth), (4.5, top - depth)]
-open(out, "w").write("t_s,x_m,y_m,z_m\n" + "".join(f"{t},{x},{y},{z}\n" for t, z in rows))
+at = (lambda h: (a, h, b)) if axis == "y" else (lambda h: (a, b, h))
+open(out, "w").write("t_s,x_m,y_m,z_m\n" + "".join("{},{},{},{}\n".format(t, *at(h)) for t, h in rows))
 PY
 "$bin/sim-server" run --quiet --session "$session" --scene "$scene" --duration-s 30 --json "$dir/sim.json" &
 sim=$!
