@@ -135,3 +135,107 @@ fn frames_of_one_mesh_are_refused_with_a_following_mesh() {
         "{e}"
     );
 }
+
+/// The step's worker threads of `pid` (named `tensor-mass-*`): how many
+/// run under SCHED_FIFO, and how many there are.
+fn step_workers_fifo(pid: u32) -> (usize, usize) {
+    let (mut fifo, mut all) = (0, 0);
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return (0, 0);
+    };
+    for t in tasks.flatten() {
+        let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
+        if !comm.starts_with("tensor-mass-") {
+            continue;
+        }
+        let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
+        // Field 41 (policy); the fields after the command's ')' start at 3.
+        let policy = stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().nth(41 - 3))
+            .and_then(|p| p.parse::<u32>().ok());
+        all += 1;
+        fifo += usize::from(policy == Some(libc::SCHED_FIFO as u32));
+    }
+    (fifo, all)
+}
+
+#[test]
+fn a_mesh_swapped_in_steps_on_workers_at_the_loops_priority() {
+    if shared::rt::set_fifo(1).is_err() {
+        eprintln!("skipped: this machine refuses SCHED_FIFO");
+        return;
+    }
+    // Back to normal for the test's own thread.
+    // SAFETY: a plain sched_setscheduler on the calling thread.
+    unsafe {
+        let p = libc::sched_param { sched_priority: 0 };
+        libc::sched_setscheduler(0, libc::SCHED_OTHER, &p);
+    }
+    let dir = scratch_dir("follow-rt");
+    let scene = dir.join("box.toml");
+    // Two step workers: the scene's [simulation] table is its last.
+    let text = scene_text().replacen("\n[contact]", "threads = 2\n\n[contact]", 1);
+    std::fs::write(&scene, text).unwrap();
+    let top = 0.02 + 0.0025;
+    let hand = dir.join("hand.csv");
+    std::fs::write(
+        &hand,
+        format!(
+            "t_s,x_m,y_m,z_m\n0,0.02,0.02,{a}\n0.5,0.02,0.02,{a}\n1.0,0.02,0.02,{d}\n4.0,0.04,0.02,{d}\n",
+            a = top + 0.003,
+            d = top - 0.005,
+        ),
+    )
+    .unwrap();
+    let session = format!("followrt{}", std::process::id());
+    let json = dir.join("sim.json");
+    let sim = spawn_sim_server(
+        &session,
+        &[
+            "--scene",
+            scene.to_str().unwrap(),
+            "--rt-priority",
+            "5",
+            "--duration-s",
+            "6",
+            "--json",
+            json.to_str().unwrap(),
+        ],
+    );
+    system_tests::wait_for(&session, system_tests::Peer::Simulation);
+    let daemon = daemon_run(&session)
+        .args(["--device", &format!("replay:{}", hand.display())])
+        .args(["--duration-s", "4.2"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Late in the slide, after meshes have been swapped in: the workers of
+    // the mesh in use are under SCHED_FIFO (a mesh being built beside it
+    // has workers of its own at normal priority, hence "at least"). Each
+    // look is tried three times, 10 ms apart, for the few microseconds
+    // between a swap and its raise.
+    std::thread::sleep(Duration::from_millis(3000));
+    let mut seen = Vec::new();
+    for _ in 0..5 {
+        let mut ok = false;
+        for _ in 0..3 {
+            let (fifo, all) = step_workers_fifo(sim.id());
+            seen.push((fifo, all));
+            if fifo >= 2 {
+                ok = true;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(ok, "step workers (FIFO, all) seen: {seen:?}");
+        std::thread::sleep(Duration::from_millis(150));
+    }
+    finish(daemon, Duration::from_secs(30), "haptic-daemon");
+    finish(sim, Duration::from_secs(30), "sim-server");
+    let s = read_json(&json);
+    assert!(s["remesh_swaps"].as_u64().unwrap() >= 3, "{s}");
+    assert_eq!(s["rt_priority"], 5, "{s}");
+    assert_eq!(s["rt_step_workers"], 2, "{s}");
+}

@@ -217,6 +217,8 @@ pub struct RunSummary {
     /// The step's worker threads (`threads` above 1 on the tensor-mass
     /// backend) put at the stepping loop's SCHED_FIFO priority with it: a
     /// step waits for them, so at normal priority they made it theirs.
+    /// With `[contact] refine_radius_m`, those of the mesh in use at the
+    /// end: each mesh swapped in has its own, raised when it comes in.
     pub rt_step_workers: usize,
     /// Steps finished from the prediction made while the loop waited for
     /// the pose (the tensor-mass backend, one thread; the rest ran whole),

@@ -351,6 +351,13 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 self.predicted_before.1 += rows;
             }
             note_partition(&mut self.summary, partition);
+            // The mesh swapped in steps on its own worker pool, started by
+            // the follower's thread at normal priority: raised now, as the
+            // first mesh's were at start, before its first step.
+            if self.summary.rt_priority > 0 {
+                let p = self.summary.rt_priority;
+                self.summary.rt_step_workers = self.raise_step_workers(p);
+            }
             self.sim.defer_far_rows(true);
             // The new mesh's next step predicted now, as `publish` did for
             // the old one's: otherwise the first step on every mesh swapped
