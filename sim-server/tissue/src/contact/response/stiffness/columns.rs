@@ -57,14 +57,7 @@ impl ColumnCache {
     pub fn new(n: usize, topology: u64) -> Self {
         let mut out = Self {
             n,
-            data: Vec::new(),
-            slot_of: HashMap::new(),
-            slots: 0,
-            used: 0,
-            blocks: Vec::new(),
-            block_gen: Vec::new(),
-            generation: 1,
-            blocks_for: topology,
+            ..Self::unsized_for(topology)
         };
         out.allocate(slots_for(n));
         out
