@@ -159,15 +159,21 @@ impl Solver {
     /// The columns' cache and the per-vertex scratch for `model`'s vertex
     /// count, claimed (and touched) now: at start or when a factor for a
     /// changed mesh comes in, not as contacts touch new vertices.
+    /// Nothing is done when they are sized already (`unit` is all zeros
+    /// between solves: each column's solve puts its 1 back to 0).
     fn size_scratch(&mut self, model: &ElasticModel) {
         let n = model.vertex_count();
         if self.columns.vertex_count() != n || self.columns.slots() == 0 {
             self.columns = ColumnCache::new(n, model.topology_changes());
         }
-        self.unit.clear();
-        self.unit.resize(n, Vec3::ZERO);
-        self.weighted.clear();
-        self.weighted.resize(9 * n, 0.0);
+        if self.unit.len() != n {
+            self.unit.clear();
+            self.unit.resize(n, Vec3::ZERO);
+        }
+        if self.weighted.len() != 9 * n {
+            self.weighted.clear();
+            self.weighted.resize(9 * n, 0.0);
+        }
     }
 
     /// Whether K_eff uses the tissue's full compliance (else the diagonal
@@ -331,6 +337,11 @@ impl Solver {
     /// Solves and caches the K^-1 columns of the vertices in `verts` not
     /// cached yet (nothing without a factor).
     fn ensure_columns(&mut self, model: &ElasticModel) {
+        if self.factor.is_none() {
+            return;
+        }
+        // A cut may have changed the vertex count before its factor came in.
+        self.size_scratch(model);
         let Some(factor) = &self.factor else {
             return;
         };
@@ -342,13 +353,7 @@ impl Solver {
             .iter()
             .filter(|v| !self.columns.contains(**v))
             .count();
-        if self.columns.vertex_count() != n {
-            // A cut changed the vertex count before its factor came in.
-            self.columns = ColumnCache::new(n, model.topology_changes());
-        }
         self.columns.make_room(new, self.verts.len());
-        self.unit.clear();
-        self.unit.resize(n, Vec3::ZERO);
         for &v in &self.verts {
             if self.columns.contains(v) {
                 continue;
