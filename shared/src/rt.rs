@@ -37,6 +37,21 @@ pub fn background() -> Result<(), String> {
     }
 }
 
+/// Puts the calling thread under SCHED_OTHER at nice 0, the default: for
+/// threads started by a [`background`] thread, which inherit SCHED_IDLE
+/// but do a loop's work (the step workers of a mesh made in the
+/// background).
+pub fn normal() -> Result<(), String> {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: `param` is valid for the call; pid 0 = the calling thread.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error().to_string())
+    }
+}
+
 /// Sets the calling thread's timer slack to 1 ns: by default Linux may wake
 /// a normal thread up to 50 us after its deadline to batch wake-ups (real-
 /// time threads already get none).

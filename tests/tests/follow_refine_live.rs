@@ -137,9 +137,9 @@ fn frames_of_one_mesh_are_refused_with_a_following_mesh() {
 }
 
 /// The step's worker threads of `pid` (named `tensor-mass-*`): how many
-/// run under SCHED_FIFO, and how many there are.
-fn step_workers_fifo(pid: u32) -> (usize, usize) {
-    let (mut fifo, mut all) = (0, 0);
+/// run under scheduling `policy`, and how many there are.
+fn step_workers_under(pid: u32, policy: i32) -> (usize, usize) {
+    let (mut under, mut all) = (0, 0);
     let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
         return (0, 0);
     };
@@ -150,31 +150,27 @@ fn step_workers_fifo(pid: u32) -> (usize, usize) {
         }
         let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
         // Field 41 (policy); the fields after the command's ')' start at 3.
-        let policy = stat
+        let found = stat
             .rsplit_once(')')
             .and_then(|(_, rest)| rest.split_whitespace().nth(41 - 3))
-            .and_then(|p| p.parse::<u32>().ok());
+            .and_then(|p| p.parse::<i32>().ok());
         all += 1;
-        fifo += usize::from(policy == Some(libc::SCHED_FIFO as u32));
+        under += usize::from(found == Some(policy));
     }
-    (fifo, all)
+    (under, all)
 }
 
-#[test]
-fn a_mesh_swapped_in_steps_on_workers_at_the_loops_priority() {
-    if shared::rt::set_fifo(1).is_err() {
-        eprintln!("skipped: this machine refuses SCHED_FIFO");
-        return;
-    }
-    // Back to normal for the test's own thread.
-    // SAFETY: a plain sched_setscheduler on the calling thread.
-    unsafe {
-        let p = libc::sched_param { sched_priority: 0 };
-        libc::sched_setscheduler(0, libc::SCHED_OTHER, &p);
-    }
-    let dir = scratch_dir("follow-rt");
+/// Presses and slides the probe over the box with two step workers
+/// (`sim_args` added to `sim-server run`) and, late in the slide, after
+/// meshes have been swapped in, looks five times at the step workers: the
+/// two of the mesh in use must run under `policy` (a mesh being built
+/// beside it has workers of its own in the background, hence "at least").
+/// Each look is tried three times, 10 ms apart, for the few microseconds
+/// between a swap and the change of its workers. The run summary.
+fn slide_with_step_workers_under(tag: &str, sim_args: &[&str], policy: i32) -> serde_json::Value {
+    let dir = scratch_dir(tag);
     let scene = dir.join("box.toml");
-    // Two step workers: the scene's [simulation] table is its last.
+    // The scene's [simulation] table is its last.
     let text = scene_text().replacen("\n[contact]", "threads = 2\n\n[contact]", 1);
     std::fs::write(&scene, text).unwrap();
     let top = 0.02 + 0.0025;
@@ -188,21 +184,18 @@ fn a_mesh_swapped_in_steps_on_workers_at_the_loops_priority() {
         ),
     )
     .unwrap();
-    let session = format!("followrt{}", std::process::id());
+    let session = format!("{tag}{}", std::process::id()).replace('-', "");
     let json = dir.join("sim.json");
-    let sim = spawn_sim_server(
-        &session,
-        &[
-            "--scene",
-            scene.to_str().unwrap(),
-            "--rt-priority",
-            "5",
-            "--duration-s",
-            "6",
-            "--json",
-            json.to_str().unwrap(),
-        ],
-    );
+    let mut args = vec![
+        "--scene",
+        scene.to_str().unwrap(),
+        "--duration-s",
+        "6",
+        "--json",
+        json.to_str().unwrap(),
+    ];
+    args.extend_from_slice(sim_args);
+    let sim = spawn_sim_server(&session, &args);
     system_tests::wait_for(&session, system_tests::Peer::Simulation);
     let daemon = daemon_run(&session)
         .args(["--device", &format!("replay:{}", hand.display())])
@@ -211,31 +204,48 @@ fn a_mesh_swapped_in_steps_on_workers_at_the_loops_priority() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Late in the slide, after meshes have been swapped in: the workers of
-    // the mesh in use are under SCHED_FIFO (a mesh being built beside it
-    // has workers of its own at normal priority, hence "at least"). Each
-    // look is tried three times, 10 ms apart, for the few microseconds
-    // between a swap and its raise.
     std::thread::sleep(Duration::from_millis(3000));
     let mut seen = Vec::new();
     for _ in 0..5 {
         let mut ok = false;
         for _ in 0..3 {
-            let (fifo, all) = step_workers_fifo(sim.id());
-            seen.push((fifo, all));
-            if fifo >= 2 {
+            let (under, all) = step_workers_under(sim.id(), policy);
+            seen.push((under, all));
+            if under >= 2 {
                 ok = true;
                 break;
             }
             std::thread::sleep(Duration::from_millis(10));
         }
-        assert!(ok, "step workers (FIFO, all) seen: {seen:?}");
+        assert!(
+            ok,
+            "step workers (under policy {policy}, all) seen: {seen:?}"
+        );
         std::thread::sleep(Duration::from_millis(150));
     }
     finish(daemon, Duration::from_secs(30), "haptic-daemon");
     finish(sim, Duration::from_secs(30), "sim-server");
     let s = read_json(&json);
     assert!(s["remesh_swaps"].as_u64().unwrap() >= 3, "{s}");
+    s
+}
+
+#[test]
+fn a_mesh_swapped_in_steps_on_workers_at_the_loops_priority() {
+    if shared::rt::set_fifo(1).is_err() {
+        eprintln!("skipped: this machine refuses SCHED_FIFO");
+        return;
+    }
+    // Back to normal for the test's own thread.
+    shared::rt::normal().unwrap();
+    let s = slide_with_step_workers_under("follow-rt", &["--rt-priority", "5"], libc::SCHED_FIFO);
     assert_eq!(s["rt_priority"], 5, "{s}");
     assert_eq!(s["rt_step_workers"], 2, "{s}");
+}
+
+#[test]
+fn a_mesh_swapped_in_steps_on_normal_workers_not_background_ones() {
+    // Made on the follower's SCHED_IDLE thread, its workers were SCHED_IDLE.
+    let s = slide_with_step_workers_under("follow-normal", &[], libc::SCHED_OTHER);
+    assert_eq!(s["rt_priority"], 0, "{s}");
 }

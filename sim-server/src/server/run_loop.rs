@@ -87,6 +87,8 @@ struct Told {
     last_stall_ns: u64,
     /// A refused cut was told.
     cut_refusal: bool,
+    /// A swapped-in mesh's step worker that stayed in the background was told.
+    background_workers: bool,
 }
 
 impl<'a, B: Backend> RunLoop<'a, B> {
@@ -190,6 +192,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 stalls: 0,
                 last_stall_ns: 0,
                 cut_refusal: false,
+                background_workers: false,
             },
             last_step_ns: start_ns,
             removed_total: 0,
@@ -351,13 +354,7 @@ impl<'a, B: Backend> RunLoop<'a, B> {
                 self.predicted_before.1 += rows;
             }
             note_partition(&mut self.summary, partition);
-            // The mesh swapped in steps on its own worker pool, started by
-            // the follower's thread at normal priority: raised now, as the
-            // first mesh's were at start, before its first step.
-            if self.summary.rt_priority > 0 {
-                let p = self.summary.rt_priority;
-                self.summary.rt_step_workers = self.raise_step_workers(p);
-            }
+            self.step_workers_at_loop_priority();
             self.sim.defer_far_rows(true);
             // The new mesh's next step predicted now, as `publish` did for
             // the old one's: otherwise the first step on every mesh swapped
@@ -600,6 +597,34 @@ impl<'a, B: Backend> RunLoop<'a, B> {
             );
         }
         raised.into_inner()
+    }
+
+    /// A mesh swapped in steps on its own worker pool, started by the
+    /// follower's background thread and so under SCHED_IDLE, where a
+    /// worker runs only on a core nothing else wants and the step waits
+    /// for it: its workers are put where the stepping thread is,
+    /// SCHED_FIFO at the run's priority as the first mesh's were at start,
+    /// or normal.
+    fn step_workers_at_loop_priority(&mut self) {
+        let p = self.summary.rt_priority;
+        if p > 0 {
+            self.summary.rt_step_workers = self.raise_step_workers(p);
+            return;
+        }
+        let refused = std::sync::Mutex::new(None);
+        self.sim.on_step_workers(&|| {
+            if let Err(e) = shared::rt::normal()
+                && let Ok(mut r) = refused.lock()
+            {
+                r.get_or_insert(e);
+            }
+        });
+        if let Ok(Some(e)) = refused.into_inner()
+            && !self.told.background_workers
+        {
+            self.told.background_workers = true;
+            eprintln!("sim-server: a step worker of a refined mesh stays under SCHED_IDLE: {e}");
+        }
     }
 
     /// The summary so far, for what the loop's caller records in it.
